@@ -1,0 +1,5 @@
+import sys
+
+from imagemap.cli import main
+
+sys.exit(main())

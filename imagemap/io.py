@@ -1,0 +1,208 @@
+"""Reading and writing images, depth maps and arrays, with checks at the door.
+
+Every reader names the file and the problem when the input is bad (raising
+:class:`InputError`), and every writer is atomic: the data go to a temporary
+file in the destination folder, which is renamed over the target only once it
+is complete, so an interrupted run never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "InputError",
+    "atomic_path",
+    "read_depth",
+    "read_image",
+    "write_image",
+    "write_npz",
+]
+
+DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
+
+
+class InputError(ValueError):
+    """Bad input: the message names the file (where there is one) and the problem."""
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    On any exception the temporary file is removed and ``path`` is untouched.
+
+    Examples
+    --------
+    >>> with atomic_path("out.npy") as tmp:  # doctest: +SKIP
+    ...     np.save(tmp, np.zeros(3))
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    suffix = suffix if suffix is not None else "".join(path.suffixes)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise
+
+
+def _to_unit_float(array: np.ndarray, path: Path) -> np.ndarray:
+    """Integer images to float32 in [0, 1] by their dtype's range; floats as they are."""
+    if array.dtype == np.uint8:
+        return array.astype(np.float32) / 255.0
+    if array.dtype == np.uint16:
+        return array.astype(np.float32) / 65535.0
+    if np.issubdtype(array.dtype, np.integer):
+        raise InputError(f"{path}: unsupported integer pixel type {array.dtype} (use 8 or 16 bit)")
+    if np.issubdtype(array.dtype, np.floating):
+        return array.astype(np.float32)
+    raise InputError(f"{path}: unsupported pixel type {array.dtype}")
+
+
+def _load_raw(path: Path) -> np.ndarray:
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npy":
+            return np.load(path, allow_pickle=False)
+        if suffix in (".tif", ".tiff"):
+            import tifffile
+
+            return tifffile.imread(path)
+        import imageio.v3 as iio
+
+        return iio.imread(path)
+    except InputError:
+        raise
+    except Exception as exc:  # any decoder failure is the file's fault here
+        raise InputError(f"{path}: cannot be read as an image ({exc})") from exc
+
+
+def read_depth(path: str | os.PathLike) -> np.ndarray:
+    """Read a depth map as float32 (H, W); background is NaN-free 0.
+
+    Accepts 8- or 16-bit PNG (scaled to [0, 1] by the bit depth), float TIFF and
+    ``.npy``. Larger values are nearer; 0 or NaN is background (NaN becomes 0).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The depth file.
+
+    Returns
+    -------
+    depth : ndarray of float32, shape (H, W)
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, more than one channel, no foreground,
+        infinite or negative values.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in DEPTH_SUFFIXES:
+        raise InputError(
+            f"{path}: unsupported depth format {path.suffix!r} (use .png, .tif or .npy)"
+        )
+    raw = _load_raw(path)
+    if raw.ndim == 3 and raw.shape[2] in (2, 4):  # grey + alpha: alpha 0 is background
+        alpha = raw[..., -1]
+        raw = np.where(alpha > 0, raw[..., 0], 0)
+    if raw.ndim == 3 and raw.shape[2] == 3 and np.array_equal(raw[..., 0], raw[..., 1]):
+        raw = raw[..., 0]
+    if raw.ndim != 2:
+        raise InputError(f"{path}: a depth map must have one channel, got shape {raw.shape}")
+    depth = _to_unit_float(raw, path)
+    return validate_depth(depth, name=str(path))
+
+
+def validate_depth(depth: np.ndarray, name: str = "depth") -> np.ndarray:
+    """Check a depth array and return it as float32 with background 0.
+
+    NaN becomes background (0). Raises :class:`InputError` naming ``name`` on a
+    wrong shape, infinite or negative values, or an empty foreground.
+    """
+    depth = np.asarray(depth)
+    if depth.ndim != 2:
+        raise InputError(f"{name}: a depth map must be 2-D (H, W), got shape {depth.shape}")
+    if depth.shape[0] < 8 or depth.shape[1] < 8:
+        raise InputError(f"{name}: depth map of {depth.shape} is too small (at least 8x8)")
+    depth = np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=np.inf, neginf=-np.inf)
+    if not np.all(np.isfinite(depth)):
+        raise InputError(f"{name}: depth has infinite values")
+    if np.any(depth < 0):
+        raise InputError(f"{name}: depth has negative values (background must be 0 or NaN)")
+    if not np.any(depth > 0):
+        raise InputError(f"{name}: depth has no foreground (every pixel is 0 or NaN)")
+    return depth
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read a colour image as float32 (H, W, 3) in [0, 1] (alpha dropped, grey expanded).
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, NaN values, unsupported layout.
+    """
+    path = Path(path)
+    raw = _load_raw(path)
+    image = _to_unit_float(raw, path)
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    if image.ndim != 3 or image.shape[2] not in (3, 4):
+        raise InputError(f"{path}: expected an RGB(A) or grey image, got shape {image.shape}")
+    image = image[..., :3]
+    if not np.all(np.isfinite(image)):
+        raise InputError(f"{path}: image has NaN or infinite values")
+    return np.clip(image, 0.0, 1.0)
+
+
+def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Path:
+    """Write an image in [0, 1] (H, W), (H, W, 3) or (H, W, 4) as PNG, atomically.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination (``.png``).
+    image : ndarray
+        Float values in [0, 1] (clipped), or uint8/uint16 written as they are.
+    bits : {8, 16}
+        Bit depth for float input.
+    """
+    import imageio.v3 as iio
+
+    path = Path(path)
+    array = np.asarray(image)
+    if np.issubdtype(array.dtype, np.floating):
+        if bits not in (8, 16):
+            raise ValueError("bits must be 8 or 16")
+        scale = 255 if bits == 8 else 65535
+        dtype = np.uint8 if bits == 8 else np.uint16
+        array = np.round(np.clip(np.nan_to_num(array), 0.0, 1.0) * scale).astype(dtype)
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, array, extension=path.suffix or ".png")
+    return path
+
+
+def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
+    """Save arrays to one ``.npz`` atomically."""
+    path = Path(path)
+    with atomic_path(path, suffix=".npz") as tmp:
+        np.savez_compressed(tmp, **arrays)
+    return path

@@ -1,0 +1,25 @@
+"""Progress reporting: a bar on a terminal, silence elsewhere or when asked."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable, Iterator
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+def progress(
+    iterable: Iterable[T],
+    *,
+    total: int | None = None,
+    desc: str = "",
+    quiet: bool = False,
+) -> Iterator[T]:
+    """Wrap ``iterable`` in a tqdm bar when stderr is a terminal and not ``quiet``."""
+    if quiet or not sys.stderr.isatty():
+        yield from iterable
+        return
+    from tqdm.auto import tqdm
+
+    yield from tqdm(iterable, total=total, desc=desc, leave=False, dynamic_ncols=True)
