@@ -1,0 +1,11 @@
+"""BTF extrapolation: from a small measured sample and four scans to a large BTF.
+
+The compressed BTF object and its error measure live in :mod:`imagemap.btf.core`;
+the scanner constraints in :mod:`imagemap.btf.constraints`; the two synthesis
+methods in :mod:`imagemap.btf.extrapolate`; the Bonn UBO2014 reader in
+:mod:`imagemap.btf.ubo2014`; the paper's Table 2 in :mod:`imagemap.btf.experiment`.
+"""
+
+from imagemap.btf.core import BTF, compress, directions_to_vectors, relative_error
+
+__all__ = ["BTF", "compress", "directions_to_vectors", "relative_error"]
