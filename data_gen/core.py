@@ -1,0 +1,268 @@
+"""Object classes, one instance end to end, and the colour helpers the classes share.
+
+An :class:`ObjectClass` samples shape, appearance and view parameters from a
+Generator, builds an :class:`~data_gen.geometry.Assembly`, and colours surface hits
+(part labels and RGB from canonical surface coordinates). :func:`make_instance` runs
+the chain: parameters -> mesh -> small view jitter -> orthographic ray cast -> depth,
+image-map and part-label map.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+from data_gen.geometry import Assembly
+from data_gen.render import OrthographicView, cast_orthographic
+
+__all__ = [
+    "Instance",
+    "ObjectClass",
+    "SurfaceHits",
+    "hsv",
+    "instance_rng",
+    "make_instance",
+    "mix",
+]
+
+#: Foreground depth is 0.1 at the class's far z and 1.0 at its near z (see
+#: ObjectClass.depth_range); hits beyond the far z are clipped to this floor so that
+#: no foreground pixel is 0 (background).
+DEPTH_FLOOR = 0.02
+
+
+@dataclass
+class SurfaceHits:
+    """What a class's colouring function sees of every ray hit (N hits).
+
+    ``component`` (N,) indexes ``component_names``; ``canonical`` (N, 3) are the
+    surface coordinates interpolated from the vertices; ``points`` (N, 3) are the hit
+    points in the object's own frame (before the view jitter).
+    """
+
+    component: np.ndarray
+    component_names: tuple[str, ...]
+    canonical: np.ndarray
+    points: np.ndarray
+
+    def where(self, *names: str) -> np.ndarray:
+        """Boolean (N,) mask of the hits on any of the named components."""
+        ids = [i for i, n in enumerate(self.component_names) if n in names]
+        return np.isin(self.component, ids)
+
+
+@dataclass(frozen=True)
+class ObjectClass:
+    """A procedural class of objects.
+
+    Parameters
+    ----------
+    name : str
+    parts : tuple of str
+        Part names; part ``i`` has label ``i + 1`` (0 is background).
+    default_size : (int, int)
+        (width, height) in pixels.
+    frame : (float, float, float, float)
+        World window (x_min, x_max, y_min, y_max) that must be visible; the pixel size
+        is chosen so that it fits the picture, centred.
+    depth_range : (float, float)
+        World z mapped to depth 0.1 (far) and 1.0 (near): one fixed scale per class.
+    sample_params : callable (Generator) -> dict
+        Shape and appearance parameters (JSON-able).
+    build : callable (dict) -> Assembly
+    colorize : callable (dict, SurfaceHits) -> (labels (N,) uint8, rgb (N, 3) float32)
+    """
+
+    name: str
+    parts: tuple[str, ...]
+    default_size: tuple[int, int]
+    frame: tuple[float, float, float, float]
+    depth_range: tuple[float, float]
+    sample_params: Callable[[np.random.Generator], dict]
+    build: Callable[[dict], Assembly]
+    colorize: Callable[[dict, SurfaceHits], tuple[np.ndarray, np.ndarray]]
+    max_jitter: dict = field(
+        default_factory=lambda: {"yaw": 4.0, "pitch": 3.0, "roll": 3.0, "shift_px": 3.0}
+    )
+
+
+@dataclass
+class Instance:
+    """One rendered example: arrays (H, W) / (H, W, 3) and its parameters."""
+
+    name: str
+    depth: np.ndarray  # float32, nearer = larger, background 0, foreground in ~[0.1, 1]
+    image: np.ndarray  # float32 RGB in [0, 1], background black
+    labels: np.ndarray  # uint8 part ids, 0 = background
+    params: dict  # JSON-able: class, seed, index, parts, palette, shape, view
+    mesh: trimesh.Trimesh | None = None
+
+
+def instance_rng(class_name: str, index: int, seed: int) -> np.random.Generator:
+    """The Generator of instance ``index``: depends on (seed, class, index) only.
+
+    So instance i of seed S is the same whatever the count of a run.
+    """
+    class_key = zlib.crc32(class_name.encode())
+    return np.random.default_rng(np.random.SeedSequence([int(seed), class_key, int(index)]))
+
+
+def hsv(hue: float, saturation: float, value: float) -> list[float]:
+    """An RGB triple (list of float in [0, 1]) from HSV; hue wraps around 1."""
+    return [float(c) for c in colorsys.hsv_to_rgb(hue % 1.0, saturation, value)]
+
+
+def mix(
+    colors: Sequence[Sequence[float]], weight: np.ndarray, shade: np.ndarray | None = None
+) -> np.ndarray:
+    """Linear blend of two colours by ``weight`` (N,) in [0, 1], times ``shade`` (N,).
+
+    Returns (N, 3) float32 in [0, 1].
+    """
+    first = np.asarray(colors[0], dtype=np.float32)
+    second = np.asarray(colors[1], dtype=np.float32)
+    weight = np.clip(np.asarray(weight, dtype=np.float32), 0.0, 1.0)[:, None]
+    rgb = first + (second - first) * weight
+    if shade is not None:
+        rgb = rgb * np.asarray(shade, dtype=np.float32)[:, None]
+    return np.clip(rgb, 0.0, 1.0).astype(np.float32)
+
+
+def _view_rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """4x4 rotation: roll about z, then pitch about x, then yaw about y (degrees)."""
+    rz = trimesh.transformations.rotation_matrix(np.radians(roll), [0, 0, 1])
+    rx = trimesh.transformations.rotation_matrix(np.radians(pitch), [1, 0, 0])
+    ry = trimesh.transformations.rotation_matrix(np.radians(yaw), [0, 1, 0])
+    return ry @ rx @ rz
+
+
+def _sample_view(rng: np.random.Generator, max_jitter: dict) -> dict:
+    return {key: float(rng.uniform(-limit, limit)) for key, limit in max_jitter.items()} | {
+        "shift_y_px": float(rng.uniform(-1, 1) * max_jitter.get("shift_px", 0.0))
+    }
+
+
+def _view_window(object_class: ObjectClass, size: tuple[int, int], view: dict) -> OrthographicView:
+    x_min, x_max, y_min, y_max = object_class.frame
+    width, height = size
+    pixel_size = max((x_max - x_min) / width, (y_max - y_min) / height)
+    center = (
+        0.5 * (x_min + x_max) - view["shift_px"] * pixel_size,
+        0.5 * (y_min + y_max) + view["shift_y_px"] * pixel_size,
+    )
+    return OrthographicView(center=center, pixel_size=pixel_size, size=(width, height))
+
+
+def _interpolate_canonical(
+    mesh: trimesh.Trimesh, vertex_values: np.ndarray, faces: np.ndarray, points: np.ndarray
+) -> np.ndarray:
+    barycentric = trimesh.triangles.points_to_barycentric(mesh.triangles[faces], points)
+    corners = vertex_values[mesh.faces[faces]]  # (N, 3 corners, 3 values)
+    return np.einsum("nk,nkc->nc", barycentric, corners).astype(np.float32)
+
+
+def make_instance(
+    object_class: ObjectClass,
+    index: int,
+    seed: int = 0,
+    size: tuple[int, int] | None = None,
+    keep_mesh: bool = False,
+) -> Instance:
+    """Sample, build and render instance ``index`` of a class.
+
+    Parameters
+    ----------
+    object_class : ObjectClass
+        E.g. ``data_gen.CLASSES["fish"]``.
+    index : int
+        Instance number (its name is ``f"{class}_{index:03d}"``).
+    seed : int, optional
+        Run seed; with ``index`` and the class name it fixes the instance exactly.
+    size : (int, int), optional
+        (width, height); the class default if None.
+    keep_mesh : bool, optional
+        Keep the posed trimesh in the result (for inspection and tests).
+
+    Returns
+    -------
+    Instance
+
+    Example
+    -------
+    >>> from data_gen import CLASSES
+    >>> fish = make_instance(CLASSES["fish"], 0, seed=1, size=(80, 60))
+    >>> fish.depth.shape, fish.image.shape, int(fish.labels.max()) <= len(CLASSES["fish"].parts)
+    ((60, 80), (60, 80, 3), True)
+    """
+    size = tuple(size) if size is not None else object_class.default_size
+    rng = instance_rng(object_class.name, index, seed)
+    params = object_class.sample_params(rng)
+    view = _sample_view(rng, object_class.max_jitter)
+    assembly = object_class.build(params)
+
+    pose = _view_rotation(view["yaw"], view["pitch"], view["roll"])
+    mesh = assembly.mesh.copy()
+    mesh.apply_transform(pose)
+    window = _view_window(object_class, size, view)
+    hits = cast_orthographic(mesh, window)
+
+    canonical = _interpolate_canonical(mesh, assembly.vertex_canonical, hits.faces, hits.points)
+    object_points = trimesh.transform_points(hits.points, np.linalg.inv(pose)).astype(np.float32)
+    surface = SurfaceHits(
+        component=assembly.face_component[hits.faces],
+        component_names=assembly.component_names,
+        canonical=canonical,
+        points=object_points,
+    )
+    hit_labels, hit_rgb = object_class.colorize(params, surface)
+
+    width, height = size
+    z_far, z_near = object_class.depth_range
+    depth = np.zeros((height, width), dtype=np.float32)
+    scaled = 0.1 + 0.9 * (hits.z.flat[hits.pixels] - z_far) / (z_near - z_far)
+    depth.flat[hits.pixels] = np.clip(scaled, DEPTH_FLOOR, 1.0)
+    image = np.zeros((height, width, 3), dtype=np.float32)
+    image.reshape(-1, 3)[hits.pixels] = hit_rgb
+    labels = np.zeros((height, width), dtype=np.uint8)
+    labels.flat[hits.pixels] = hit_labels
+
+    name = f"{object_class.name}_{index:03d}"
+    record = {
+        "name": name,
+        "class": object_class.name,
+        "seed": int(seed),
+        "index": int(index),
+        "size": [int(width), int(height)],
+        "parts": {str(i + 1): part for i, part in enumerate(object_class.parts)},
+        "depth_units": {
+            "world_z_far_at_0.1": z_far,
+            "world_z_near_at_1.0": z_near,
+            "pixel_size": window.pixel_size,
+        },
+        "view": view,
+        "faces": int(len(mesh.faces)),
+        **params,
+    }
+    return Instance(name, depth, image, labels, _jsonable(record), mesh if keep_mesh else None)
+
+
+def _jsonable(value):
+    """Numpy scalars and arrays inside dicts/lists to plain Python for json."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return round(float(value), 6)
+    if isinstance(value, float):
+        return round(value, 6)
+    return value

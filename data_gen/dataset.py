@@ -1,0 +1,119 @@
+"""Writing a class of instances to disk in the database format, with a contact sheet."""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from data_gen.core import Instance, ObjectClass, make_instance
+from data_gen.render import ray_backend
+from imagemap.io import InputError, atomic_path, write_image
+from imagemap.progress import progress
+
+__all__ = ["contact_sheet", "write_class", "write_instance"]
+
+log = logging.getLogger(__name__)
+
+
+def write_instance(instance: Instance, directory: str | os.PathLike) -> list[Path]:
+    """Write ``NAME_depth.png`` (16-bit), ``NAME_image.png``, ``NAME_labels.png``, ``NAME.json``.
+
+    Every file is written atomically. Returns the paths written.
+    """
+    directory = Path(directory)
+    name = instance.name
+    paths = [
+        write_image(directory / f"{name}_depth.png", instance.depth, bits=16),
+        write_image(directory / f"{name}_image.png", instance.image, bits=8),
+        write_image(directory / f"{name}_labels.png", instance.labels),
+    ]
+    sidecar = directory / f"{name}.json"
+    with atomic_path(sidecar) as tmp:
+        tmp.write_text(json.dumps(instance.params, indent=1, sort_keys=True) + "\n")
+    return [*paths, sidecar]
+
+
+def contact_sheet(
+    instances: list[Instance], columns: int | None = None, gap: int = 4
+) -> np.ndarray:
+    """One picture of a class: for each instance its depth (grey) beside its image-map.
+
+    Parameters
+    ----------
+    instances : list of Instance
+        All of the same size.
+    columns : int, optional
+        Instances per row (about square overall by default).
+    gap : int, optional
+        Pixels of grey between tiles.
+
+    Returns
+    -------
+    sheet : ndarray of float32, (H', W', 3) in [0, 1]
+    """
+    if not instances:
+        raise InputError("contact sheet: no instances")
+    height, width = instances[0].depth.shape
+    columns = columns or max(1, int(np.ceil(np.sqrt(len(instances) / 2.0))))
+    rows = int(np.ceil(len(instances) / columns))
+    tile_w = 2 * width + gap
+    sheet = np.full(
+        (rows * (height + gap) + gap, columns * (tile_w + gap) + gap, 3), 0.25, dtype=np.float32
+    )
+    for k, instance in enumerate(instances):
+        top = gap + (k // columns) * (height + gap)
+        left = gap + (k % columns) * (tile_w + gap)
+        sheet[top : top + height, left : left + width] = instance.depth[..., None]
+        sheet[top : top + height, left + width + gap : left + tile_w] = instance.image
+    return sheet
+
+
+def write_class(
+    object_class: ObjectClass,
+    out: str | os.PathLike,
+    count: int = 20,
+    seed: int = 0,
+    size: tuple[int, int] | None = None,
+    holdout: int = 0,
+    quiet: bool = False,
+) -> list[Instance]:
+    """Make and write instances 0..count-1 of a class into ``out``.
+
+    Parameters
+    ----------
+    object_class : ObjectClass
+    out : path-like
+        Output directory (created). ``out/contact_sheet.png`` shows all instances.
+    count : int, optional
+    seed : int, optional
+        Instance i of a seed is the same whatever ``count`` is.
+    size : (int, int), optional
+        (width, height); the class default if None.
+    holdout : int, optional
+        The last ``holdout`` instances go to ``out/holdout/`` instead, so they can be
+        queries that are not in the database.
+    quiet : bool, optional
+        No progress bar.
+
+    Returns
+    -------
+    list of Instance (without meshes)
+    """
+    if count < 1:
+        raise InputError(f"--count: must be at least 1, got {count}")
+    if not 0 <= holdout < count:
+        raise InputError(f"--holdout: must be in [0, count), got {holdout} for count {count}")
+    out = Path(out)
+    log.info("%s, ray backend %s", object_class.name, ray_backend())
+    instances = []
+    for index in progress(range(count), total=count, desc=object_class.name, quiet=quiet):
+        instance = make_instance(object_class, index, seed=seed, size=size)
+        target = out / "holdout" if index >= count - holdout else out
+        write_instance(instance, target)
+        instances.append(instance)
+    write_image(out / "contact_sheet.png", contact_sheet(instances))
+    return instances
