@@ -6,9 +6,9 @@ an over-determined Lambertian system I_i = rho (n . l_i): least squares gives th
 normal g = rho n (Woodham), whose direction is the normal and whose length the albedo. The
 normal field is integrated into heights by the Frankot-Chellappa projection onto integrable
 surfaces (in Fourier space). The range map is enlarged to any size by *seamless periodic
-tiling*: its periodic component (Moisan's periodic-plus-smooth decomposition) tiles without
-seams, standing in for the paper's roller method, which also tiles a seam-free toroidal cut
-of the sample.
+tiling* (:func:`enlarge_range_map`): the sample is cross-faded with its half-shifted copy
+into a tile whose heights and slopes wrap continuously, standing in for the paper's roller
+method, which also repeats a seam-free toroidal tile of the sample.
 
 Vectors use the image frame of :mod:`imagemap.render`: x along the columns, y up the screen
 (against the row index), z out of the surface; heights come out in pixels.
@@ -21,6 +21,8 @@ import numpy as np
 from imagemap.io import InputError
 
 __all__ = [
+    "btf_direction_vectors",
+    "crossfade_tile",
     "enlarge_range_map",
     "frankot_chellappa",
     "periodic_component",
@@ -216,15 +218,67 @@ def periodic_component(image: np.ndarray) -> np.ndarray:
     return (image - smooth).astype(np.float32)
 
 
-def enlarge_range_map(
-    height: np.ndarray, shape: tuple[int, int], *, seed: int | None = 0
-) -> np.ndarray:
-    """Enlarge a range map to any ``shape`` by seamless tiling of its periodic component.
+def crossfade_tile(image: np.ndarray, *, overlap: float = 0.25) -> np.ndarray:
+    """A seamless periodic tile of ``image`` by cross-fading its opposite border strips.
 
-    Stands in for the roller method of the paper: the tile is the periodic component
-    (:func:`periodic_component`) so that copies meet without seams, and a seeded random
-    cyclic shift chooses where the tiling starts. The result is itself periodic when
-    ``shape`` is a multiple of the tile.
+    Along each axis in turn, the last ``o`` lines are faded into the first ``o`` (weights
+    w = sin^2 ramp, 0 -> 1) and then dropped: the tile's first line continues its last one,
+    so it wraps with continuous values *and* slopes, and no content repeats inside a tile.
+    The deviation from the mean is divided by sqrt(w^2 + (1 - w)^2), which keeps the
+    variance of an uncorrelated mix, so the fade does not flatten the relief.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W)
+    overlap : float
+        Fraction of each side faded (o = round(overlap * side)).
+
+    Returns
+    -------
+    tile : ndarray of float32, shape (H - o_H, W - o_W), periodic
+
+    Examples
+    --------
+    >>> ramp = np.tile(np.arange(16.0), (16, 1))
+    >>> tile = crossfade_tile(ramp)
+    >>> tile.shape, bool(abs(tile[:, 0] - tile[:, -1]).max() < 2.0)
+    ((12, 12), True)
+    """
+    tile = np.asarray(image, dtype=np.float64)
+    if tile.ndim != 2:
+        raise InputError(f"image: expected a 2-D array, got shape {tile.shape}")
+    if not 0.0 <= overlap < 0.5:
+        raise InputError(f"overlap: expected a fraction in [0, 0.5), got {overlap}")
+    mean = tile.mean()
+    tile = tile - mean
+    for axis in (0, 1):
+        size = tile.shape[axis]
+        strip = int(round(overlap * size))
+        if strip < 1:
+            continue
+        tile = np.moveaxis(tile, axis, 0)
+        weight = np.sin(0.5 * np.pi * (np.arange(strip) + 0.5) / strip)[:, None] ** 2
+        head, tail = tile[:strip], tile[size - strip :]
+        faded = (weight * head + (1 - weight) * tail) / np.sqrt(weight**2 + (1 - weight) ** 2)
+        tile = np.moveaxis(np.concatenate([faded, tile[strip : size - strip]]), 0, axis)
+    return (tile + mean).astype(np.float32)
+
+
+def enlarge_range_map(
+    height: np.ndarray,
+    shape: tuple[int, int],
+    *,
+    method: str = "crossfade",
+    seed: int | None = 0,
+) -> np.ndarray:
+    """Enlarge a range map to any ``shape`` by seamless tiling.
+
+    Stands in for the roller method of the paper, which also repeats a seam-free toroidal
+    tile of the sample: the tile is made periodic by :func:`crossfade_tile` (continuous
+    heights and slopes across the wrap; default) or by :func:`periodic_component`
+    (continuous heights, but slope creases at the tile borders show under grazing light),
+    or taken as it is (``"wrap"``, for a tile that is already periodic); a seeded random
+    cyclic shift chooses where the tiling starts.
 
     Parameters
     ----------
@@ -232,12 +286,14 @@ def enlarge_range_map(
         Range map of the sample.
     shape : (int, int)
         Output (H, W), any size.
+    method : {"crossfade", "periodic", "wrap"}
     seed : int or None
         Seed of the starting offset (None: no offset).
 
     Returns
     -------
-    enlarged : ndarray of float32, shape ``shape``
+    enlarged : ndarray of float32, shape ``shape``; periodic when ``shape`` is a multiple
+    of the tile.
 
     Examples
     --------
@@ -250,15 +306,39 @@ def enlarge_range_map(
     out_h, out_w = (int(s) for s in shape)
     if out_h < 1 or out_w < 1:
         raise InputError(f"shape: must be positive, got {shape}")
-    tile = periodic_component(height)
+    if method == "crossfade":
+        tile = crossfade_tile(height)
+    elif method == "periodic":
+        tile = periodic_component(height)
+    elif method == "wrap":
+        tile = height
+    else:
+        raise InputError(f"method: expected 'crossfade', 'periodic' or 'wrap', got {method!r}")
     if seed is not None:
         rng = np.random.default_rng(seed)
-        tile = np.roll(
-            tile, (int(rng.integers(tile.shape[0])), int(rng.integers(tile.shape[1]))), (0, 1)
-        )
-    return np.pad(
-        tile, ((0, max(out_h - tile.shape[0], 0)), (0, max(out_w - tile.shape[1], 0))), mode="wrap"
-    )[:out_h, :out_w].astype(np.float32)
+        offset = (int(rng.integers(tile.shape[0])), int(rng.integers(tile.shape[1])))
+        tile = np.roll(tile, offset, (0, 1))
+    repeats = (-(-out_h // tile.shape[0]), -(-out_w // tile.shape[1]))
+    return np.tile(tile, repeats)[:out_h, :out_w].astype(np.float32)
+
+
+def btf_direction_vectors(directions: np.ndarray) -> np.ndarray:
+    """BTF (theta, phi) directions in degrees to unit vectors in the image frame used here.
+
+    BTF azimuths (:mod:`imagemap.btf.core`, :mod:`data_gen.materials`) count y along the
+    image rows (down the screen); the image frame of :mod:`imagemap.render` has y up, so the
+    y component changes sign.
+
+    Examples
+    --------
+    >>> btf_direction_vectors(np.array([[90.0, 90.0]])).round(6).tolist()
+    [[0.0, -1.0, 0.0]]
+    """
+    from imagemap.btf.core import directions_to_vectors
+
+    vectors = directions_to_vectors(directions)
+    vectors[:, 1] *= -1.0
+    return vectors + 0.0
 
 
 def range_map_from_btf(
@@ -283,11 +363,9 @@ def range_map_from_btf(
     --------
     >>> height, normals, albedo = range_map_from_btf(sample)  # doctest: +SKIP
     """
-    from imagemap.btf.core import directions_to_vectors
-
     if view is None:
         view = int(np.argmin(btf.view_dirs[:, 0]))
     images = np.stack([btf.image(light, view) for light in range(btf.n_lights)])
-    lights = directions_to_vectors(btf.light_dirs)
+    lights = btf_direction_vectors(btf.light_dirs)
     normals, albedo = photometric_stereo(images, lights, min_intensity=min_intensity)
     return frankot_chellappa(normals, mirror=mirror), normals, albedo

@@ -1,0 +1,849 @@
+"""The moving-average BTF model (Havlicek & Haindl, papers/moving-average-btf-model.txt).
+
+A parametric, stochastic alternative to example-based BTF enlargement:
+
+1. range map of the material by over-determined photometric stereo on the top view
+   (:mod:`imagemap.btf.photometric`), enlarged by seamless periodic tiling (section 2.1);
+2. optional segmentation of the BTF images into subspaces by K-means in CIELAB; one
+   representative image (the member nearest the centroid) is modelled per subspace;
+3. spectral decorrelation of a representative by the Karhunen-Loeve transform (2.2) and
+   spatial factorization of each decorrelated band by a Gaussian-Laplacian pyramid (2.3);
+4. per mono-spectral band-limited factor, a 2D moving-average (MA) kernel estimated by the
+   random-decrement procedure (2.5): threshold gamma = 0.5 sigma, a window is kept where the
+   factor crosses gamma (the pixel is >= gamma while at least one of its row neighbours and
+   one of its column neighbours are below), the summed windows are divided by their count;
+5. synthesis of any size by convolving white noise with each kernel (2.6, circular FFT
+   convolution, so the result tiles seamlessly), inverse K-L and pyramid collapse;
+6. appearance under any light and view: the synthetic smooth texture of the subspace of the
+   nearest measured (light, view) pair, bump mapped with the enlarged range map.
+
+By default the averaged windows are the filter, as the paper states (``kernel="signature"``,
+scaled so the filter's energy equals the factor's variance). For a Gaussian field the
+random-decrement average is, in theory, proportional to the autocorrelation R(s), whose
+convolution with white noise would be too smooth; ``kernel="spectral_root"`` instead takes
+the zero-phase filter whose autocorrelation is the signature. Measured on MA fields of known
+Gaussian kernels, the crossing condition (neighbours below gamma) sharpens the average so
+much that the plain signature reproduces the field's autocorrelation better (lags 1-3 within
+0.05, against up to 0.2 too low for the spectral root), so the paper's choice is the default.
+The bump mapping divides the representative
+image by its own range-map shading before modelling (``deshade``), so the shading is not
+counted twice; the synthetic texture is shaded again with the enlarged range map.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from imagemap.io import InputError, write_npz
+from imagemap.pyramid import laplacian_pyramid, level_shapes
+from imagemap.render import normals_from_height
+
+__all__ = [
+    "MAParams",
+    "MovingAverageModel",
+    "collapse_periodic",
+    "compression_ratios",
+    "fit_moving_average",
+    "fit_moving_average_btf",
+    "inverse_karhunen_loeve",
+    "karhunen_loeve",
+    "ma_kernel_from_signature",
+    "moving_average_extrapolate",
+    "parameter_count",
+    "random_decrement_signature",
+    "segment_subspaces",
+    "synthesize_band",
+    "synthesize_btf",
+    "synthesize_appearance",
+    "synthesize_smooth_textures",
+]
+
+
+@dataclass(frozen=True)
+class MAParams:
+    """Parameters of the moving-average BTF model.
+
+    Parameters
+    ----------
+    levels : int
+        Gaussian-Laplacian pyramid levels (the paper: 4 for 128 x 128).
+    support : int
+        Odd width of the square MA kernel support I_r (shrunk on small coarse levels).
+    threshold : float
+        Random-decrement threshold gamma in units of the factor's standard deviation.
+    kernel : {"spectral_root", "signature"}
+        How the averaged windows become the filter (see the module docstring).
+    n_subspaces : int
+        K-means clusters of BTF images; 1 models one representative for the whole BTF.
+    deshade : bool
+        Divide representatives by their range-map shading before modelling.
+    bump_scale : float
+        Multiplier of the range map's heights when bump mapping.
+    min_intensity : float
+        Photometric stereo: samples darker than this are treated as shadowed.
+    """
+
+    levels: int = 4
+    support: int = 13
+    threshold: float = 0.5
+    kernel: str = "signature"
+    n_subspaces: int = 8
+    deshade: bool = True
+    bump_scale: float = 1.0
+    min_intensity: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.levels < 1:
+            raise InputError(f"levels: must be at least 1, got {self.levels}")
+        if self.support < 1 or self.support % 2 == 0:
+            raise InputError(f"support: must be a positive odd width, got {self.support}")
+        if self.threshold < 0:
+            raise InputError(f"threshold: must be >= 0 (in sigma), got {self.threshold}")
+        if self.kernel not in ("spectral_root", "signature"):
+            raise InputError(
+                f"kernel: expected 'spectral_root' or 'signature', got {self.kernel!r}"
+            )
+        if self.n_subspaces < 1:
+            raise InputError(f"n_subspaces: must be at least 1, got {self.n_subspaces}")
+
+
+# --------------------------------------------------------------------------- K-L transform
+def karhunen_loeve(image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Spectral decorrelation: project the channels on the eigenvectors of their covariance.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, C)
+
+    Returns
+    -------
+    bands : ndarray (H, W, C) float32
+        Decorrelated bands, strongest first (their covariance is diagonal).
+    mean : ndarray (C,)
+        Channel means.
+    basis : ndarray (C, C)
+        Rows are the eigenvectors: ``bands = (image - mean) @ basis.T``.
+
+    Examples
+    --------
+    >>> x = np.random.default_rng(0).random((8, 8, 3))
+    >>> bands, mean, basis = karhunen_loeve(x)
+    >>> bool(np.allclose(inverse_karhunen_loeve(bands, mean, basis), x, atol=1e-5))
+    True
+    """
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim != 3:
+        raise InputError(f"image: expected (H, W, C), got shape {image.shape}")
+    pixels = image.reshape(-1, image.shape[2])
+    mean = pixels.mean(axis=0)
+    covariance = np.cov(pixels - mean, rowvar=False).reshape(image.shape[2], image.shape[2])
+    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
+    basis = eigenvectors[:, np.argsort(eigenvalues)[::-1]].T
+    # Fix each eigenvector's sign (largest entry positive): same data, same model bytes.
+    basis *= np.sign(basis[np.arange(len(basis)), np.argmax(np.abs(basis), axis=1)])[:, None]
+    bands = (image - mean) @ basis.T
+    return bands.astype(np.float32), mean.astype(np.float32), basis.astype(np.float32)
+
+
+def inverse_karhunen_loeve(bands: np.ndarray, mean: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`karhunen_loeve`: ``bands @ basis + mean`` (the basis is orthonormal)."""
+    return (np.asarray(bands, np.float32) @ np.asarray(basis, np.float32) + mean).astype(np.float32)
+
+
+# ------------------------------------------------------------------ periodic pyramid collapse
+def _expand_wrap(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Bilinear 2x upsampling like :func:`imagemap.pyramid.expand`, wrapping at the borders.
+
+    Synthetic factors are periodic; wrapping keeps the collapsed texture tileable.
+    """
+    height, width = shape
+    ys = np.arange(height, dtype=np.float32) / 2
+    xs = np.arange(width, dtype=np.float32) / 2
+    y0, x0 = np.floor(ys).astype(np.intp), np.floor(xs).astype(np.intp)
+    fy = (ys - y0)[:, None]
+    fx = (xs - x0)[None, :]
+    y0, y1 = y0 % image.shape[0], (y0 + 1) % image.shape[0]
+    x0, x1 = x0 % image.shape[1], (x0 + 1) % image.shape[1]
+    top = image[y0][:, x0] * (1 - fx) + image[y0][:, x1] * fx
+    bottom = image[y1][:, x0] * (1 - fx) + image[y1][:, x1] * fx
+    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+
+
+def collapse_periodic(pyramid: list[np.ndarray]) -> np.ndarray:
+    """Collapse a Laplacian pyramid of periodic 2-D factors with wrapping expansion.
+
+    Examples
+    --------
+    >>> flat = [np.zeros((8, 8)), np.zeros((4, 4)), np.ones((2, 2))]
+    >>> float(collapse_periodic(flat).mean())
+    1.0
+    """
+    image = np.asarray(pyramid[-1], dtype=np.float32)
+    for band in reversed(pyramid[:-1]):
+        image = np.asarray(band, np.float32) + _expand_wrap(image, band.shape[:2])
+    return image
+
+
+# ------------------------------------------------------------------ random decrement, MA kernel
+def random_decrement_signature(
+    factor: np.ndarray, *, support: int = 13, threshold: float = 0.5
+) -> tuple[np.ndarray, int]:
+    """Random-decrement average of the windows around threshold crossings (Eq. 2).
+
+    The factor is centred; gamma = ``threshold`` * sigma. Pixel r is a crossing when
+    Y_r >= gamma while at least one of its left/right neighbours and one of its up/down
+    neighbours are below gamma. Only crossings whose whole window lies inside are used.
+    The sum over crossings is one FFT cross-correlation of the crossing indicator with Y.
+
+    Parameters
+    ----------
+    factor : ndarray (H, W)
+        A mono-spectral band-limited factor.
+    support : int
+        Odd window width.
+    threshold : float
+        gamma in units of sigma.
+
+    Returns
+    -------
+    signature : ndarray (support, support) float32
+        Mean window, centred on the crossing (zeros when there is no crossing).
+    count : int
+        Number of crossings, cardinality of Gamma.
+
+    Examples
+    --------
+    >>> y = np.random.default_rng(0).standard_normal((64, 64))
+    >>> signature, count = random_decrement_signature(y, support=5)
+    >>> signature.shape, count > 100
+    ((5, 5), True)
+    """
+    y = np.asarray(factor, dtype=np.float64)
+    if y.ndim != 2:
+        raise InputError(f"factor: expected a 2-D band, got shape {y.shape}")
+    radius = support // 2
+    y = y - y.mean()
+    gamma = threshold * y.std()
+    above = y >= gamma
+    below = ~above
+    row_neighbour_below = np.zeros_like(above)
+    row_neighbour_below[:, 1:-1] = below[:, :-2] | below[:, 2:]
+    column_neighbour_below = np.zeros_like(above)
+    column_neighbour_below[1:-1, :] = below[:-2, :] | below[2:, :]
+    crossing = above & row_neighbour_below & column_neighbour_below
+    interior = np.zeros_like(crossing)
+    interior[radius : y.shape[0] - radius, radius : y.shape[1] - radius] = True
+    crossing &= interior
+    count = int(crossing.sum())
+    if count == 0:
+        return np.zeros((support, support), np.float32), 0
+    # sum_r M_r Y_{r+s} = circular cross-correlation; no wrap for |s| <= radius (interior).
+    correlation = np.real(np.fft.ifft2(np.conj(np.fft.fft2(crossing)) * np.fft.fft2(y)))
+    offsets = np.arange(-radius, radius + 1)
+    window = correlation[np.ix_(offsets % y.shape[0], offsets % y.shape[1])]
+    return (window / count).astype(np.float32), count
+
+
+def ma_kernel_from_signature(
+    signature: np.ndarray, variance: float, *, kernel: str = "signature"
+) -> np.ndarray:
+    """Turn a random-decrement signature into an MA filter with the factor's variance.
+
+    Parameters
+    ----------
+    signature : ndarray (s, s)
+        From :func:`random_decrement_signature`.
+    variance : float
+        Variance of the factor; the filter's energy sum(h^2) is set to it, so white noise
+        of unit variance convolved with it has this variance.
+    kernel : {"spectral_root", "signature"}
+        "spectral_root": the zero-phase filter whose autocorrelation is the symmetrized
+        signature (its power spectrum is clipped at 0 and square-rooted); "signature": the
+        averaged windows themselves.
+
+    Returns
+    -------
+    kernel : ndarray (s, s) float32, centred
+
+    Examples
+    --------
+    >>> delta = np.zeros((5, 5)); delta[2, 2] = 1.0
+    >>> ma_kernel_from_signature(delta, 4.0, kernel="spectral_root")[2, 2].round(3)
+    np.float32(2.0)
+    """
+    signature = np.asarray(signature, dtype=np.float64)
+    size = signature.shape[0]
+    if kernel == "signature":
+        filt = signature
+    elif kernel == "spectral_root":
+        symmetric = 0.5 * (signature + signature[::-1, ::-1])
+        fft_size = 4 * size
+        padded = np.zeros((fft_size, fft_size))
+        offsets = np.arange(size) - size // 2
+        padded[np.ix_(offsets % fft_size, offsets % fft_size)] = symmetric
+        power = np.clip(np.real(np.fft.fft2(padded)), 0.0, None)
+        root = np.real(np.fft.ifft2(np.sqrt(power)))
+        filt = root[np.ix_(offsets % fft_size, offsets % fft_size)]
+    else:
+        raise InputError(f"kernel: expected 'spectral_root' or 'signature', got {kernel!r}")
+    energy = float(np.sum(filt**2))
+    if energy <= 0 or not np.isfinite(energy):
+        filt = np.zeros_like(filt)
+        filt[size // 2, size // 2] = 1.0
+        energy = 1.0
+    return (filt * np.sqrt(max(variance, 0.0) / energy)).astype(np.float32)
+
+
+def synthesize_band(
+    kernel: np.ndarray,
+    shape: tuple[int, int],
+    *,
+    noise: np.ndarray | None = None,
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
+    """White noise circularly convolved with an MA kernel (Eq. 1), any size, seamless.
+
+    Parameters
+    ----------
+    kernel : ndarray (s, s), centred
+    shape : (H, W)
+    noise : ndarray (H, W), optional
+        The uncorrelated input e_r; default standard normal from ``rng``.
+    rng : numpy.random.Generator, optional
+        Needed when ``noise`` is not given.
+
+    Returns
+    -------
+    band : ndarray (H, W) float32, periodic
+
+    Examples
+    --------
+    >>> k = np.zeros((3, 3)); k[1, 1] = 1.0
+    >>> e = np.random.default_rng(0).standard_normal((8, 8))
+    >>> bool(np.allclose(synthesize_band(k, (8, 8), noise=e), e, atol=1e-6))
+    True
+    """
+    height, width = (int(s) for s in shape)
+    if noise is None:
+        if rng is None:
+            raise InputError("synthesize_band: give noise or rng")
+        noise = rng.standard_normal((height, width))
+    kernel = np.asarray(kernel, dtype=np.float64)
+    wrapped = np.zeros((height, width))
+    rows = (np.arange(kernel.shape[0]) - kernel.shape[0] // 2) % height
+    cols = (np.arange(kernel.shape[1]) - kernel.shape[1] // 2) % width
+    # add.at: a kernel wider than a tiny coarse level folds onto itself (circular).
+    np.add.at(wrapped, (rows[:, None], cols[None, :]), kernel)
+    band = np.real(np.fft.ifft2(np.fft.fft2(noise) * np.fft.fft2(wrapped)))
+    return band.astype(np.float32)
+
+
+# ------------------------------------------------------------------------ subspaces (K-means)
+def _lab_features(image: np.ndarray, scale: float) -> np.ndarray:
+    from skimage.color import rgb2lab
+
+    lab = rgb2lab(np.clip(image / scale, 0.0, 1.0)).reshape(-1, 3)
+    return np.concatenate([lab.mean(axis=0), lab.std(axis=0)])
+
+
+def segment_subspaces(
+    features: np.ndarray, n_subspaces: int, *, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """K-means segmentation of BTF images by their CIELAB features.
+
+    Parameters
+    ----------
+    features : ndarray (N, F)
+        Per image: mean and standard deviation of L*, a*, b*.
+    n_subspaces : int
+        Clusters (clipped to N).
+    seed : int
+
+    Returns
+    -------
+    labels : ndarray (N,) int
+        Subspace of each image, renumbered 0..K-1 by first appearance.
+    representatives : ndarray (K,) int
+        Per subspace, the image nearest its centroid.
+
+    Examples
+    --------
+    >>> f = np.array([[0.0], [0.1], [10.0], [10.2]])
+    >>> segment_subspaces(f, 2)[0].tolist()
+    [0, 0, 1, 1]
+    """
+    from scipy.cluster.vq import kmeans2
+
+    features = np.asarray(features, dtype=np.float64)
+    n = features.shape[0]
+    k = int(min(n_subspaces, n))
+    if k == 1:
+        centre = features.mean(axis=0)
+        return np.zeros(n, np.intp), np.array([np.argmin(((features - centre) ** 2).sum(1))])
+    spread = features.std(axis=0)
+    whitened = features / np.where(spread > 0, spread, 1.0)
+    centroids, labels = kmeans2(whitened, k, minit="++", rng=np.random.default_rng(seed))
+    _, first = np.unique(labels, return_index=True)
+    order = labels[np.sort(first)]
+    renumber = np.full(k, -1)
+    renumber[order] = np.arange(len(order))
+    labels = renumber[labels]
+    centroids = centroids[order]
+    distances = ((whitened[:, None, :] - centroids[None]) ** 2).sum(-1)
+    distances = np.where(labels[:, None] == np.arange(len(order)), distances, np.inf)
+    return labels.astype(np.intp), np.argmin(distances, axis=0)
+
+
+# --------------------------------------------------------------------------------- the model
+@dataclass
+class MovingAverageModel:
+    """A fitted moving-average BTF model (all arrays; saved to one ``.npz``).
+
+    Attributes
+    ----------
+    kernels : list (per subspace) of list (per level) of ndarray (C, s_l, s_l)
+        MA filters of the K-L bands at each pyramid level (finest first).
+    level_means : ndarray (K, L, C)
+        Mean of each band-limited factor (the MA field itself is zero-mean).
+    kl_means, kl_bases : ndarray (K, C), (K, C, C)
+        Inverse K-L transform of each subspace.
+    subspace_of : ndarray (n_lights, n_views) int
+        Subspace of every measured (light, view) pair.
+    light_vectors, view_vectors : ndarray (n_lights, 3), (n_views, 3)
+        Unit directions, z up.
+    range_map : ndarray (h, w)
+        Periodic range-map tile in pixels (:func:`imagemap.btf.photometric.crossfade_tile`
+        of the photometric-stereo heights), enlarged by tiling.
+    sample_shape : (int, int)
+    params : MAParams
+    """
+
+    kernels: list
+    level_means: np.ndarray
+    kl_means: np.ndarray
+    kl_bases: np.ndarray
+    subspace_of: np.ndarray
+    light_vectors: np.ndarray
+    view_vectors: np.ndarray
+    range_map: np.ndarray
+    sample_shape: tuple[int, int]
+    params: MAParams = field(default_factory=MAParams)
+
+    @property
+    def n_subspaces(self) -> int:
+        return int(self.kl_means.shape[0])
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the model to one ``.npz`` atomically."""
+        arrays = {
+            f"kernel_{k}_{level}": self.kernels[k][level]
+            for k in range(self.n_subspaces)
+            for level in range(len(self.kernels[k]))
+        }
+        return write_npz(
+            path,
+            level_means=self.level_means,
+            kl_means=self.kl_means,
+            kl_bases=self.kl_bases,
+            subspace_of=self.subspace_of,
+            light_vectors=self.light_vectors,
+            view_vectors=self.view_vectors,
+            range_map=self.range_map,
+            sample_shape=np.array(self.sample_shape),
+            params=np.array(repr(asdict(self.params))),
+            format=np.array("imagemap-moving-average-btf-1"),
+            **arrays,
+        )
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MovingAverageModel:
+        """Read a model written by :meth:`save`."""
+        import ast
+
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: file not found")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                fields = {name: data[name] for name in data.files}
+        except Exception as exc:
+            raise InputError(f"{path}: not a readable .npz ({exc})") from exc
+        if str(fields.get("format", "")) != "imagemap-moving-average-btf-1":
+            raise InputError(f"{path}: not a moving-average BTF model (see 'imagemap btf ma-fit')")
+        k_count, levels = fields["level_means"].shape[:2]
+        kernels = [[fields[f"kernel_{k}_{lv}"] for lv in range(levels)] for k in range(k_count)]
+        return cls(
+            kernels,
+            fields["level_means"],
+            fields["kl_means"],
+            fields["kl_bases"],
+            fields["subspace_of"],
+            fields["light_vectors"],
+            fields["view_vectors"],
+            fields["range_map"],
+            tuple(int(s) for s in fields["sample_shape"]),
+            MAParams(**ast.literal_eval(str(fields["params"]))),
+        )
+
+
+def _bump_factor(normals: np.ndarray, light: np.ndarray, *, floor: float = 0.0) -> np.ndarray:
+    """Lambert shading of the bumped surface relative to its mean under the same light."""
+    shading = np.clip(normals @ np.asarray(light, np.float32), 0.0, None)
+    mean = float(shading.mean())
+    if mean <= 1e-6:
+        return np.zeros(normals.shape[:2], np.float32)
+    return np.maximum(shading / mean, floor).astype(np.float32)
+
+
+def _fit_representative(image: np.ndarray, params: MAParams):
+    """K-L, pyramid and one MA kernel per mono-spectral band-limited factor."""
+    bands, kl_mean, kl_basis = karhunen_loeve(image)
+    pyramid = laplacian_pyramid(bands, params.levels)
+    kernels, means = [], []
+    for level in pyramid:
+        smallest = min(level.shape[:2])
+        # A window must leave room for crossings inside small coarse levels.
+        support = int(min(params.support, max(1, (smallest // 3) | 1)))
+        level_kernels, level_means = [], []
+        for channel in range(level.shape[2]):
+            factor = level[..., channel].astype(np.float64)
+            signature, _ = random_decrement_signature(
+                factor, support=support, threshold=params.threshold
+            )
+            level_kernels.append(
+                ma_kernel_from_signature(signature, float(factor.var()), kernel=params.kernel)
+            )
+            level_means.append(float(factor.mean()))
+        kernels.append(np.stack(level_kernels))
+        means.append(level_means)
+    return kernels, np.array(means, np.float32), kl_mean, kl_basis
+
+
+def fit_moving_average(
+    images: np.ndarray,
+    light_vectors: np.ndarray,
+    view_vectors: np.ndarray,
+    *,
+    params: MAParams | None = None,
+    seed: int = 0,
+    image_of=None,
+) -> MovingAverageModel:
+    """Fit the moving-average BTF model to measured images (plain arrays).
+
+    Parameters
+    ----------
+    images : ndarray (n_lights, n_views, H, W, 3), or None with ``image_of``
+        Linear RGB BTF images.
+    light_vectors, view_vectors : ndarray (n_lights, 3), (n_views, 3)
+        Unit directions, z up, in the image frame of :mod:`imagemap.render`.
+    params : MAParams, optional
+    seed : int
+        Seed of the K-means initialization.
+    image_of : callable (light, view) -> (H, W, 3), optional
+        Fetches one image at a time instead of ``images`` (large BTFs).
+
+    Returns
+    -------
+    MovingAverageModel
+
+    Examples
+    --------
+    >>> model = fit_moving_average(stack, lights, views)  # doctest: +SKIP
+    """
+    from imagemap.btf.photometric import crossfade_tile, frankot_chellappa, photometric_stereo
+
+    params = params or MAParams()
+    lights = np.asarray(light_vectors, np.float64)
+    views = np.asarray(view_vectors, np.float64)
+    if lights.ndim != 2 or lights.shape[1] != 3 or views.ndim != 2 or views.shape[1] != 3:
+        raise InputError("light_vectors, view_vectors: expected (n, 3) unit vectors")
+    lights /= np.linalg.norm(lights, axis=1, keepdims=True)
+    views /= np.linalg.norm(views, axis=1, keepdims=True)
+    n_lights, n_views = len(lights), len(views)
+    if image_of is None:
+        images = np.asarray(images, dtype=np.float32)
+        if images.ndim != 5 or images.shape[:2] != (n_lights, n_views) or images.shape[4] != 3:
+            raise InputError(
+                f"images: expected ({n_lights}, {n_views}, H, W, 3), got {np.shape(images)}"
+            )
+        if not np.all(np.isfinite(images)):
+            raise InputError("images: have NaN or infinite values")
+
+        def image_of(light: int, view: int) -> np.ndarray:
+            return images[light, view]
+
+    top_view = int(np.argmax(views[:, 2]))
+    top_stack = np.stack([image_of(light, top_view) for light in range(n_lights)])
+    sample_shape = top_stack.shape[1:3]
+    normals, _ = photometric_stereo(top_stack, lights, min_intensity=params.min_intensity)
+    sample_height = frankot_chellappa(normals)
+    # Deshading needs the heights registered with the sample; synthesis needs a tile.
+    bumped = normals_from_height(sample_height, scale=params.bump_scale)
+    range_map = crossfade_tile(sample_height)
+
+    scale = float(np.percentile(top_stack, 99.5)) or 1.0
+    features = np.array(
+        [_lab_features(image_of(lt, vw), scale) for lt in range(n_lights) for vw in range(n_views)]
+    )
+    labels, representatives = segment_subspaces(features, params.n_subspaces, seed=seed)
+
+    kernels, level_means, kl_means, kl_bases = [], [], [], []
+    for index in representatives:
+        light, view = divmod(int(index), n_views)
+        image = image_of(light, view).astype(np.float32)
+        if params.deshade:
+            image = image / np.maximum(_bump_factor(bumped, lights[light]), 0.25)[..., None]
+        k_kernels, k_means, k_mean, k_basis = _fit_representative(image, params)
+        kernels.append(k_kernels)
+        level_means.append(k_means)
+        kl_means.append(k_mean)
+        kl_bases.append(k_basis)
+    return MovingAverageModel(
+        kernels=kernels,
+        level_means=np.stack(level_means),
+        kl_means=np.stack(kl_means),
+        kl_bases=np.stack(kl_bases),
+        subspace_of=labels.reshape(n_lights, n_views),
+        light_vectors=lights.astype(np.float32),
+        view_vectors=views.astype(np.float32),
+        range_map=range_map.astype(np.float32),
+        sample_shape=(int(sample_shape[0]), int(sample_shape[1])),
+        params=params,
+    )
+
+
+def fit_moving_average_btf(
+    btf, *, params: MAParams | None = None, seed: int = 0
+) -> MovingAverageModel:
+    """Fit the model to an :class:`imagemap.btf.BTF`, decompressing one image at a time.
+
+    Examples
+    --------
+    >>> model = fit_moving_average_btf(BTF.load("sample.npz"))  # doctest: +SKIP
+    """
+    from imagemap.btf.photometric import btf_direction_vectors
+
+    return fit_moving_average(
+        None,
+        btf_direction_vectors(btf.light_dirs),
+        btf_direction_vectors(btf.view_dirs),
+        params=params,
+        seed=seed,
+        image_of=lambda light, view: btf.image(light, view),
+    )
+
+
+def synthesize_smooth_textures(
+    model: MovingAverageModel, shape: tuple[int, int], *, seed: int = 0
+) -> np.ndarray:
+    """Synthetic smooth multi-spectral texture of every subspace, any size, seamless.
+
+    All subspaces share the same white-noise fields (one per level and K-L band), so their
+    textures are spatially coherent: a texel keeps its character from light to light.
+
+    Returns
+    -------
+    textures : ndarray (K, H, W, 3) float32
+
+    Examples
+    --------
+    >>> textures = synthesize_smooth_textures(model, (512, 512), seed=1)  # doctest: +SKIP
+    """
+    height, width = (int(s) for s in shape)
+    if height < 1 or width < 1:
+        raise InputError(f"shape: must be positive, got {shape}")
+    rng = np.random.default_rng(seed)
+    levels = len(model.kernels[0])
+    channels = model.kl_means.shape[1]
+    shapes = level_shapes((height, width), levels)
+    noise = [[rng.standard_normal(s) for _ in range(channels)] for s in shapes]
+    textures = np.empty((model.n_subspaces, height, width, channels), np.float32)
+    for k in range(model.n_subspaces):
+        pyramid = [
+            np.stack(
+                [
+                    synthesize_band(model.kernels[k][lv][c], shapes[lv], noise=noise[lv][c])
+                    + model.level_means[k, lv, c]
+                    for c in range(channels)
+                ],
+                axis=-1,
+            )
+            for lv in range(levels)
+        ]
+        bands = np.stack(
+            [collapse_periodic([p[..., c] for p in pyramid]) for c in range(channels)], -1
+        )
+        textures[k] = inverse_karhunen_loeve(bands, model.kl_means[k], model.kl_bases[k])
+    return textures
+
+
+def _enlarged_normals(model: MovingAverageModel, shape, seed: int) -> np.ndarray:
+    from imagemap.btf.photometric import enlarge_range_map
+
+    height = enlarge_range_map(model.range_map, shape, method="wrap", seed=seed)
+    return normals_from_height(height, scale=model.params.bump_scale, periodic=True)
+
+
+def synthesize_appearance(
+    model: MovingAverageModel,
+    light: np.ndarray,
+    view: np.ndarray,
+    shape: tuple[int, int],
+    *,
+    seed: int = 0,
+    textures: np.ndarray | None = None,
+) -> np.ndarray:
+    """The enlarged material under any light and view: smooth texture x bump shading.
+
+    The subspace is that of the measured (light, view) pair nearest to the request (sum of
+    the two cosines); the texture is shaded with the enlarged range map under ``light``
+    relative to a flat average, so the mean brightness stays that of the subspace.
+
+    Parameters
+    ----------
+    model : MovingAverageModel
+    light, view : 3-vectors
+        Unit directions, z up.
+    shape : (H, W)
+    seed : int
+        Seed of the noise fields and of the range-map tiling offset.
+    textures : ndarray (K, H, W, 3), optional
+        Precomputed :func:`synthesize_smooth_textures` (same seed and shape).
+
+    Returns
+    -------
+    image : ndarray (H, W, 3) float32, linear (not clipped)
+    """
+    light = np.asarray(light, np.float64) / np.linalg.norm(light)
+    view = np.asarray(view, np.float64) / np.linalg.norm(view)
+    best_light = int(np.argmax(model.light_vectors @ light))
+    best_view = int(np.argmax(model.view_vectors @ view))
+    subspace = int(model.subspace_of[best_light, best_view])
+    if textures is None:
+        textures = synthesize_smooth_textures(model, shape, seed=seed)
+    normals = _enlarged_normals(model, shape, seed)
+    return (textures[subspace] * _bump_factor(normals, light)[..., None]).astype(np.float32)
+
+
+def synthesize_btf(model: MovingAverageModel, sample, shape: tuple[int, int], *, seed: int = 0):
+    """Synthesize the enlarged BTF on the sample's eigen-ABRDFs: V Sigma = S'^T U.
+
+    Every rendered row image (light, view, channel) is projected onto the sample's U, so the
+    result is a :class:`imagemap.btf.BTF` sharing U and the relative error is computed the
+    same way as for the example-based methods. The projection is grouped by subspace and
+    channel so it runs as a few large matrix products: with F the (texels, lights) matrix of
+    bump factors, V Sigma = sum_k sum_c T_kc * (F @ U_kc), U_kc summing the U rows of the
+    (light, view) pairs of subspace k.
+
+    Parameters
+    ----------
+    model : MovingAverageModel
+    sample : imagemap.btf.BTF
+        Gives U, directions and channels (RGB colour model expected).
+    shape : (H, W)
+    seed : int
+
+    Returns
+    -------
+    imagemap.btf.BTF
+    """
+    if sample.n_channels != 3 or sample.color_model != "RGB":
+        raise InputError("sample: the moving-average model needs an RGB BTF")
+    if model.subspace_of.shape != (sample.n_lights, sample.n_views):
+        raise InputError(
+            f"model: fitted on {model.subspace_of.shape} (lights, views), sample has "
+            f"{(sample.n_lights, sample.n_views)}"
+        )
+    height, width = (int(s) for s in shape)
+    textures = synthesize_smooth_textures(model, (height, width), seed=seed)
+    normals = _enlarged_normals(model, (height, width), seed)
+    factors = np.stack(
+        [_bump_factor(normals, light).reshape(-1) for light in model.light_vectors], axis=1
+    )  # (texels, lights)
+    u = sample.eigen_abrdfs.reshape(sample.n_lights, sample.n_views, 3, -1)
+    eigentextures = np.zeros((height * width, sample.n_components), np.float32)
+    for k in range(model.n_subspaces):
+        in_subspace = (model.subspace_of == k).astype(np.float32)  # (lights, views)
+        u_k = np.einsum("lv,lvcj->lcj", in_subspace, u)  # (lights, C, k)
+        for channel in range(3):
+            projected = factors @ u_k[:, channel, :]
+            eigentextures += textures[k, ..., channel].reshape(-1, 1) * projected
+    return sample.with_eigentextures(eigentextures.reshape(height, width, -1))
+
+
+def moving_average_extrapolate(
+    sample, output_shape: tuple[int, int], *, seed: int = 0, params: MAParams | None = None
+):
+    """The ``moving_average`` row of ``imagemap btf experiment``: fit on the sample, enlarge.
+
+    Parameters
+    ----------
+    sample : imagemap.btf.BTF
+        The measured cut-out.
+    output_shape : (H, W)
+    seed : int
+    params : MAParams, optional
+
+    Returns
+    -------
+    imagemap.btf.BTF
+        Shares the sample's U, so :func:`imagemap.btf.relative_error` applies directly.
+
+    Examples
+    --------
+    >>> big = moving_average_extrapolate(sample, (512, 512), seed=0)  # doctest: +SKIP
+    """
+    model = fit_moving_average_btf(sample, params=params, seed=seed)
+    return synthesize_btf(model, sample, output_shape, seed=seed)
+
+
+# ------------------------------------------------------------------------ size and compression
+def parameter_count(model: MovingAverageModel) -> dict[str, int]:
+    """Numbers the model stores, by part.
+
+    Returns
+    -------
+    dict with "kernels", "band_means", "kl", "range_map", "subspace_map", "directions",
+    "total".
+    """
+    counts = {
+        "kernels": int(sum(k.size for per_k in model.kernels for k in per_k)),
+        "band_means": int(model.level_means.size),
+        "kl": int(model.kl_means.size + model.kl_bases.size),
+        "range_map": int(model.range_map.size),
+        "subspace_map": int(model.subspace_of.size),
+        "directions": int(2 * (len(model.light_vectors) + len(model.view_vectors))),
+    }
+    counts["total"] = int(sum(counts.values()))
+    return counts
+
+
+def compression_ratios(
+    model: MovingAverageModel, shape: tuple[int, int], *, tsvd_rank: int = 100
+) -> dict[str, float]:
+    """Compression of the model against raw and TSVD data of a BTF of ``shape`` texels.
+
+    Raw: n_lights * n_views * 3 values per texel. TSVD (rank k): U (rows x k), sigma (k)
+    and V Sigma (texels x k). The model's size does not grow with ``shape``.
+
+    Examples
+    --------
+    >>> compression_ratios(model, (512, 512))["vs_raw"]  # doctest: +SKIP
+    """
+    n_rows = model.subspace_of.size * 3
+    texels = int(shape[0]) * int(shape[1])
+    raw = n_rows * texels
+    k = min(tsvd_rank, n_rows, texels)
+    tsvd = k * (n_rows + texels + 1)
+    total = parameter_count(model)["total"]
+    return {
+        "raw_values": float(raw),
+        "tsvd_values": float(tsvd),
+        "model_values": float(total),
+        "vs_raw": raw / total,
+        "vs_tsvd": tsvd / total,
+    }
