@@ -1,0 +1,333 @@
+"""Extrapolate a BTF sample to a large sample: pixel-wise (Eq. 6) and texture optimization.
+
+Both methods synthesize only new eigentextures V~Sigma for the large sample; the
+eigen-ABRDFs U of the measured sample are reused (Sec. 3.3 of the cross-device
+paper). The inputs are the sample BTF and four images of the large sample lit from
+theta 22 deg at azimuths 0, 90, 180, 270 (scans, or rows of a reference BTF).
+
+Example
+-------
+>>> from imagemap.btf.extrapolate import extrapolate, ExtrapolationParams
+>>> params = ExtrapolationParams(radius=0, ws=0.0, wc=1.0)
+>>> big = extrapolate(sample, scans, params)  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from imagemap.btf.constraints import (
+    TABLE1_RESPONSE,
+    ScannerResponse,
+    align_histograms,
+    color_correct,
+    constraint_bands,
+    histogram_alignment_factors,
+    stack_neighbourhood,
+)
+from imagemap.btf.core import BTF
+from imagemap.io import InputError
+
+__all__ = [
+    "CONSTRAINT_AZIMUTHS",
+    "CONSTRAINT_THETA",
+    "ExtrapolationParams",
+    "TextureOptimizationParams",
+    "constraint_images",
+    "prepare_scans",
+    "pixelwise",
+    "texture_optimization",
+    "tile",
+    "extrapolate",
+]
+
+log = logging.getLogger("imagemap")
+
+#: The paper's constraint images: topmost view, light theta 22 deg, these azimuths.
+CONSTRAINT_THETA = 22.0
+CONSTRAINT_AZIMUTHS = (0.0, 90.0, 180.0, 270.0)
+
+#: Beyond this many dimensions a k-d tree is no faster than brute force.
+_KDTREE_MAX_DIMS = 16
+
+
+@dataclass(frozen=True)
+class ExtrapolationParams:
+    """Parameters of the pixel-wise method (Eqs. 5-6).
+
+    Parameters
+    ----------
+    radius : int
+        Neighbourhood radius R of the extended constraint vectors.
+    ws, wc : float
+        Weights of the surface descriptors and the colours.
+    search : {"approximate", "exact"}
+        "approximate": pynndescent (seeded). "exact": a k-d tree (scipy) for at
+        most 16 dimensions, chunked brute force (BLAS) beyond.
+    seed : int
+        Seed of the approximate search.
+    """
+
+    radius: int = 0
+    ws: float = 0.0
+    wc: float = 1.0
+    search: str = "approximate"
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class TextureOptimizationParams:
+    """Texture optimization (Kwatra et al. 2005) through :mod:`imagemap.engine`.
+
+    Parameters
+    ----------
+    radius : int
+        Window radius R at every scale (window 2R+1; the paper: R = 8).
+    levels : int
+        Scales 1, 2, 4, ... (the paper: 3 levels, scales 4, 2, 1).
+    ws, wc : float
+        Weights baked into the guide bands [ws n1, ws n2, wc I0 .. wc I270].
+    matched_components : int
+        Leading eigentextures matched (weight > 0); the rest are carried.
+    appearance_weight : float
+        Weight of the matched eigentextures, relative to the leading one's
+        standard deviation (bands are not normalized; guide bands are in the
+        constraint units).
+    stride : int
+        Spacing of query windows (Kwatra: a sparse grid).
+    max_iterations : int
+        EM iterations per level at most.
+    pca_max_components : int
+        Window features kept after PCA.
+    backend : str
+        The engine's nearest-neighbour backend.
+    seed : int
+    """
+
+    radius: int = 8
+    levels: int = 3
+    ws: float = 1.0
+    wc: float = 10.0
+    matched_components: int = 8
+    appearance_weight: float = 1.0
+    stride: int = 4
+    max_iterations: int = 4
+    pca_max_components: int = 24
+    backend: str = "patchmatch"
+    seed: int = 0
+    extra: dict = field(default_factory=dict)
+
+
+def constraint_images(
+    btf: BTF, *, theta: float = CONSTRAINT_THETA, azimuths: Sequence[float] = CONSTRAINT_AZIMUTHS
+) -> list[np.ndarray]:
+    """The BTF's own four constraint images: topmost view, light at (theta, azimuth).
+
+    Returns linear RGB (H, W, 3) float32 images, decompressed one at a time.
+    """
+    view = btf.nearest_view(0.0, 0.0)
+    images = []
+    for phi in azimuths:
+        light = btf.nearest_light(theta, phi)
+        found = btf.light_dirs[light]
+        if abs(found[0] - theta) > 3 or (theta > 0 and _angle_gap(found[1], phi) > 3):
+            log.warning("constraint light (%g, %g) not sampled; using (%g, %g)", theta, phi, *found)
+        images.append(btf.image(light, view))
+    return images
+
+
+def _angle_gap(a: float, b: float) -> float:
+    return abs((float(a) - float(b) + 180.0) % 360.0 - 180.0)
+
+
+def prepare_scans(
+    scans: Sequence[np.ndarray],
+    reference_images: Sequence[np.ndarray],
+    *,
+    response: ScannerResponse | None = TABLE1_RESPONSE,
+) -> list[np.ndarray]:
+    """Colour-correct four scans (Table 1) and align their histograms to the BTF's (Eqs. 1-2).
+
+    Parameters
+    ----------
+    scans : four (H, W, 3) images in [0, 1] as the scanner wrote them.
+    reference_images : the sample BTF's four constraint images.
+    response : ScannerResponse or None
+        None when the scans are already linear.
+    """
+    if len(scans) != 4:
+        raise InputError(
+            f"scans: expected four images (azimuths 0, 90, 180, 270), got {len(scans)}"
+        )
+    corrected = [color_correct(s, response=response) if response else s for s in scans]
+    factors = histogram_alignment_factors(reference_images, corrected)
+    return align_histograms(corrected, factors)
+
+
+def _search(sample: np.ndarray, target: np.ndarray, params: ExtrapolationParams) -> np.ndarray:
+    """Index of the nearest sample row for every target row (Eq. 6)."""
+    from imagemap.search import ExactIndex, PynndescentIndex
+
+    # Bands with weight 0 are 0 everywhere: they cost time and change nothing.
+    used = np.any(sample != 0, axis=0) | np.any(target != 0, axis=0)
+    sample, target = sample[:, used], target[:, used]
+    if params.search == "exact":
+        if sample.shape[1] <= _KDTREE_MAX_DIMS:
+            from scipy.spatial import cKDTree
+
+            return cKDTree(sample).query(target, k=1, workers=-1)[1].astype(np.int64)
+        return ExactIndex(sample).query(target)[0]
+    if params.search == "approximate":
+        return PynndescentIndex(sample, seed=params.seed).query(target)[0]
+    raise InputError(f"search: {params.search!r} is not 'approximate' or 'exact'")
+
+
+def pixelwise(
+    sample: BTF,
+    sample_images: Sequence[np.ndarray],
+    target_images: Sequence[np.ndarray],
+    params: ExtrapolationParams = ExtrapolationParams(),
+) -> tuple[BTF, np.ndarray]:
+    """Pixel-wise extrapolation (Eq. 6): copy the V Sigma row of the nearest constraint vector.
+
+    Parameters
+    ----------
+    sample : BTF
+        The measured sample.
+    sample_images : four (h, w, 3) constraint images of the sample.
+    target_images : four (H, W, 3) constraint images of the large sample (prepared
+        scans: colour-corrected and histogram-aligned).
+    params : ExtrapolationParams
+
+    Returns
+    -------
+    btf : BTF
+        Shares the sample's U; eigentextures (H, W, k).
+    source : ndarray (H, W, 2) int32
+        Sample texel (y, x) copied to each output texel.
+
+    Example
+    -------
+    >>> big, source = pixelwise(sample, constraint_images(sample), scans)  # doctest: +SKIP
+    """
+    if sample_images[0].shape[:2] != sample.shape:
+        raise InputError(
+            f"sample_images: shape {sample_images[0].shape[:2]} differs from the sample's "
+            f"{sample.shape}"
+        )
+    kwargs = {"ws": params.ws, "wc": params.wc}
+    sample_c = stack_neighbourhood(constraint_bands(sample_images, **kwargs), radius=params.radius)
+    target_c = stack_neighbourhood(constraint_bands(target_images, **kwargs), radius=params.radius)
+    height, width = target_c.shape[:2]
+    index = _search(
+        sample_c.reshape(-1, sample_c.shape[2]), target_c.reshape(-1, target_c.shape[2]), params
+    )
+    flat = sample.eigentextures.reshape(-1, sample.n_components)
+    eigentextures = flat[index].reshape(height, width, -1)
+    source = np.stack(np.unravel_index(index, sample.shape), axis=-1).reshape(height, width, 2)
+    return sample.with_eigentextures(eigentextures), source.astype(np.int32)
+
+
+def tile(sample: BTF, shape: tuple[int, int]) -> BTF:
+    """The naive baseline: the sample's eigentextures repeated to ``shape``."""
+    reps = (-(-shape[0] // sample.shape[0]), -(-shape[1] // sample.shape[1]), 1)
+    tiled = np.tile(sample.eigentextures, reps)[: shape[0], : shape[1]]
+    return sample.with_eigentextures(np.ascontiguousarray(tiled))
+
+
+def texture_optimization(
+    sample: BTF,
+    sample_images: Sequence[np.ndarray],
+    target_images: Sequence[np.ndarray],
+    params: TextureOptimizationParams = TextureOptimizationParams(),
+    *,
+    quiet: bool = True,
+) -> tuple[BTF, object]:
+    """Texture optimization through the shared engine, coarse to fine.
+
+    Guide bands are the per-texel constraint bands [ws n1, ws n2, wc I0..I270]
+    (the engine's windows give the neighbourhood), appearance bands are the
+    eigentextures V Sigma; only the leading ``matched_components`` are matched,
+    all are voted.
+
+    Returns
+    -------
+    btf : BTF
+        Shares the sample's U.
+    result : imagemap.engine.EngineResult
+        Source map, costs and timings of the engine.
+    """
+    from imagemap.engine import EngineParams, Mapping, synthesize
+    from imagemap.pyramid import gaussian_pyramid
+
+    kwargs = {"ws": params.ws, "wc": params.wc}
+    sample_guide = constraint_bands(sample_images, **kwargs)
+    target_guide = constraint_bands(target_images, **kwargs)
+    k = sample.n_components
+    matched = min(params.matched_components, k)
+    spread = sample.eigentextures.reshape(-1, k).std(axis=0)
+    # One weight for all matched bands, per std of the leading one: later bands then
+    # count in proportion to their own spread (their energy), not equally.
+    weights = np.zeros(k)
+    weights[:matched] = params.appearance_weight / max(float(spread[0]), 1e-12)
+    window = 2 * params.radius + 1
+    engine_params = EngineParams(
+        patch_sizes=(window,) * params.levels,
+        guide_weights=(1.0,) * sample_guide.shape[2],
+        appearance_weights=tuple(float(w) for w in weights),
+        position_weight=0.0,
+        pca_max_components=params.pca_max_components,
+        backend=params.backend,
+        max_iterations=params.max_iterations,
+        normalize_bands=False,
+        guide_padding="reflect",
+        stride=params.stride,
+        **params.extra,
+    )
+    query = [Mapping(guide=g) for g in gaussian_pyramid(target_guide, levels=params.levels)]
+    exemplar = [
+        Mapping(guide=g, appearance=a)
+        for g, a in zip(
+            gaussian_pyramid(sample_guide, levels=params.levels),
+            gaussian_pyramid(sample.eigentextures, levels=params.levels),
+            strict=True,
+        )
+    ]
+    result = synthesize(query, [exemplar], engine_params, seed=params.seed, quiet=quiet)
+    return sample.with_eigentextures(result.appearance[0]), result
+
+
+def extrapolate(
+    sample: BTF,
+    scans: Sequence[np.ndarray],
+    params: ExtrapolationParams | TextureOptimizationParams = ExtrapolationParams(),
+    *,
+    response: ScannerResponse | None = TABLE1_RESPONSE,
+    quiet: bool = True,
+) -> BTF:
+    """The whole pipeline: sample BTF + four scans -> BTF of the large sample.
+
+    The scans are colour-corrected (``response``; None if already linear) and
+    histogram-aligned to the sample's own constraint images, then the method of
+    ``params`` (pixel-wise or texture optimization) synthesizes V~Sigma.
+
+    Example
+    -------
+    >>> big = extrapolate(sample, [scan0, scan90, scan180, scan270])  # doctest: +SKIP
+    """
+    started = time.perf_counter()
+    sample_images = constraint_images(sample)
+    target_images = prepare_scans(scans, sample_images, response=response)
+    if isinstance(params, TextureOptimizationParams):
+        result, _ = texture_optimization(sample, sample_images, target_images, params, quiet=quiet)
+    else:
+        result, _ = pixelwise(sample, sample_images, target_images, params)
+    log.info(
+        "extrapolated %s -> %s in %.1f s", sample.shape, result.shape, time.perf_counter() - started
+    )
+    return result
