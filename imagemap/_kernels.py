@@ -1,0 +1,254 @@
+"""Numba kernels for the loops that cannot be vectorized.
+
+All kernels are deterministic for any number of threads: random numbers come
+from a counter-based hash of (seed, pixel, pass, trial), never from a shared
+generator, and parallel work is split into fixed bands of rows whose members
+only read matches inside their own band.
+
+Coordinates: a *candidate* is an exemplar window centre, numbered 0..N-1, with
+``cand_e, cand_y, cand_x`` its exemplar index and centre (unpadded coordinates);
+``exemplar_lookup[e, y, x]`` maps a centre back to its number (-1 when it is
+not a candidate). A *query centre* m has ``query_y[m], query_x[m]`` and
+``query_lookup[y, x] == m``. Band arrays are padded by the window radius r, so
+the window of centre (y, x) is ``bands[y:y + k, x:x + k]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+
+
+@njit(inline="always", cache=True)
+def _splitmix(z):
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(inline="always", cache=True)
+def _random_below(seed, a, b, c, n):
+    """A deterministic pseudo-random integer in [0, n) for the counter (seed, a, b, c)."""
+    z = _splitmix(np.uint64(seed) + _GOLDEN)
+    z = _splitmix(z ^ (np.uint64(a) * _GOLDEN))
+    z = _splitmix(z ^ (np.uint64(b) * _MIX1))
+    z = _splitmix(z ^ (np.uint64(c) * _MIX2))
+    return np.int64(z % np.uint64(n))
+
+
+@njit(inline="always", cache=True)
+def _sq_dist(a, b, ndims):
+    s = np.float32(0.0)
+    for i in range(ndims):
+        d = a[i] - b[i]
+        s += d * d
+    return s
+
+
+@njit(parallel=True, cache=True)
+def feature_distances(query_features, candidate_features, matches, ndims):
+    """Squared distance over the first ``ndims`` feature columns for each (m, matches[m])."""
+    out = np.empty(matches.shape[0], dtype=np.float32)
+    for m in prange(matches.shape[0]):
+        out[m] = _sq_dist(query_features[m], candidate_features[matches[m]], ndims)
+    return out
+
+
+@njit(parallel=True, cache=True)
+def patchmatch(
+    query_features,
+    candidate_features,
+    ndims,
+    query_y,
+    query_x,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    exemplar_lookup,
+    exemplar_shape,
+    band_starts,
+    matches,
+    distances,
+    n_passes,
+    stride,
+    seed,
+):
+    """PatchMatch over the candidates of several exemplars, in place on matches/distances.
+
+    Each pass visits the query centres of a band in scan order (reversed on odd
+    passes): propagation from the previous neighbour in x and y (shifted by one
+    stride), random search around the current match with halving radius, and one
+    uniformly random candidate (a jump to any exemplar).
+    """
+    n_candidates = candidate_features.shape[0]
+    height = query_lookup.shape[0]
+    width = query_lookup.shape[1]
+    for band in prange(band_starts.shape[0] - 1):
+        m0 = band_starts[band]
+        m1 = band_starts[band + 1]
+        if m1 <= m0:
+            continue
+        row0 = query_y[m0]
+        row1 = query_y[m1 - 1]
+        for p in range(n_passes):
+            forward = p % 2 == 0
+            step = stride if forward else -stride
+            for t in range(m1 - m0):
+                m = m0 + t if forward else m1 - 1 - t
+                y = query_y[m]
+                x = query_x[m]
+                best = matches[m]
+                best_d = distances[m]
+                qf = query_features[m]
+                # Propagation: the neighbour already visited in this pass, shifted.
+                for axis in range(2):
+                    ny = y - step if axis == 0 else y
+                    nx = x - step if axis == 1 else x
+                    if ny < row0 or ny > row1 or nx < 0 or nx >= width or ny >= height:
+                        continue
+                    n = query_lookup[ny, nx]
+                    if n < 0:
+                        continue
+                    c = matches[n]
+                    e = cand_e[c]
+                    cy = cand_y[c] + (step if axis == 0 else 0)
+                    cx = cand_x[c] + (step if axis == 1 else 0)
+                    if cy < 0 or cx < 0 or cy >= exemplar_shape[e, 0] or cx >= exemplar_shape[e, 1]:
+                        continue
+                    cc = exemplar_lookup[e, cy, cx]
+                    if cc < 0 or cc == best:
+                        continue
+                    d = _sq_dist(qf, candidate_features[cc], ndims)
+                    if d < best_d:
+                        best = cc
+                        best_d = d
+                # Random search around the current best, radius halving.
+                e = cand_e[best]
+                radius = max(exemplar_shape[e, 0], exemplar_shape[e, 1])
+                trial = 0
+                while radius >= 1:
+                    cy = cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
+                    cx = cand_x[best] + _random_below(seed, m, p, 2 * trial + 1, 2 * radius + 1)
+                    cx -= radius
+                    cy = min(max(cy, 0), exemplar_shape[e, 0] - 1)
+                    cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
+                    cc = exemplar_lookup[e, cy, cx]
+                    if cc >= 0 and cc != best:
+                        d = _sq_dist(qf, candidate_features[cc], ndims)
+                        if d < best_d:
+                            best = cc
+                            best_d = d
+                    radius //= 2
+                    trial += 1
+                # One jump anywhere: lets a pixel leave a poor exemplar.
+                cc = _random_below(seed, m, p, 1000003, n_candidates)
+                d = _sq_dist(qf, candidate_features[cc], ndims)
+                if d < best_d:
+                    best = cc
+                    best_d = d
+                matches[m] = best
+                distances[m] = best_d
+
+
+@njit(parallel=True, cache=True)
+def window_costs(
+    query_bands,
+    exemplar_bands,
+    window_weights,
+    query_y,
+    query_x,
+    cand_e,
+    cand_y,
+    cand_x,
+    matches,
+    query_position,
+    cand_position,
+    position_weight2,
+):
+    """Exact weighted window distance for each query centre and its match.
+
+    ``query_bands`` (Hq + 2r, Wq + 2r, C) and ``exemplar_bands`` (E, Hmax + 2r,
+    Wmax + 2r, C) hold the matched bands already multiplied by their weights;
+    ``window_weights`` (k, k) is the Gaussian window, summing to one.
+    """
+    k = window_weights.shape[0]
+    channels = query_bands.shape[2]
+    out = np.empty(matches.shape[0], dtype=np.float32)
+    for m in prange(matches.shape[0]):
+        c = matches[m]
+        e = cand_e[c]
+        qy = query_y[m]
+        qx = query_x[m]
+        ey = cand_y[c]
+        ex = cand_x[c]
+        s = 0.0
+        for oy in range(k):
+            for ox in range(k):
+                w = window_weights[oy, ox]
+                acc = 0.0
+                for ch in range(channels):
+                    d = query_bands[qy + oy, qx + ox, ch] - exemplar_bands[e, ey + oy, ex + ox, ch]
+                    acc += d * d
+                s += w * acc
+        dy = query_position[m, 0] - cand_position[c, 0]
+        dx = query_position[m, 1] - cand_position[c, 1]
+        s += position_weight2 * (dy * dy + dx * dx)
+        out[m] = s
+    return out
+
+
+@njit(parallel=True, cache=True)
+def vote(
+    exemplar_appearance,
+    window_weights,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    matches,
+    out,
+    coverage,
+):
+    """M-step: every padded query pixel becomes the weighted mean of its window estimates.
+
+    ``out`` (Hq + 2r, Wq + 2r, Ca) receives the mean where at least one window
+    covers a pixel and keeps its value elsewhere; ``coverage`` gets the weight sum.
+    """
+    k = window_weights.shape[0]
+    height = query_lookup.shape[0]
+    width = query_lookup.shape[1]
+    channels = exemplar_appearance.shape[3]
+    for py in prange(out.shape[0]):
+        acc = np.zeros(channels, dtype=np.float64)
+        for px in range(out.shape[1]):
+            wsum = 0.0
+            for ch in range(channels):
+                acc[ch] = 0.0
+            for oy in range(k):
+                cy = py - oy  # window centre in unpadded query coordinates
+                if cy < 0 or cy >= height:
+                    continue
+                for ox in range(k):
+                    cx = px - ox
+                    if cx < 0 or cx >= width:
+                        continue
+                    m = query_lookup[cy, cx]
+                    if m < 0:
+                        continue
+                    c = matches[m]
+                    e = cand_e[c]
+                    w = window_weights[oy, ox]
+                    sy = cand_y[c] + oy
+                    sx = cand_x[c] + ox
+                    for ch in range(channels):
+                        acc[ch] += w * exemplar_appearance[e, sy, sx, ch]
+                    wsum += w
+            coverage[py, px] = wsum
+            if wsum > 0:
+                for ch in range(channels):
+                    out[py, px, ch] = acc[ch] / wsum

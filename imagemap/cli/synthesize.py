@@ -1,0 +1,192 @@
+"""``imagemap synthesize`` and ``imagemap db check``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+import tracemalloc
+
+from imagemap.io import InputError
+
+log = logging.getLogger("imagemap")
+
+SYNTHESIZE_HELP = """\
+Synthesize an image-map for a new depth map from a database of examples.
+
+The database is a directory of NAME_depth.png (8/16-bit; or .tif float, .npy)
+beside NAME_image.png. The m examples whose depth is nearest to the query's
+(after centroid alignment) are selected automatically, or name them with
+--examples. Windows of the query's depth are matched to windows of the
+examples' depth and colour, coarse to fine, and the matched colours are merged
+(hard EM). Background (depth 0 or NaN) is transparent in the output unless
+--background gives a colour.
+
+examples:
+  # a fish from a generated database (see the README's first command)
+  imagemap synthesize examples/fish/holdout/fish_008_depth.png --db examples/fish \\
+      -o fish_map.png --preset fish --provenance fish_provenance.png
+
+  # two chosen examples, white background, exact search
+  imagemap synthesize bust_depth.png --db busts/ -o bust_map.png --preset busts \\
+      --examples bust_003,bust_017 --background white --backend exact
+"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from imagemap.cli import add_common_options
+    from imagemap.colorize import PRESETS
+    from imagemap.engine import BACKENDS
+
+    p = subparsers.add_parser(
+        "synthesize",
+        help="make an image-map for a depth map from a database of examples",
+        description=SYNTHESIZE_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("depth", help="query depth map (.png 8/16-bit, .tif float, .npy)")
+    p.add_argument("--db", required=True, help="database directory of NAME_depth/NAME_image pairs")
+    p.add_argument("-o", "--output", required=True, help="output image-map (.png, RGBA)")
+    p.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        default="busts",
+        help="class preset: weights, patch sizes and m after the paper's Table 1 (default busts)",
+    )
+    p.add_argument("--m", type=int, help="number of examples to select automatically")
+    p.add_argument("--examples", help="comma-separated example names to use instead")
+    p.add_argument("--exclude", help="comma-separated example names to leave out of the database")
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        help="nearest-neighbour search (default patchmatch: fastest; exact: reference)",
+    )
+    p.add_argument(
+        "--background",
+        default="transparent",
+        help="'transparent' (RGBA, default) or a colour: white, black, '#rrggbb'",
+    )
+    p.add_argument("--provenance", help="also write a picture of which example each region is from")
+    p.add_argument("--preview", help="also write the result rendered on its depth beside the best "
+                   "example's map on the same depth")
+    p.add_argument("--report", help="also write a JSON report (examples, timings, memory, target)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    add_common_options(p)
+    p.set_defaults(func=run_synthesize)
+
+    db = subparsers.add_parser("db", help="inspect a database of examples")
+    db_sub = db.add_subparsers(dest="db_command", metavar="SUBCOMMAND")
+    check = db_sub.add_parser(
+        "check",
+        help="read every example and report what was found",
+        description="Read every NAME_depth/NAME_image pair of DIR and report sizes, depth "
+        "ranges and problems (unpaired, unreadable or mismatched files). Exit code 1 when "
+        "there is a problem.",
+    )
+    check.add_argument("directory")
+    check.add_argument("--json", action="store_true", help="print the report as JSON")
+    check.set_defaults(func=run_db_check)
+    db.set_defaults(func=lambda args: db.print_help() or 2)
+
+
+def parse_colour(text: str) -> tuple[float, float, float] | None:
+    """'transparent' -> None; a named or '#rrggbb' colour -> RGB in [0, 1]."""
+    named = {"white": "#ffffff", "black": "#000000", "grey": "#808080", "gray": "#808080"}
+    text = named.get(text.lower(), text)
+    if text.lower() == "transparent":
+        return None
+    if len(text) == 7 and text.startswith("#"):
+        try:
+            return tuple(int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+        except ValueError:
+            pass
+    raise InputError(f"--background: not a colour: {text!r} (use transparent, white or #rrggbb)")
+
+
+def run_synthesize(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from imagemap.colorize import colorize
+    from imagemap.database import Database
+    from imagemap.io import read_depth, write_image
+
+    background = parse_colour(args.background)
+    outputs = [Path(p) for p in (args.output, args.provenance, args.preview, args.report) if p]
+    for path in outputs:
+        if path.suffix.lower() not in (".png", ".json"):
+            raise InputError(f"{path}: output must be a .png (or .json for --report)")
+    depth = read_depth(args.depth)
+    database = Database.from_directory(args.db)
+    if args.exclude:
+        database = database.without(*[n.strip() for n in args.exclude.split(",")])
+    examples = [n.strip() for n in args.examples.split(",")] if args.examples else None
+    if examples:
+        for name in examples:
+            database[name]  # unknown names fail here, before any work
+    tracemalloc.start()
+    start = time.perf_counter()
+    result = colorize(
+        depth,
+        database,
+        preset=args.preset,
+        m=args.m,
+        examples=examples,
+        backend=args.backend,
+        seed=args.seed,
+        quiet=args.quiet or not sys.stderr.isatty(),
+    )
+    seconds = time.perf_counter() - start
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    image = result.rgba if background is None else result.on_background(background)
+    write_image(args.output, image)
+    if args.provenance:
+        write_image(args.provenance, result.provenance)
+    if args.preview:
+        from imagemap.render import preview_pair
+
+        best = database[result.example_names[0]]
+        write_image(args.preview, preview_pair(depth, result.image, best.image))
+    if args.report:
+        from imagemap.io import atomic_path
+
+        report = {
+            "query": str(args.depth),
+            "examples": result.example_names,
+            "seconds": seconds,
+            "peak_traced_memory_mb": peak / 2**20,
+            "timings": result.timings,
+            "objective": result.objective,
+            "preset": args.preset,
+            "seed": args.seed,
+        }
+        with atomic_path(args.report) as tmp:
+            tmp.write_text(json.dumps(report, indent=2))
+    if not args.quiet:
+        print(
+            f"wrote {args.output} ({depth.shape[1]}x{depth.shape[0]}) from "
+            f"{', '.join(result.example_names)} in {seconds:.2f} s",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def run_db_check(args: argparse.Namespace) -> int:
+    from imagemap.database import check_database
+
+    rows, problems = check_database(args.directory)
+    if args.json:
+        print(json.dumps({"examples": rows, "problems": problems}, indent=2))
+    else:
+        print(f"{args.directory}: {len(rows)} readable example(s)")
+        for row in rows:
+            print(
+                f"  {row['name']:<24} {row['size']:>9}  depth {row['depth_min']:.3f}-"
+                f"{row['depth_max']:.3f}  foreground {100 * row['foreground']:.0f}%"
+                f"{'  labels' if row['labels'] else ''}{'  json' if row['json'] else ''}"
+            )
+        for problem in problems:
+            print(f"  problem: {problem}")
+    return 1 if problems else 0

@@ -1,0 +1,395 @@
+"""Depth-map colorization: the first front end of the engine (Hassner & Basri 2006).
+
+Guide bands per pyramid level: the depth's Gaussian level and its high
+frequencies (the Laplacian band of the same level). Appearance bands: the
+Laplacian pyramids of Y, Cb and Cr of the image-map, synthesised level by level
+and collapsed into RGB at the end.
+
+Examples
+--------
+>>> from imagemap import Database, colorize
+>>> db = Database.from_directory("examples/fish")            # doctest: +SKIP
+>>> result = colorize(query_depth, db, preset="fish", seed=0)  # doctest: +SKIP
+>>> result.image.shape, result.example_names                  # doctest: +SKIP
+((150, 200, 3), ['fish_003', 'fish_005'])
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+from scipy import ndimage
+from skimage import color
+
+from imagemap.database import Database, Example
+from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
+from imagemap.io import InputError, validate_depth
+from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
+
+__all__ = [
+    "PRESETS",
+    "ColorizeParams",
+    "ColorizeResult",
+    "colorize",
+    "depth_mappings",
+    "example_mappings",
+    "select_examples",
+]
+
+log = logging.getLogger("imagemap")
+
+
+@dataclass(frozen=True)
+class ColorizeParams:
+    """Parameters of depth-map colorization.
+
+    The six weights are those of the paper's Table 1 (depth, depth high
+    frequencies, Y, Cb, Cr, relative position) restated for our units: each band
+    weight is per standard deviation of that band over the selected examples at
+    that pyramid level (so depth in metres, millimetres or [0, 1] gives the same
+    result), and the position weight is per standard deviation of the object's
+    pixel coordinates along each axis. See ``docs/presets.md`` for how the presets
+    were set.
+
+    Parameters
+    ----------
+    m : int
+        Number of examples selected automatically.
+    patch_sizes : tuple of int
+        Window width per level, fine to coarse (three levels).
+    depth_weight, depth_detail_weight : float
+        Weights of the depth's Gaussian and Laplacian bands.
+    luma_weight, chroma_weight : float
+        Weights of Y and of Cb, Cr.
+    position_weight : float
+        Weight of the position relative to the depth's centroid.
+    backend : str
+        Search backend of the engine (``"patchmatch"``, ``"exact"``, ``"pynndescent"``).
+    use_pyramid : bool
+        Synthesise YCbCr Laplacian bands (the paper) or plain YCbCr at every level.
+    """
+
+    m: int = 2
+    patch_sizes: tuple[int, ...] = (7, 11, 9)
+    depth_weight: float = 1.0
+    depth_detail_weight: float = 0.75
+    luma_weight: float = 1.0
+    chroma_weight: float = 0.5
+    position_weight: float = 1.0
+    pca_fraction: float = 0.2
+    backend: str = "patchmatch"
+    max_iterations: int = 8
+    tolerance: float = 2e-3
+    use_pyramid: bool = True
+
+    @property
+    def levels(self) -> int:
+        return len(self.patch_sizes)
+
+    def engine_params(self) -> EngineParams:
+        return EngineParams(
+            patch_sizes=self.patch_sizes,
+            guide_weights=(self.depth_weight, self.depth_detail_weight),
+            appearance_weights=(self.luma_weight, self.chroma_weight, self.chroma_weight),
+            position_weight=self.position_weight,
+            pca_fraction=self.pca_fraction,
+            backend=self.backend,
+            max_iterations=self.max_iterations,
+            tolerance=self.tolerance,
+            guide_padding="constant",
+        )
+
+
+#: Class presets after the paper's Table 1 (m and patch widths as published;
+#: weights restated per band standard deviation, see ``docs/presets.md``).
+PRESETS: dict[str, ColorizeParams] = {
+    "humans": ColorizeParams(m=1, patch_sizes=(7, 9, 9), position_weight=1.0),
+    "busts": ColorizeParams(m=2, patch_sizes=(7, 11, 9), position_weight=1.0),
+    "fish": ColorizeParams(m=2, patch_sizes=(7, 11, 9), position_weight=0.3),
+}
+
+
+def _resolve(preset: str | ColorizeParams | None, **overrides) -> ColorizeParams:
+    if preset is None:
+        params = ColorizeParams()
+    elif isinstance(preset, ColorizeParams):
+        params = preset
+    else:
+        try:
+            params = PRESETS[preset]
+        except KeyError:
+            raise InputError(f"unknown preset {preset!r}; use one of {sorted(PRESETS)}") from None
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    return replace(params, **overrides) if overrides else params
+
+
+def _centroid(mask: np.ndarray) -> np.ndarray:
+    return np.array(ndimage.center_of_mass(mask), dtype=np.float64)
+
+
+def _aligned(depth: np.ndarray, shift: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``depth`` translated by the integer ``shift`` onto a zero canvas of ``shape``."""
+    dy, dx = (int(round(s)) for s in shift)
+    out = np.zeros(shape, dtype=np.float32)
+    h, w = depth.shape
+    y0, x0 = max(0, dy), max(0, dx)
+    y1, x1 = min(shape[0], h + dy), min(shape[1], w + dx)
+    if y1 > y0 and x1 > x0:
+        out[y0:y1, x0:x1] = depth[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
+    return out
+
+
+def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[int]:
+    """Indices of the ``m`` examples whose depth is nearest to ``depth`` after centroid alignment.
+
+    The distance is the sum of squared differences once each example's depth is
+    translated so that its foreground centroid falls on the query's (paper, Sec. 2.3).
+
+    Examples
+    --------
+    >>> select_examples(query_depth, db, m=2)  # doctest: +SKIP
+    [3, 5]
+    """
+    depth = validate_depth(depth)
+    if m < 1:
+        raise InputError(f"m must be at least 1, got {m}")
+    centre = _centroid(depth > 0)
+    distances = []
+    for example in database:
+        other = example.depth
+        shifted = _aligned(other, centre - _centroid(other > 0), depth.shape)
+        # Depth outside the query frame counts too: a larger object is a worse fit.
+        outside = float(np.square(other, dtype=np.float64).sum() - np.square(shifted).sum())
+        distances.append(float(np.square(depth - shifted, dtype=np.float64).sum()) + outside)
+    order = np.argsort(distances, kind="stable")
+    return [int(i) for i in order[:m]]
+
+
+def _depth_guides(depth: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Per level: (H_l, W_l, 2) depth Gaussian level and its Laplacian (detail) band."""
+    gaussian = gaussian_pyramid(depth, levels)
+    # One level more, so that even the coarsest level has a true band-pass detail band.
+    detail = laplacian_pyramid(depth, levels + 1)[:levels]
+    return [np.stack([g, d], axis=-1) for g, d in zip(gaussian, detail, strict=True)]
+
+
+def depth_mappings(depth: np.ndarray, levels: int = 3) -> list[Mapping]:
+    """The query's pyramid of mappings (guide bands and mask) for a depth map."""
+    depth = validate_depth(depth)
+    masks = mask_pyramid(depth > 0, levels)
+    return [
+        Mapping(guide=guide, mask=mask if mask.any() else None)
+        for guide, mask in zip(_depth_guides(depth, levels), masks, strict=True)
+    ]
+
+
+def _fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Extend the object's colours into the background (nearest foreground pixel).
+
+    A window at the silhouette then carries object-like colours beyond the edge,
+    so no background colour bleeds into the synthesised object.
+    """
+    _, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    return image[ny, nx]
+
+
+def to_ycbcr(rgb: np.ndarray) -> np.ndarray:
+    """RGB in [0, 1] to YCbCr scaled to [0, 1] (ITU-R BT.601, as skimage)."""
+    return (color.rgb2ycbcr(rgb) / 255.0).astype(np.float32)
+
+
+def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_ycbcr`, clipped to [0, 1]."""
+    return np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0.0, 1.0).astype(np.float32)
+
+
+def example_mappings(example: Example, levels: int = 3, use_pyramid: bool = True) -> list[Mapping]:
+    """An example's pyramid of mappings: depth bands, YCbCr (Laplacian) bands, mask."""
+    mask = example.mask
+    ycbcr = to_ycbcr(_fill_background(example.image, mask))
+    if use_pyramid:
+        appearance = laplacian_pyramid(ycbcr, levels)
+    else:
+        appearance = gaussian_pyramid(ycbcr, levels)
+    masks = mask_pyramid(mask, levels)
+    return [
+        Mapping(guide=guide, appearance=bands, mask=level_mask if level_mask.any() else None)
+        for guide, bands, level_mask in zip(
+            _depth_guides(example.depth, levels), appearance, masks, strict=True
+        )
+    ]
+
+
+_PALETTE = np.array(
+    [
+        [0.90, 0.10, 0.10],
+        [0.10, 0.45, 0.95],
+        [0.10, 0.75, 0.20],
+        [0.95, 0.70, 0.05],
+        [0.65, 0.20, 0.85],
+        [0.05, 0.80, 0.80],
+        [0.95, 0.40, 0.70],
+        [0.50, 0.50, 0.50],
+    ],
+    dtype=np.float32,
+)
+
+
+@dataclass
+class ColorizeResult:
+    """A synthesised image-map and how it was made.
+
+    Attributes
+    ----------
+    image : ndarray, (H, W, 3) float32 in [0, 1]
+        The image-map (background pixels are 0; see :attr:`rgba`).
+    mask : ndarray of bool, (H, W)
+        The object (non-background depth).
+    source : ndarray of int32, (H, W, 3)
+        Per pixel: index into :attr:`example_names`, source y, source x.
+    cost : ndarray of float32, (H, W)
+        Match cost of the window centred at each pixel (finest level).
+    example_names : list of str
+        The examples used, in the order of the indices of :attr:`source`.
+    objective : list of list of float
+        Target value per EM iteration, per level (finest first).
+    timings : dict
+        Seconds per stage.
+    """
+
+    image: np.ndarray
+    mask: np.ndarray
+    source: np.ndarray
+    cost: np.ndarray
+    example_names: list[str]
+    objective: list[list[float]]
+    timings: dict[str, float] = field(default_factory=dict)
+    params: ColorizeParams | None = None
+
+    @property
+    def rgba(self) -> np.ndarray:
+        """(H, W, 4) image with a transparent background."""
+        return np.concatenate([self.image, self.mask[..., None].astype(np.float32)], axis=2)
+
+    def on_background(self, colour: tuple[float, float, float]) -> np.ndarray:
+        """(H, W, 3) image with the background set to ``colour`` (RGB in [0, 1])."""
+        out = self.image.copy()
+        out[~self.mask] = np.asarray(colour, dtype=np.float32)
+        return out
+
+    @cached_property
+    def provenance(self) -> np.ndarray:
+        """A picture of which example each region came from (Fig. 2c of the paper).
+
+        The image-map's luminance tinted with one colour per example, with the
+        borders between regions from different examples drawn dark.
+        """
+        index = self.source[..., 0]
+        tint = _PALETTE[index % len(_PALETTE)]
+        luma = color.rgb2gray(self.image)[..., None]
+        picture = 0.45 * tint + 0.55 * luma * (0.5 + tint)
+        border = ndimage.morphological_gradient(index, size=3) > 0
+        picture[border & self.mask] = 0.05
+        picture[~self.mask] = 1.0
+        return np.clip(picture, 0, 1).astype(np.float32)
+
+    @property
+    def legend(self) -> list[tuple[str, tuple[float, float, float]]]:
+        """(example name, tint colour) for the provenance picture."""
+        return [
+            (name, tuple(float(c) for c in _PALETTE[i % len(_PALETTE)]))
+            for i, name in enumerate(self.example_names)
+        ]
+
+
+def colorize(
+    depth: np.ndarray,
+    database: Database,
+    preset: str | ColorizeParams | None = "busts",
+    *,
+    m: int | None = None,
+    examples: list[str] | None = None,
+    backend: str | None = None,
+    seed: int = 0,
+    quiet: bool = True,
+) -> ColorizeResult:
+    """Synthesise an image-map for ``depth`` from the examples of ``database``.
+
+    Parameters
+    ----------
+    depth : ndarray, (H, W)
+        Query depth; larger is nearer, 0 or NaN is background.
+    database : Database
+        Examples of the same class.
+    preset : str or ColorizeParams
+        ``"humans"``, ``"busts"``, ``"fish"`` or explicit parameters.
+    m : int, optional
+        Number of examples to select automatically (overrides the preset).
+    examples : list of str, optional
+        Use these examples by name instead of the automatic selection.
+    backend : str, optional
+        Search backend (overrides the preset).
+    seed : int
+        The same seed gives the same bytes.
+    quiet : bool
+        No progress bar.
+
+    Returns
+    -------
+    ColorizeResult
+
+    Examples
+    --------
+    >>> result = colorize(depth, db, preset="fish", m=2, seed=0)  # doctest: +SKIP
+    >>> result.rgba.shape  # doctest: +SKIP
+    (150, 200, 4)
+    """
+    params = _resolve(preset, m=m, backend=backend)
+    depth = validate_depth(depth)
+    if len(database) == 0:
+        raise InputError("the database has no examples")
+    start = time.perf_counter()
+    if examples:
+        chosen = [database[name] for name in examples]
+    else:
+        n = params.m
+        if n > len(database):
+            log.warning("m=%d but the database has %d examples: using all", n, len(database))
+            n = len(database)
+        chosen = [database[i] for i in select_examples(depth, database, n)]
+    log.info("examples: %s", ", ".join(e.name for e in chosen))
+    selection_seconds = time.perf_counter() - start
+
+    start = time.perf_counter()
+    levels = params.levels
+    query = depth_mappings(depth, levels)
+    exemplar_levels = [example_mappings(e, levels, params.use_pyramid) for e in chosen]
+    pyramid_seconds = time.perf_counter() - start
+
+    result: EngineResult = synthesize(
+        query, exemplar_levels, params.engine_params(), seed=seed, quiet=quiet
+    )
+    start = time.perf_counter()
+    if params.use_pyramid:
+        ycbcr = collapse_laplacian(result.appearance)
+    else:
+        ycbcr = result.appearance[0]
+    mask = depth > 0
+    image = to_rgb(ycbcr)
+    image[~mask] = 0.0
+    timings = {"selection": selection_seconds, "pyramids": pyramid_seconds, **result.timings}
+    timings["collapse"] = time.perf_counter() - start
+    return ColorizeResult(
+        image=image,
+        mask=mask,
+        source=result.source,
+        cost=result.cost,
+        example_names=[e.name for e in chosen],
+        objective=result.objective,
+        timings=timings,
+        params=params,
+    )

@@ -1,0 +1,723 @@
+"""The guided hard-EM synthesis engine, shared by every front end.
+
+A :class:`Mapping` is a stack of *guide* bands (known for query and exemplars)
+beside *appearance* bands (known for exemplars, to be made for the query) and a
+mask. For every k x k query window the engine finds the most similar exemplar
+window (guide + current appearance + relative position to the mask centroid,
+weighted, PCA-reduced, nearest-neighbour search: the hard E-step) and sets every
+pixel to the Gaussian-weighted mean of the k^2 estimates that the overlapping
+matches give it (the M-step), coarse to fine. Between levels the selected source
+coordinates are propagated (x2) and the finer exemplar level is sampled, never
+interpolated intensities (Hassner & Basri 2006, Sec. 2).
+
+The target the iterations minimise is the sum over query windows of the exact
+weighted window distance to their match (the negative log of the paper's
+similarity). With the window weighting equal to the voting weights, the vote is
+the exact minimiser for fixed matches, and a new match replaces the previous one
+only where the exact distance improves, so the recorded target never increases
+at a level whatever the search backend (generalised EM).
+
+Examples
+--------
+A single-level guided synthesis: the query guide is a shifted exemplar guide.
+
+>>> rng = np.random.default_rng(0)
+>>> guide = rng.random((32, 32, 1)).astype(np.float32)
+>>> exemplar = Mapping(guide=guide, appearance=guide * 2)
+>>> query = Mapping(guide=np.roll(guide, 3, axis=1))
+>>> params = EngineParams(patch_sizes=(5,), backend="exact", guide_weights=(1.0,),
+...                       appearance_weights=(1.0,))
+>>> result = synthesize([query], [[exemplar]], params)
+>>> result.appearance[0].shape
+(32, 32, 1)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy import ndimage
+
+from imagemap import _kernels
+from imagemap.progress import progress
+from imagemap.search import make_index
+
+__all__ = ["BACKENDS", "EngineParams", "EngineResult", "Mapping", "synthesize"]
+
+log = logging.getLogger("imagemap")
+
+BACKENDS = ("patchmatch", "exact", "pynndescent")
+_CHUNK = 16384  # windows per block when extracting features: bounds memory
+_N_BANDS = 16  # fixed PatchMatch work split: results do not depend on the thread count
+
+
+@dataclass(frozen=True)
+class Mapping:
+    """One pyramid level of a query or exemplar: guide, appearance and mask.
+
+    Parameters
+    ----------
+    guide : ndarray, shape (H, W, Cg) or (H, W)
+        Bands known for query and exemplars (depth bands, constraint images...).
+    appearance : ndarray, shape (H, W, Ca) or (H, W), optional
+        Bands to synthesise: given for exemplars, None for the query.
+    mask : ndarray of bool, shape (H, W), optional
+        Where the mapping matters (the object); None means everywhere.
+    """
+
+    guide: np.ndarray
+    appearance: np.ndarray | None = None
+    mask: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        guide = np.asarray(self.guide, dtype=np.float32)
+        if guide.ndim == 2:
+            guide = guide[..., None]
+        if guide.ndim != 3:
+            raise ValueError(f"guide must be (H, W) or (H, W, C), got shape {guide.shape}")
+        object.__setattr__(self, "guide", guide)
+        if self.appearance is not None:
+            appearance = np.asarray(self.appearance, dtype=np.float32)
+            if appearance.ndim == 2:
+                appearance = appearance[..., None]
+            if appearance.shape[:2] != guide.shape[:2]:
+                raise ValueError(
+                    f"appearance {appearance.shape[:2]} and guide {guide.shape[:2]} differ in size"
+                )
+            object.__setattr__(self, "appearance", appearance)
+        if self.mask is not None:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.shape != guide.shape[:2]:
+                raise ValueError(f"mask {mask.shape} and guide {guide.shape[:2]} differ in size")
+            if not mask.any():
+                raise ValueError("mask is empty")
+            object.__setattr__(self, "mask", mask)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.guide.shape[:2]
+
+
+@dataclass(frozen=True)
+class EngineParams:
+    """Parameters of the engine (front ends wrap them in their own presets).
+
+    Parameters
+    ----------
+    patch_sizes : tuple of int
+        Odd window width per pyramid level, finest first.
+    guide_weights, appearance_weights : tuple of float
+        One weight per band. With ``normalize_bands`` a weight is per standard
+        deviation of its band over the exemplars, so weights are unit-free.
+        An appearance weight of 0 carries the band (voted into the output) without
+        matching on it.
+    position_weight : float
+        Weight of the position relative to the mask centroid, in units of the
+        mask's standard deviation per axis (0 switches the term off).
+    pca_fraction : float
+        Fraction of the PCA basis kept, separately for guide and appearance windows.
+    pca_max_components : int, optional
+        Upper bound on kept components per part.
+    pca_samples : int
+        Exemplar windows sampled to learn the PCA basis.
+    backend : {"patchmatch", "exact", "pynndescent"}
+        Nearest-neighbour search of the E-step.
+    max_iterations : int
+        EM iterations per level at most.
+    tolerance : float
+        Stop a level when the target decreases by less than this fraction.
+    patchmatch_passes : int
+        PatchMatch passes per E-step (twice as many from a random start).
+    normalize_bands : bool
+        Divide each band by its standard deviation over the exemplars.
+    guide_padding : {"constant", "reflect", "edge"}
+        How guide bands are extended beyond the image (constant = 0, for depth).
+    stride : int
+        Spacing of query windows; 1 matches every pixel.
+    init_from_guide : bool
+        At the coarsest level, start from matches on guide and position only.
+    window_sigma : float
+        Standard deviation of the Gaussian window, as a fraction of its width.
+    """
+
+    patch_sizes: tuple[int, ...] = (7, 11, 9)
+    guide_weights: tuple[float, ...] = (1.0,)
+    appearance_weights: tuple[float, ...] = (1.0,)
+    position_weight: float = 0.0
+    pca_fraction: float = 0.2
+    pca_max_components: int | None = None
+    pca_samples: int = 20000
+    backend: str = "patchmatch"
+    max_iterations: int = 8
+    tolerance: float = 2e-3
+    patchmatch_passes: int = 3
+    normalize_bands: bool = True
+    guide_padding: str = "constant"
+    stride: int = 1
+    init_from_guide: bool = True
+    window_sigma: float = 1.0 / 3.0
+
+    def __post_init__(self) -> None:
+        if any(k < 1 or k % 2 == 0 for k in self.patch_sizes):
+            raise ValueError(f"patch sizes must be odd and positive, got {self.patch_sizes}")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"unknown backend {self.backend!r}; use one of {BACKENDS}")
+        if not 0 < self.pca_fraction <= 1:
+            raise ValueError("pca_fraction must be in (0, 1]")
+        if self.guide_padding not in ("constant", "reflect", "edge"):
+            raise ValueError("guide_padding must be 'constant', 'reflect' or 'edge'")
+        if self.stride < 1 or self.max_iterations < 1:
+            raise ValueError("stride and max_iterations must be at least 1")
+
+
+@dataclass
+class EngineResult:
+    """What the engine returns.
+
+    Attributes
+    ----------
+    appearance : list of ndarray
+        Synthesised appearance bands per level, finest first, (H_l, W_l, Ca).
+    source : ndarray of int32, shape (H, W, 3)
+        Per pixel of the finest level: exemplar index, source y, source x.
+    cost : ndarray of float32, shape (H, W)
+        Exact window distance of each query window to its match (finest level;
+        NaN where no window is centred).
+    objective : list of list of float
+        Per level (finest first), the target value (mean window distance) after
+        each E-step.
+    timings : dict
+        Seconds per stage.
+    backend : str
+        The search backend that ran.
+    """
+
+    appearance: list[np.ndarray]
+    source: np.ndarray
+    cost: np.ndarray
+    objective: list[list[float]]
+    timings: dict[str, float] = field(default_factory=dict)
+    backend: str = ""
+
+
+class _Timer:
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    def add(self, stage: str, start: float) -> None:
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - start
+
+
+def _gaussian_window(k: int, sigma_fraction: float) -> np.ndarray:
+    r = k // 2
+    sigma = max(sigma_fraction * k, 0.5)
+    offsets = np.arange(-r, r + 1, dtype=np.float64)
+    g = np.exp(-(offsets[:, None] ** 2 + offsets[None, :] ** 2) / (2 * sigma**2))
+    return (g / g.sum()).astype(np.float32)
+
+
+def _centroid_frame(mask: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
+    """(yc, xc, sy, sx): centroid and per-axis std of the mask (or the whole frame)."""
+    if mask is None:
+        mask = np.ones(shape, dtype=bool)
+    ys, xs = np.nonzero(mask)
+    sy = max(float(ys.std()), 1.0)
+    sx = max(float(xs.std()), 1.0)
+    return np.array([ys.mean(), xs.mean(), sy, sx], dtype=np.float64)
+
+
+def _positions(ys: np.ndarray, xs: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    return np.stack([(ys - frame[0]) / frame[2], (xs - frame[1]) / frame[3]], axis=1).astype(
+        np.float32
+    )
+
+
+def _pad(array: np.ndarray, r: int, mode: str) -> np.ndarray:
+    width = ((r, r), (r, r), (0, 0))
+    if mode == "constant":
+        return np.pad(array, width, mode="constant")
+    return np.pad(array, width, mode=mode)
+
+
+def _fit_pca(
+    samples: np.ndarray, n_keep: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows."""
+    mean = samples.mean(axis=0)
+    centered = (samples - mean).astype(np.float32)
+    dim = centered.shape[1]
+    if dim <= 1024 or 4 * n_keep > dim:
+        cov = centered.T.astype(np.float64) @ centered.astype(np.float64)
+        eigvals, eigvecs = np.linalg.eigh(cov)
+        basis = eigvecs[:, ::-1][:, :n_keep]
+    else:  # randomised range finder (Halko et al.): the covariance would be too large
+        omega = rng.standard_normal((dim, n_keep + 10)).astype(np.float32)
+        y = centered @ omega
+        for _ in range(2):
+            y, _ = np.linalg.qr(y)
+            y = centered @ (centered.T @ y)
+        q, _ = np.linalg.qr(y)
+        _, _, vt = np.linalg.svd(q.T @ centered, full_matrices=False)
+        basis = vt[:n_keep].T
+    return mean.astype(np.float32), np.ascontiguousarray(basis, dtype=np.float32)
+
+
+class _Projection:
+    """Weighted window -> PCA coordinates, for one channel range of a band stack."""
+
+    def __init__(self, channels: slice, k: int, window: np.ndarray) -> None:
+        self.channels = channels
+        self.k = k
+        n_channels = channels.stop - channels.start
+        # Window order of sliding_window_view: (channel, ky, kx).
+        self.sqrt_weights = np.tile(np.sqrt(window).ravel(), n_channels).astype(np.float32)
+        self.matrix: np.ndarray | None = None
+        self.offset: np.ndarray | None = None
+
+    @property
+    def n_components(self) -> int:
+        return 0 if self.matrix is None else self.matrix.shape[1]
+
+    def windows(self, view: np.ndarray, index: tuple[np.ndarray, ...]) -> np.ndarray:
+        # Slice the channels first (free on a view), then gather: one copy only.
+        block = view[..., self.channels, :, :][index]
+        return block.reshape(block.shape[0], -1)
+
+    def fit(self, samples: np.ndarray, fraction: float, cap: int | None, rng) -> None:
+        weighted = samples * self.sqrt_weights
+        n_keep = max(1, int(round(fraction * weighted.shape[1])))
+        if cap is not None:
+            n_keep = min(n_keep, cap)
+        mean, basis = _fit_pca(weighted, n_keep, rng)
+        self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
+        self.offset = mean @ basis
+
+    def project(self, view: np.ndarray, index: tuple[np.ndarray, ...]) -> np.ndarray:
+        n = index[0].shape[0]
+        out = np.empty((n, self.n_components), dtype=np.float32)
+        for start in range(0, n, _CHUNK):
+            sub = tuple(i[start : start + _CHUNK] for i in index)
+            out[start : start + _CHUNK] = self.windows(view, sub) @ self.matrix - self.offset
+        return out
+
+
+class _LevelSolver:
+    """Everything the EM iterations of one level need, built once for the level."""
+
+    def __init__(
+        self,
+        query: Mapping,
+        exemplars: Sequence[Mapping],
+        k: int,
+        params: EngineParams,
+        rng: np.random.Generator,
+        timer: _Timer,
+    ) -> None:
+        start = time.perf_counter()
+        self.params = params
+        self.k = k
+        self.r = r = k // 2
+        self.window = _gaussian_window(k, params.window_sigma)
+        self.timer = timer
+        n_guide = query.guide.shape[2]
+        n_appearance = exemplars[0].appearance.shape[2]
+        guide_w = np.asarray(params.guide_weights, dtype=np.float32)
+        appearance_w = np.asarray(params.appearance_weights, dtype=np.float32)
+        self.guide_active = np.flatnonzero(guide_w != 0)
+        self.appearance_active = np.flatnonzero(appearance_w != 0)
+        n_ga, n_aa = len(self.guide_active), len(self.appearance_active)
+        self.n_guide_active = n_ga
+
+        # Band scales: weight per standard deviation over the exemplars' masks.
+        guide_scale = guide_w[self.guide_active]
+        appearance_scale = appearance_w[self.appearance_active]
+        if params.normalize_bands:
+            guide_scale = guide_scale / self._band_std(exemplars, "guide", self.guide_active)
+            appearance_scale = appearance_scale / self._band_std(
+                exemplars, "appearance", self.appearance_active
+            )
+        self.appearance_scale = appearance_scale.astype(np.float32)
+
+        # Exemplars: padded and packed into one array each (zero beyond each one's size).
+        heights = [e.shape[0] for e in exemplars]
+        widths = [e.shape[1] for e in exemplars]
+        n_ex = len(exemplars)
+        hp, wp = max(heights) + 2 * r, max(widths) + 2 * r
+        self.exemplar_active = np.zeros((n_ex, hp, wp, n_ga + n_aa), dtype=np.float32)
+        self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
+        self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
+        cand_e, cand_y, cand_x, positions = [], [], [], []
+        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int64)
+        self.exemplar_nearest: list[np.ndarray] = []
+        n_cand = 0
+        for e, ex in enumerate(exemplars):
+            h, w = ex.shape
+            active = np.concatenate(
+                [
+                    ex.guide[..., self.guide_active] * guide_scale,
+                    ex.appearance[..., self.appearance_active] * appearance_scale,
+                ],
+                axis=2,
+            )
+            guide_part = _pad(active[..., :n_ga], r, params.guide_padding)
+            appearance_part = _pad(active[..., n_ga:], r, "reflect")
+            self.exemplar_active[e, : h + 2 * r, : w + 2 * r] = np.concatenate(
+                [guide_part, appearance_part], axis=2
+            )
+            self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r] = _pad(ex.appearance, r, "reflect")
+            valid = self._region(ex.mask, (h, w), r)
+            ys, xs = np.nonzero(valid)
+            self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
+            # Nearest candidate of every exemplar pixel: snaps propagated coordinates.
+            _, (ny, nx) = ndimage.distance_transform_edt(~valid, return_indices=True)
+            self.exemplar_nearest.append(self.exemplar_lookup[e, ny, nx])
+            n_cand += len(ys)
+            cand_e.append(np.full(len(ys), e, dtype=np.int64))
+            cand_y.append(ys.astype(np.int64))
+            cand_x.append(xs.astype(np.int64))
+            positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
+        self.cand_e = np.concatenate(cand_e)
+        self.cand_y = np.concatenate(cand_y)
+        self.cand_x = np.concatenate(cand_x)
+        self.cand_position = np.concatenate(positions)
+
+        # Query: centres inside the (dilated) mask on the stride grid.
+        self.query_shape = query.shape
+        h, w = query.shape
+        centres = self._region(query.mask, (h, w), r)
+        if params.stride > 1:
+            grid = np.zeros((h, w), dtype=bool)
+            grid[:: params.stride, :: params.stride] = True
+            # The last row and column too, so that every pixel is covered by a window.
+            grid[h - 1, :: params.stride] = grid[:: params.stride, w - 1] = True
+            grid[h - 1, w - 1] = True
+            centres &= grid
+        self.query_y, self.query_x = (a.astype(np.int64) for a in np.nonzero(centres))
+        self.query_lookup = np.full((h, w), -1, dtype=np.int64)
+        self.query_lookup[self.query_y, self.query_x] = np.arange(len(self.query_y))
+        self.query_position = _positions(
+            self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
+        )
+        self.query_active = np.zeros((h + 2 * r, w + 2 * r, n_ga + n_aa), dtype=np.float32)
+        self.query_active[..., :n_ga] = _pad(
+            query.guide[..., self.guide_active] * guide_scale, r, params.guide_padding
+        )
+        timer.add("setup", start)
+
+        # PCA, learned on exemplar windows, separately for guide and appearance.
+        start = time.perf_counter()
+        self.exemplar_view = sliding_window_view(self.exemplar_active, (k, k), axis=(1, 2))
+        self.guide_projection = _Projection(slice(0, n_ga), k, self.window)
+        self.appearance_projection = _Projection(slice(n_ga, n_ga + n_aa), k, self.window)
+        n_samples = min(params.pca_samples, len(self.cand_e))
+        pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
+        sample_index = (self.cand_e[pick], self.cand_y[pick], self.cand_x[pick])
+        for projection in (self.guide_projection, self.appearance_projection):
+            if projection.channels.stop > projection.channels.start:
+                samples = projection.windows(self.exemplar_view, sample_index)
+                projection.fit(samples, params.pca_fraction, params.pca_max_components, rng)
+        timer.add("pca", start)
+
+        # Features: [guide PCA | weighted position | appearance PCA].
+        start = time.perf_counter()
+        index = (self.cand_e, self.cand_y, self.cand_x)
+        self.n_init_dims = self.guide_projection.n_components + 2
+        self.candidate_features = self._features(
+            self.exemplar_view, index, self.cand_position, with_appearance=True
+        )
+        self.query_view = sliding_window_view(self.query_active, (k, k), axis=(0, 1))
+        self.query_features = self._features(
+            self.query_view,
+            (self.query_y, self.query_x),
+            self.query_position,
+            with_appearance=True,
+        )
+        ys = self.query_y
+        row_edges = np.linspace(0, h, min(_N_BANDS, h) + 1).astype(np.int64)
+        self.band_starts = np.searchsorted(ys, row_edges, side="left").astype(np.int64)
+        timer.add("features", start)
+        self.indexes: dict[str, object] = {}
+
+    @staticmethod
+    def _band_std(exemplars: Sequence[Mapping], part: str, channels: np.ndarray) -> np.ndarray:
+        if len(channels) == 0:
+            return np.ones(0, dtype=np.float32)
+        values = []
+        for ex in exemplars:
+            bands = getattr(ex, part)[..., channels]
+            values.append(bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels)))
+        stacked = np.concatenate(values, axis=0)
+        std = stacked.std(axis=0)
+        floor = max(float(std.max()), 1e-12) * 1e-3
+        return np.maximum(std, floor).astype(np.float32)
+
+    @staticmethod
+    def _region(mask: np.ndarray | None, shape: tuple[int, int], r: int) -> np.ndarray:
+        if mask is None:
+            return np.ones(shape, dtype=bool)
+        return ndimage.binary_dilation(mask, iterations=max(r, 1))
+
+    def _features(self, view, index, position, with_appearance: bool) -> np.ndarray:
+        parts = []
+        if self.guide_projection.n_components:
+            parts.append(self.guide_projection.project(view, index))
+        parts.append(position * np.float32(self.params.position_weight))
+        if with_appearance and self.appearance_projection.n_components:
+            parts.append(self.appearance_projection.project(view, index))
+        return np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32)
+
+    # -- the two steps ---------------------------------------------------------
+
+    def set_appearance(self, appearance_padded: np.ndarray) -> None:
+        """Install the current appearance estimate and refresh the query's features."""
+        start = time.perf_counter()
+        n_ga = self.n_guide_active
+        self.query_active[..., n_ga:] = (
+            appearance_padded[..., self.appearance_active] * self.appearance_scale
+        )
+        if self.appearance_projection.n_components:
+            self.query_features[:, self.n_init_dims :] = self.appearance_projection.project(
+                self.query_view, (self.query_y, self.query_x)
+            )
+        self.timer.add("features", start)
+
+    def costs(self, matches: np.ndarray) -> np.ndarray:
+        start = time.perf_counter()
+        out = _kernels.window_costs(
+            self.query_active,
+            self.exemplar_active,
+            self.window,
+            self.query_y,
+            self.query_x,
+            self.cand_e,
+            self.cand_y,
+            self.cand_x,
+            matches,
+            self.query_position,
+            self.cand_position,
+            np.float32(self.params.position_weight**2),
+        )
+        self.timer.add("costs", start)
+        return out
+
+    def vote(self, matches: np.ndarray, appearance_padded: np.ndarray) -> np.ndarray:
+        start = time.perf_counter()
+        coverage = np.zeros(appearance_padded.shape[:2], dtype=np.float64)
+        _kernels.vote(
+            self.exemplar_appearance,
+            self.window,
+            self.query_lookup,
+            self.cand_e,
+            self.cand_y,
+            self.cand_x,
+            matches,
+            appearance_padded,
+            coverage,
+        )
+        self.timer.add("vote", start)
+        return appearance_padded
+
+    def search(self, matches: np.ndarray | None, init: bool, seed: int, rng) -> np.ndarray:
+        """E-step search: new candidate matches (PCA space) for every query centre."""
+        ndims = self.n_init_dims if init else self.candidate_features.shape[1]
+        backend = self.params.backend
+        if backend == "patchmatch":
+            start = time.perf_counter()
+            passes = self.params.patchmatch_passes
+            if matches is None:
+                matches = rng.integers(0, len(self.cand_e), size=len(self.query_y))
+                passes *= 2
+            new = np.ascontiguousarray(matches, dtype=np.int64).copy()
+            distances = _kernels.feature_distances(
+                self.query_features, self.candidate_features, new, ndims
+            )
+            _kernels.patchmatch(
+                self.query_features,
+                self.candidate_features,
+                ndims,
+                self.query_y,
+                self.query_x,
+                self.query_lookup,
+                self.cand_e,
+                self.cand_y,
+                self.cand_x,
+                self.exemplar_lookup,
+                self.exemplar_shape,
+                self.band_starts,
+                new,
+                distances,
+                passes,
+                self.params.stride,
+                seed,
+            )
+            self.timer.add("search", start)
+            return new
+        key = "init" if init else "full"
+        if key not in self.indexes:
+            start = time.perf_counter()
+            data = np.ascontiguousarray(self.candidate_features[:, :ndims])
+            self.indexes[key] = make_index(backend, data, seed=seed)
+            self.timer.add("index", start)
+        start = time.perf_counter()
+        queries = np.ascontiguousarray(self.query_features[:, :ndims])
+        new, _ = self.indexes[key].query(queries)
+        self.timer.add("search", start)
+        return new.astype(np.int64)
+
+    def propagate(self, coarse_source: np.ndarray) -> np.ndarray:
+        """Initial matches from the coarser level's dense source map (coordinates x2)."""
+        ys, xs = self.query_y, self.query_x
+        src = coarse_source[np.minimum(ys // 2, coarse_source.shape[0] - 1),
+                            np.minimum(xs // 2, coarse_source.shape[1] - 1)]
+        e = src[:, 0]
+        sy = np.minimum(2 * src[:, 1] + ys % 2, self.exemplar_shape[e, 0] - 1)
+        sx = np.minimum(2 * src[:, 2] + xs % 2, self.exemplar_shape[e, 1] - 1)
+        matches = np.empty(len(ys), dtype=np.int64)
+        for ex, nearest in enumerate(self.exemplar_nearest):
+            sel = e == ex
+            matches[sel] = nearest[sy[sel], sx[sel]]
+        return matches
+
+    def dense_source(self, matches: np.ndarray) -> np.ndarray:
+        """(H, W, 3) exemplar, y, x for every pixel, from its nearest window centre."""
+        h, w = self.query_shape
+        _, (ny, nx) = ndimage.distance_transform_edt(self.query_lookup < 0, return_indices=True)
+        nearest = self.query_lookup[ny, nx]
+        c = matches[nearest]
+        e = self.cand_e[c]
+        yy, xx = np.mgrid[0:h, 0:w]
+        sy = np.clip(self.cand_y[c] + (yy - ny), 0, self.exemplar_shape[e, 0] - 1)
+        sx = np.clip(self.cand_x[c] + (xx - nx), 0, self.exemplar_shape[e, 1] - 1)
+        return np.stack([e, sy, sx], axis=-1).astype(np.int32)
+
+
+def _validate(query_levels, exemplar_levels, params) -> None:
+    n_levels = len(query_levels)
+    if n_levels == 0:
+        raise ValueError("no query levels")
+    if len(exemplar_levels) == 0:
+        raise ValueError("at least one exemplar is needed")
+    if len(params.patch_sizes) < n_levels:
+        raise ValueError(f"{n_levels} levels need {n_levels} patch sizes, got {params.patch_sizes}")
+    n_guide = query_levels[0].guide.shape[2]
+    if len(params.guide_weights) != n_guide:
+        raise ValueError(f"{n_guide} guide bands need as many guide weights")
+    for i, levels in enumerate(exemplar_levels):
+        if len(levels) != n_levels:
+            raise ValueError(f"exemplar {i} has {len(levels)} levels, the query {n_levels}")
+        for level, ex in enumerate(levels):
+            if ex.appearance is None:
+                raise ValueError(f"exemplar {i} level {level} has no appearance")
+            if ex.guide.shape[2] != n_guide:
+                raise ValueError(f"exemplar {i} has {ex.guide.shape[2]} guide bands, query {n_guide}")
+            if ex.appearance.shape[2] != exemplar_levels[0][level].appearance.shape[2]:
+                raise ValueError(f"exemplar {i} differs from exemplar 0 in appearance bands")
+    n_appearance = exemplar_levels[0][0].appearance.shape[2]
+    if len(params.appearance_weights) != n_appearance:
+        raise ValueError(f"{n_appearance} appearance bands need as many appearance weights")
+    for level in range(1, n_levels):
+        fine, coarse = query_levels[level - 1].shape, query_levels[level].shape
+        if coarse != ((fine[0] + 1) // 2, (fine[1] + 1) // 2):
+            raise ValueError(f"query level {level} of shape {coarse} is not half of {fine}")
+
+
+def synthesize(
+    query_levels: Sequence[Mapping],
+    exemplar_levels: Sequence[Sequence[Mapping]],
+    params: EngineParams | None = None,
+    *,
+    seed: int = 0,
+    quiet: bool = True,
+) -> EngineResult:
+    """Synthesise the query's appearance from exemplars, coarse to fine, by hard EM.
+
+    Parameters
+    ----------
+    query_levels : sequence of Mapping
+        Query pyramid, finest first; appearance is ignored.
+    exemplar_levels : sequence of sequence of Mapping
+        One pyramid (finest first, same level count) per exemplar.
+    params : EngineParams, optional
+    seed : int
+        Seeds every random choice; the same seed gives the same bytes.
+    quiet : bool
+        No progress bar.
+
+    Returns
+    -------
+    EngineResult
+    """
+    params = params or EngineParams()
+    _validate(query_levels, exemplar_levels, params)
+    rng = np.random.default_rng(seed)
+    timer = _Timer()
+    n_levels = len(query_levels)
+    n_appearance = exemplar_levels[0][0].appearance.shape[2]
+    log.info("search backend: %s", params.backend)
+    appearance_levels: list[np.ndarray] = [None] * n_levels  # type: ignore[list-item]
+    objective: list[list[float]] = [[] for _ in range(n_levels)]
+    coarse_source = None
+    solver = None
+    matches = None
+    for level in progress(
+        range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet
+    ):
+        exemplars = [levels[level] for levels in exemplar_levels]
+        smallest = min(min(e.shape) for e in exemplars)
+        k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
+        solver = _LevelSolver(query_levels[level], exemplars, k, params, rng, timer)
+        level_seed = int(rng.integers(0, 2**62))
+        h, w = query_levels[level].shape
+        appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
+        if coarse_source is None and params.init_from_guide:
+            # The appearance is unknown yet: match on guide and position only.
+            matches = solver.search(None, init=True, seed=level_seed, rng=rng)
+        elif coarse_source is None:
+            matches = rng.integers(0, len(solver.cand_e), size=len(solver.query_y))
+        else:
+            matches = solver.propagate(coarse_source)
+        appearance = solver.vote(matches, appearance)
+        previous = np.inf
+        for iteration in range(params.max_iterations):
+            solver.set_appearance(appearance)
+            candidates = solver.search(
+                matches, init=False, seed=level_seed + 1 + iteration, rng=rng
+            )
+            old_cost = solver.costs(matches)
+            new_cost = solver.costs(candidates)
+            better = new_cost < old_cost
+            matches = np.where(better, candidates, matches)
+            value = float(np.where(better, new_cost, old_cost).mean(dtype=np.float64))
+            objective[level].append(value)
+            appearance = solver.vote(matches, appearance)
+            log.info(
+                "level %d iteration %d: target %.6g, %d matches changed",
+                level,
+                iteration,
+                value,
+                int(better.sum()),
+            )
+            if not better.any() or previous - value < params.tolerance * abs(previous):
+                break
+            previous = value
+        r = solver.r
+        appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
+        coarse_source = solver.dense_source(matches)
+    assert solver is not None and matches is not None
+    solver.set_appearance(appearance)
+    final_cost = solver.costs(matches)
+    cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
+    cost[solver.query_y, solver.query_x] = final_cost
+    return EngineResult(
+        appearance=appearance_levels,
+        source=coarse_source,
+        cost=cost,
+        objective=objective,
+        timings=timer.seconds,
+        backend=params.backend,
+    )

@@ -1,0 +1,60 @@
+"""Small synthetic databases for fast tests (data_gen makes the realistic ones)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imagemap.database import Database, Example
+
+
+def blob(shape=(48, 64), centre=(24, 32), radii=(16, 26), bumps=0.0, seed=0):
+    """An ellipsoid depth map (nearer = larger, background 0) with optional bumps."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    u = ((yy - centre[0]) / radii[0]) ** 2 + ((xx - centre[1]) / radii[1]) ** 2
+    depth = np.where(u < 1, 0.3 + 0.6 * np.sqrt(np.clip(1 - u, 0, 1)), 0).astype(np.float32)
+    if bumps:
+        rng = np.random.default_rng(seed)
+        phase = rng.uniform(0, 2 * np.pi)
+        depth = np.where(depth > 0, depth + bumps * np.sin(xx / 3.0 + phase), 0)
+    return depth.astype(np.float32)
+
+
+def painted(depth, palette):
+    """Colour by position relative to the object: top, bottom and a stripe band."""
+    mask = depth > 0
+    ys, xs = np.nonzero(mask)
+    yc = ys.mean()
+    xmin, xmax = xs.min(), xs.max()
+    h, w = depth.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    image = np.zeros((h, w, 3), dtype=np.float32)
+    top = yy < yc
+    image[mask & top] = palette[0]
+    image[mask & ~top] = palette[1]
+    stripe = mask & (xx > xmin + 0.7 * (xmax - xmin)) & (xx < xmin + 0.8 * (xmax - xmin))
+    image[stripe] = palette[2]
+    shade = (0.75 + 0.25 * depth / max(depth.max(), 1e-6))[..., None]
+    return np.clip(image * shade, 0, 1).astype(np.float32)
+
+
+PALETTE = [(0.85, 0.25, 0.2), (0.95, 0.9, 0.7), (0.1, 0.2, 0.5)]
+
+
+@pytest.fixture
+def blob_database():
+    """Five ellipsoids of varied size and position, painted the same way."""
+    examples = []
+    for i, (cy, cx, ry, rx) in enumerate(
+        [(24, 32, 16, 26), (23, 30, 15, 24), (25, 33, 17, 27), (24, 31, 14, 28), (22, 34, 16, 25)]
+    ):
+        depth = blob(centre=(cy, cx), radii=(ry, rx), bumps=0.02, seed=i)
+        examples.append(Example.from_arrays(f"blob_{i}", depth, painted(depth, PALETTE)))
+    return Database(examples)
+
+
+@pytest.fixture
+def query_blob():
+    depth = blob(centre=(24, 32), radii=(15, 25), bumps=0.02, seed=9)
+    return depth, painted(depth, PALETTE)

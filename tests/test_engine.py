@@ -1,0 +1,124 @@
+"""The engine's properties: hard-EM descent, reproduction, non-stationarity, determinism."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap.engine import EngineParams, Mapping, synthesize
+
+
+def slab(shape, top_left, size, left_colour=(0.9, 0.1, 0.1), right_colour=(0.1, 0.1, 0.9)):
+    """A flat slab with the same bump pattern everywhere, coloured by half."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    y0, x0 = top_left
+    hh, ww = size
+    mask = (yy >= y0) & (yy < y0 + hh) & (xx >= x0) & (xx < x0 + ww)
+    bumps = 0.1 * np.sin(2 * np.pi * xx / 6) * np.sin(2 * np.pi * yy / 6)
+    depth = np.where(mask, 0.5 + bumps, 0).astype(np.float32)
+    image = np.zeros((h, w, 3), np.float32)
+    left = xx < x0 + ww / 2
+    image[mask & left] = left_colour
+    image[mask & ~left] = right_colour
+    return depth, image, left
+
+
+def test_self_reproduction(blob_database, query_blob):
+    """With the query's own mapping in the database the map comes back (bound: 0.02 mean)."""
+    depth, truth = query_blob
+    db = Database([*blob_database.examples, Example.from_arrays("twin", depth, truth)])
+    result = colorize(depth, db, "busts", backend="exact")
+    assert result.example_names[0] == "twin"
+    error = np.abs(result.image - truth)[depth > 0].mean()
+    assert error < 0.02, error
+
+
+@pytest.mark.parametrize("backend", ["exact", "patchmatch"])
+def test_target_never_increases(blob_database, query_blob, backend):
+    depth, _ = query_blob
+    result = colorize(depth, blob_database, "busts", backend=backend, seed=3)
+    for level, values in enumerate(result.objective):
+        assert len(values) >= 2, f"level {level} ran one iteration only"
+        steps = np.diff(values)
+        assert np.all(steps <= 1e-6 * np.abs(values[:-1])), (level, values)
+
+
+def test_pynndescent_target_never_increases(blob_database, query_blob):
+    depth, _ = query_blob
+    result = colorize(depth, blob_database, "busts", backend="pynndescent", m=1)
+    for values in result.objective:
+        assert np.all(np.diff(values) <= 1e-6 * np.abs(values[:-1]))
+
+
+def test_position_term_makes_synthesis_non_stationary():
+    """Identical depth patterns carry red on the left, blue on the right of each example."""
+    d1, i1, _ = slab((64, 128), (8, 8), (48, 112))
+    d2, i2, _ = slab((64, 128), (10, 12), (44, 104))
+    db = Database([Example.from_arrays("a", d1, i1), Example.from_arrays("b", d2, i2)])
+    depth, _, left = slab((64, 128), (9, 10), (46, 108))
+    inner = ndimage.binary_erosion(depth > 0, iterations=12)
+    accuracy = {}
+    for weight in (1.0, 0.0):
+        params = ColorizeParams(m=2, position_weight=weight, backend="exact")
+        image = colorize(depth, db, params).image
+        red = image[..., 0] > image[..., 2]
+        accuracy[weight] = float((red == left)[inner].mean())
+    assert accuracy[1.0] > 0.97, accuracy
+    assert accuracy[0.0] < 0.9, accuracy
+
+
+def test_same_seed_same_bytes_and_seed_matters(blob_database, query_blob):
+    depth, _ = query_blob
+    a = colorize(depth, blob_database, "busts", seed=7)
+    b = colorize(depth, blob_database, "busts", seed=7)
+    c = colorize(depth, blob_database, "busts", seed=8)
+    assert a.image.tobytes() == b.image.tobytes()
+    assert a.source.tobytes() == b.source.tobytes()
+    assert a.source.tobytes() != c.source.tobytes()
+
+
+def test_exact_and_patchmatch_agree_on_small_case(blob_database, query_blob):
+    depth, truth = query_blob
+    exact = colorize(depth, blob_database, "busts", backend="exact")
+    approx = colorize(depth, blob_database, "busts", backend="patchmatch")
+    mask = depth > 0
+    assert np.abs(exact.image - approx.image)[mask].mean() < 0.05
+    # PatchMatch's final target stays within 25% of the exact search's.
+    assert approx.objective[0][-1] < 1.25 * exact.objective[0][-1]
+
+
+def test_many_appearance_bands_and_carried_bands():
+    """Generic over Ca; a weight-0 band is carried (voted) without being matched."""
+    rng = np.random.default_rng(0)
+    guide = ndimage.gaussian_filter(rng.random((40, 40)), 1.5).astype(np.float32)
+    appearance = np.stack([guide * (i + 1) for i in range(5)] + [1 - guide], axis=-1)
+    exemplar = Mapping(guide=guide, appearance=appearance)
+    query = Mapping(guide=np.roll(guide, 5, axis=0))
+    params = EngineParams(
+        patch_sizes=(5,),
+        guide_weights=(1.0,),
+        appearance_weights=(1.0, 0.5, 0, 0, 0, 0),
+        backend="exact",
+        pca_fraction=1.0,
+    )
+    result = synthesize([query], [[exemplar]], params)
+    out = result.appearance[0]
+    assert out.shape == (40, 40, 6)
+    truth = np.roll(appearance, 5, axis=0)
+    interior = np.s_[10:-10, 4:-4]
+    np.testing.assert_allclose(out[interior], truth[interior], atol=1e-4)
+    # The source map points at the shifted rows.
+    assert np.all(result.source[15:30, 10:30, 1] == np.arange(10, 25)[:, None])
+
+
+def test_bad_engine_input():
+    rng = np.random.default_rng(0)
+    exemplar = Mapping(guide=rng.random((20, 20, 2)), appearance=rng.random((20, 20, 3)))
+    query = Mapping(guide=rng.random((20, 20, 1)))
+    with pytest.raises(ValueError, match="guide bands"):
+        synthesize([query], [[exemplar]], EngineParams(patch_sizes=(5,)))
+    with pytest.raises(ValueError, match="mask is empty"):
+        Mapping(guide=np.zeros((5, 5)), mask=np.zeros((5, 5), bool))
+    with pytest.raises(ValueError, match="odd"):
+        EngineParams(patch_sizes=(4,))

@@ -1,0 +1,66 @@
+import numpy as np
+import pytest
+
+from imagemap.engine import EngineParams, Mapping, _LevelSolver, _Timer
+from imagemap.pyramid import (
+    collapse_laplacian,
+    expand,
+    gaussian_pyramid,
+    laplacian_pyramid,
+    level_shapes,
+    mask_pyramid,
+)
+
+
+@pytest.mark.parametrize("shape", [(150, 200), (37, 50, 3), (64, 64, 5), (33, 17)])
+def test_laplacian_round_trip_is_exact(shape):
+    x = np.random.default_rng(0).random(shape).astype(np.float32)
+    pyramid = laplacian_pyramid(x, 4)
+    assert [p.shape[:2] for p in pyramid] == level_shapes(shape[:2], 4)
+    np.testing.assert_allclose(collapse_laplacian(pyramid), x, atol=2e-6)
+
+
+def test_skimage_laplacian_would_not_round_trip():
+    # The pitfall the design notes warn about: guard against switching back to it.
+    from skimage.transform import pyramid_laplacian
+
+    x = np.random.default_rng(1).random((32, 32)).astype(np.float32)
+    levels = list(pyramid_laplacian(x, max_layer=2))
+    naive = levels[-1]
+    for band in reversed(levels[:-1]):
+        naive = band + expand(naive, band.shape)
+    assert np.abs(naive - x).max() > 1e-3
+
+
+def test_gaussian_levels_sample_even_pixels():
+    # Coarse pixel (y, x) sits on fine pixel (2y, 2x): a smooth ramp shows it.
+    yy, xx = np.mgrid[0:40, 0:40].astype(np.float32)
+    ramp = 3 * yy + xx
+    coarse = gaussian_pyramid(ramp, 2)[1]
+    np.testing.assert_allclose(coarse[5:15, 5:15], ramp[10:30:2, 10:30:2], atol=1e-3)
+
+
+def test_mask_pyramid_keeps_area():
+    mask = np.zeros((64, 64), bool)
+    mask[10:50, 20:40] = True
+    coarse = mask_pyramid(mask, 3)
+    assert coarse[2].sum() == pytest.approx(mask.sum() / 16, rel=0.15)
+
+
+def test_source_coordinates_propagate_times_two():
+    """Coarse source (e, y, x) becomes (e, 2y + dy, 2x + dx) at the finer level."""
+    rng = np.random.default_rng(0)
+    fine = Mapping(guide=rng.random((20, 24, 1)), appearance=rng.random((20, 24, 1)))
+    exemplars = [fine, Mapping(guide=rng.random((18, 22, 1)), appearance=rng.random((18, 22, 1)))]
+    query = Mapping(guide=rng.random((16, 16, 1)))
+    params = EngineParams(patch_sizes=(3,), backend="exact")
+    solver = _LevelSolver(query, exemplars, 3, params, rng, _Timer())
+    coarse = np.zeros((8, 8, 3), dtype=np.int32)
+    coarse[..., 0] = 1
+    coarse[..., 1] = np.arange(8)[:, None]
+    coarse[..., 2] = np.arange(8)[None, :] + 1
+    matches = solver.propagate(coarse)
+    y, x = solver.query_y, solver.query_x
+    assert np.all(solver.cand_e[matches] == 1)
+    np.testing.assert_array_equal(solver.cand_y[matches], 2 * (y // 2) + y % 2)
+    np.testing.assert_array_equal(solver.cand_x[matches], np.minimum(2 * (x // 2 + 1) + x % 2, 21))
