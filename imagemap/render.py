@@ -97,7 +97,7 @@ def normals_from_height(
     else:
         d_row, d_col = np.gradient(height)
     # y points up the screen, i.e. against the row index.
-    normals = np.stack([-scale * d_col, scale * d_row, np.ones_like(height)], axis=-1)
+    normals = np.stack([0.0 - scale * d_col, scale * d_row, np.ones_like(height)], axis=-1)
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
     return normals.astype(np.float32)
 
@@ -208,7 +208,7 @@ def shade(
     Examples
     --------
     >>> flat = np.zeros((2, 2, 3), np.float32); flat[..., 2] = 1
-    >>> float(shade(flat, 0.5, light=(0, 1, 1))[0, 0, 0].round(4))
+    >>> round(float(shade(flat, 0.5, light=(0, 1, 1))[0, 0, 0]), 4)
     0.3536
     """
     normals = np.asarray(normals, dtype=np.float32)
@@ -311,7 +311,9 @@ def relief_view(
     src_r = (rows + 0.5) / zoom - 0.5
     src_c = (cols + 0.5) / zoom - 0.5
     coords = np.stack([src_r, src_c])
-    z = ndimage.map_coordinates(depth, coords, order=1, mode="nearest") * relief
+    # Interpolate a background-filled depth: the rim must not droop towards depth 0.
+    nearest = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
+    z = ndimage.map_coordinates(depth[tuple(nearest)], coords, order=1, mode="nearest") * relief
     rgb = np.stack(
         [
             ndimage.map_coordinates(colour[..., c], coords, order=1, mode="nearest")
