@@ -50,8 +50,9 @@ def photometric_stereo(
     light_dirs : ndarray, shape (N, 3)
         Unit vectors towards each light, z up (lights below the horizon are ignored).
     min_intensity : float
-        Samples of a texel darker than this (on luminance) are left out of its fit, so cast
-        and attached shadows do not bend the normal; 0 keeps every sample above the horizon.
+        Samples of a texel at or below this (on luminance) are left out of its fit, so cast
+        and attached shadows do not bend the normal; the default 0 drops black samples
+        (attached shadows); a negative value keeps every sample above the horizon.
     ridge : float
         Tikhonov term that keeps texels with fewer than three usable lights solvable.
 
