@@ -16,6 +16,7 @@ from imagemap.io import InputError
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",
+    "imagemap.cli.btf",
 ]
 
 EPILOG = """\
