@@ -15,13 +15,14 @@ Example
 
 from __future__ import annotations
 
+from data_gen.busts import BUSTS
 from data_gen.core import Instance, ObjectClass
 from data_gen.core import make_instance as _make_instance
 from data_gen.fish import FISH
 
 __all__ = ["CLASSES", "Instance", "ObjectClass", "make_instance"]
 
-CLASSES: dict[str, ObjectClass] = {"fish": FISH}
+CLASSES: dict[str, ObjectClass] = {"fish": FISH, "busts": BUSTS}
 
 
 def make_instance(
