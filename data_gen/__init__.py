@@ -19,10 +19,11 @@ from data_gen.busts import BUSTS
 from data_gen.core import Instance, ObjectClass
 from data_gen.core import make_instance as _make_instance
 from data_gen.fish import FISH
+from data_gen.humans import HUMANS
 
 __all__ = ["CLASSES", "Instance", "ObjectClass", "make_instance"]
 
-CLASSES: dict[str, ObjectClass] = {"fish": FISH, "busts": BUSTS}
+CLASSES: dict[str, ObjectClass] = {"fish": FISH, "busts": BUSTS, "humans": HUMANS}
 
 
 def make_instance(
