@@ -47,6 +47,7 @@ __all__ = [
     "MovingAverageModel",
     "collapse_periodic",
     "compression_ratios",
+    "experiment_method",
     "fit_moving_average",
     "fit_moving_average_btf",
     "inverse_karhunen_loeve",
@@ -847,3 +848,11 @@ def compression_ratios(
         "vs_raw": raw / total,
         "vs_tsvd": tsvd / total,
     }
+
+
+def experiment_method(sample, shape: tuple[int, int], seed: int = 0):
+    """Hook of :mod:`imagemap.btf.experiment` (``moving_average`` row), default parameters.
+
+    Same as ``moving_average_extrapolate(sample, shape, seed=seed)``.
+    """
+    return moving_average_extrapolate(sample, shape, seed=seed)
