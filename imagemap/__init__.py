@@ -8,7 +8,7 @@ The Python API takes and returns NumPy arrays:
 >>> result.image, result.provenance, result.cost                  # doctest: +SKIP
 """
 
-from imagemap.colorize import PRESETS, ColorizeParams, ColorizeResult, colorize, select_examples
+from imagemap.colorization import PRESETS, ColorizeParams, ColorizeResult, colorize, select_examples
 from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
 from imagemap.io import InputError, read_depth, read_image, write_image

@@ -53,7 +53,10 @@ log = logging.getLogger("imagemap")
 
 BACKENDS = ("patchmatch", "exact", "pynndescent")
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
-_N_BANDS = 16  # fixed PatchMatch work split: results do not depend on the thread count
+# Fixed PatchMatch work split (results do not depend on the thread count): bands of
+# at least _BAND_ROWS rows, since propagation does not cross band borders.
+_MAX_BANDS = 8
+_BAND_ROWS = 64
 
 
 @dataclass(frozen=True)
@@ -155,7 +158,7 @@ class EngineParams:
     backend: str = "patchmatch"
     max_iterations: int = 8
     tolerance: float = 2e-3
-    patchmatch_passes: int = 3
+    patchmatch_passes: int = 4
     normalize_bands: bool = True
     guide_padding: str = "constant"
     stride: int = 1
@@ -438,7 +441,8 @@ class _LevelSolver:
             with_appearance=True,
         )
         ys = self.query_y
-        row_edges = np.linspace(0, h, min(_N_BANDS, h) + 1).astype(np.int64)
+        n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
+        row_edges = np.linspace(0, h, n_bands + 1).astype(np.int64)
         self.band_starts = np.searchsorted(ys, row_edges, side="left").astype(np.int64)
         timer.add("features", start)
         self.indexes: dict[str, object] = {}

@@ -189,6 +189,8 @@ def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Pa
 
     path = Path(path)
     array = np.asarray(image)
+    if not (array.ndim == 2 or (array.ndim == 3 and array.shape[2] in (1, 3, 4))):
+        raise ValueError(f"{path}: cannot write an image of shape {array.shape}")
     if np.issubdtype(array.dtype, np.floating):
         if bits not in (8, 16):
             raise ValueError("bits must be 8 or 16")

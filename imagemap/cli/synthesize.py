@@ -37,7 +37,7 @@ examples:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import add_common_options
-    from imagemap.colorize import PRESETS
+    from imagemap.colorization import PRESETS
     from imagemap.engine import BACKENDS
 
     p = subparsers.add_parser(
@@ -108,7 +108,7 @@ def parse_colour(text: str) -> tuple[float, float, float] | None:
 def run_synthesize(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from imagemap.colorize import colorize
+    from imagemap.colorization import colorize
     from imagemap.database import Database
     from imagemap.io import read_depth, write_image
 

@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+
+from imagemap.io import InputError, atomic_path, read_depth, read_image, write_image
+
+
+def test_depth_8_and_16_bit_and_npy_agree(tmp_path):
+    depth = np.zeros((20, 30), np.float32)
+    depth[5:15, 5:25] = np.linspace(0.2, 1.0, 20)[None, :]
+    write_image(tmp_path / "d16.png", np.round(depth * 65535).astype(np.uint16))
+    write_image(tmp_path / "d8.png", np.round(depth * 255).astype(np.uint8))
+    np.save(tmp_path / "d.npy", np.where(depth > 0, depth, np.nan))
+    d16, d8, dn = (read_depth(tmp_path / n) for n in ("d16.png", "d8.png", "d.npy"))
+    np.testing.assert_allclose(d16, depth, atol=1e-4)
+    np.testing.assert_allclose(d8, depth, atol=3e-3)
+    np.testing.assert_array_equal(dn, depth)  # NaN became background 0
+
+
+@pytest.mark.parametrize(
+    "array, message",
+    [
+        (np.zeros((20, 20), np.float32), "no foreground"),
+        (np.full((20, 20), -1, np.float32), "negative"),
+        (np.ones((20, 20, 2, 2), np.float32), "one channel"),
+        (np.ones((4, 4), np.float32), "too small"),
+    ],
+)
+def test_bad_depth(tmp_path, array, message):
+    path = tmp_path / "bad_depth.npy"
+    np.save(path, array)
+    with pytest.raises(InputError, match=message) as info:
+        read_depth(path)
+    assert "bad_depth.npy" in str(info.value)
+
+
+def test_unreadable_and_unsupported(tmp_path):
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not a png")
+    with pytest.raises(InputError, match="junk.png"):
+        read_image(junk)
+    with pytest.raises(InputError, match="unsupported depth format"):
+        read_depth(tmp_path / "x.bmp")
+
+
+def test_write_is_atomic_on_failure(tmp_path):
+    target = tmp_path / "out.png"
+    with pytest.raises(ValueError):
+        write_image(target, np.zeros((4, 4, 7)))  # 7 channels cannot be a PNG
+    write_image(target, np.zeros((4, 4, 3)))
+    before = target.read_bytes()
+    with pytest.raises(RuntimeError), atomic_path(target) as tmp:
+        tmp.write_bytes(b"half")
+        raise RuntimeError("interrupted")
+    assert target.read_bytes() == before  # the old file is untouched
+    assert [p.name for p in tmp_path.iterdir()] == ["out.png"]  # no temporary left
