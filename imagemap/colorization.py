@@ -38,6 +38,8 @@ __all__ = [
     "depth_mappings",
     "example_mappings",
     "select_examples",
+    "translate",
+    "centroid_shift",
 ]
 
 log = logging.getLogger("imagemap")
@@ -131,11 +133,25 @@ def _centroid(mask: np.ndarray) -> np.ndarray:
     return np.array(ndimage.center_of_mass(mask), dtype=np.float64)
 
 
-def _aligned(depth: np.ndarray, shift: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """``depth`` translated by the integer ``shift`` onto a zero canvas of ``shape``."""
+def centroid_shift(source_mask: np.ndarray, target_mask: np.ndarray) -> np.ndarray:
+    """(dy, dx) that moves the centroid of ``source_mask`` onto that of ``target_mask``."""
+    return _centroid(target_mask) - _centroid(source_mask)
+
+
+def translate(array: np.ndarray, shift, shape: tuple[int, int]) -> np.ndarray:
+    """``array`` (H, W[, C]) translated by the rounded ``shift`` (dy, dx) onto a zero canvas.
+
+    Examples
+    --------
+    >>> translate(np.ones((2, 2)), (1, 1), (3, 3)).astype(int)
+    array([[0, 0, 0],
+           [0, 1, 1],
+           [0, 1, 1]])
+    """
+    depth = np.asarray(array, dtype=np.float32)
     dy, dx = (int(round(s)) for s in shift)
-    out = np.zeros(shape, dtype=np.float32)
-    h, w = depth.shape
+    out = np.zeros(tuple(shape) + depth.shape[2:], dtype=np.float32)
+    h, w = depth.shape[:2]
     y0, x0 = max(0, dy), max(0, dx)
     y1, x1 = min(shape[0], h + dy), min(shape[1], w + dx)
     if y1 > y0 and x1 > x0:
@@ -157,11 +173,10 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
     depth = validate_depth(depth)
     if m < 1:
         raise InputError(f"m must be at least 1, got {m}")
-    centre = _centroid(depth > 0)
     distances = []
     for example in database:
         other = example.depth
-        shifted = _aligned(other, centre - _centroid(other > 0), depth.shape)
+        shifted = translate(other, centroid_shift(other > 0, depth > 0), depth.shape)
         # Depth outside the query frame counts too: a larger object is a worse fit.
         outside = float(np.square(other, dtype=np.float64).sum() - np.square(shifted).sum())
         distances.append(float(np.square(depth - shifted, dtype=np.float64).sum()) + outside)

@@ -132,7 +132,8 @@ class EngineParams:
     backend : {"patchmatch", "exact", "pynndescent"}
         Nearest-neighbour search of the E-step.
     max_iterations : int
-        EM iterations per level at most.
+        EM iterations per level at most; 0 gives one pass of matching on guide
+        and position and one vote per level (no EM).
     tolerance : float
         Stop a level when the target decreases by less than this fraction.
     patchmatch_passes : int
@@ -175,8 +176,8 @@ class EngineParams:
             raise ValueError("pca_fraction must be in (0, 1]")
         if self.guide_padding not in ("constant", "reflect", "edge"):
             raise ValueError("guide_padding must be 'constant', 'reflect' or 'edge'")
-        if self.stride < 1 or self.max_iterations < 1:
-            raise ValueError("stride and max_iterations must be at least 1")
+        if self.stride < 1 or self.max_iterations < 0:
+            raise ValueError("stride must be at least 1 and max_iterations at least 0")
 
 
 @dataclass
