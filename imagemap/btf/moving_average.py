@@ -685,8 +685,11 @@ def synthesize_smooth_textures(
 def _enlarged_normals(model: MovingAverageModel, shape, seed: int) -> np.ndarray:
     from imagemap.btf.photometric import enlarge_range_map
 
-    height = enlarge_range_map(model.range_map, shape, method="wrap", seed=seed)
-    return normals_from_height(height, scale=model.params.bump_scale, periodic=True)
+    # One extra texel of the tiling on each side: central differences everywhere, and no
+    # false wrap-around slope when the size is not a multiple of the tile.
+    padded = (int(shape[0]) + 2, int(shape[1]) + 2)
+    height = enlarge_range_map(model.range_map, padded, method="wrap", seed=seed)
+    return normals_from_height(height, scale=model.params.bump_scale)[1:-1, 1:-1]
 
 
 def synthesize_appearance(
