@@ -132,7 +132,9 @@ def patchmatch(
                 radius = max(exemplar_shape[e, 0], exemplar_shape[e, 1])
                 trial = 0
                 while radius >= 1:
-                    cy = cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
+                    cy = (
+                        cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
+                    )
                     cx = cand_x[best] + _random_below(seed, m, p, 2 * trial + 1, 2 * radius + 1)
                     cx -= radius
                     cy = min(max(cy, 0), exemplar_shape[e, 0] - 1)

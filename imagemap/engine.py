@@ -329,7 +329,6 @@ class _LevelSolver:
         self.r = r = k // 2
         self.window = _gaussian_window(k, params.window_sigma)
         self.timer = timer
-        n_guide = query.guide.shape[2]
         n_appearance = exemplars[0].appearance.shape[2]
         guide_w = np.asarray(params.guide_weights, dtype=np.float32)
         appearance_w = np.asarray(params.appearance_weights, dtype=np.float32)
@@ -374,7 +373,9 @@ class _LevelSolver:
             self.exemplar_active[e, : h + 2 * r, : w + 2 * r] = np.concatenate(
                 [guide_part, appearance_part], axis=2
             )
-            self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r] = _pad(ex.appearance, r, "reflect")
+            self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r] = _pad(
+                ex.appearance, r, "reflect"
+            )
             valid = self._region(ex.mask, (h, w), r)
             ys, xs = np.nonzero(valid)
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
@@ -456,7 +457,9 @@ class _LevelSolver:
         values = []
         for ex in exemplars:
             bands = getattr(ex, part)[..., channels]
-            values.append(bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels)))
+            values.append(
+                bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels))
+            )
         stacked = np.concatenate(values, axis=0)
         std = stacked.std(axis=0)
         floor = max(float(std.max()), 1e-12) * 1e-3
@@ -578,8 +581,10 @@ class _LevelSolver:
     def propagate(self, coarse_source: np.ndarray) -> np.ndarray:
         """Initial matches from the coarser level's dense source map (coordinates x2)."""
         ys, xs = self.query_y, self.query_x
-        src = coarse_source[np.minimum(ys // 2, coarse_source.shape[0] - 1),
-                            np.minimum(xs // 2, coarse_source.shape[1] - 1)]
+        src = coarse_source[
+            np.minimum(ys // 2, coarse_source.shape[0] - 1),
+            np.minimum(xs // 2, coarse_source.shape[1] - 1),
+        ]
         e = src[:, 0]
         sy = np.minimum(2 * src[:, 1] + ys % 2, self.exemplar_shape[e, 0] - 1)
         sx = np.minimum(2 * src[:, 2] + xs % 2, self.exemplar_shape[e, 1] - 1)
@@ -620,7 +625,9 @@ def _validate(query_levels, exemplar_levels, params) -> None:
             if ex.appearance is None:
                 raise ValueError(f"exemplar {i} level {level} has no appearance")
             if ex.guide.shape[2] != n_guide:
-                raise ValueError(f"exemplar {i} has {ex.guide.shape[2]} guide bands, query {n_guide}")
+                raise ValueError(
+                    f"exemplar {i} has {ex.guide.shape[2]} guide bands, query {n_guide}"
+                )
             if ex.appearance.shape[2] != exemplar_levels[0][level].appearance.shape[2]:
                 raise ValueError(f"exemplar {i} differs from exemplar 0 in appearance bands")
     n_appearance = exemplar_levels[0][0].appearance.shape[2]
@@ -677,9 +684,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
     coarse_source = None
     solver = None
     matches = None
-    for level in progress(
-        range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet
-    ):
+    for level in progress(range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet):
         exemplars = [levels[level] for levels in exemplar_levels]
         smallest = min(min(e.shape) for e in exemplars)
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))

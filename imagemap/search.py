@@ -123,5 +123,7 @@ def make_index(backend: str, data: np.ndarray, seed: int = 0) -> NearestNeighbor
     try:
         cls = _BACKENDS[backend]
     except KeyError:
-        raise ValueError(f"unknown search backend {backend!r}; use one of {sorted(_BACKENDS)}")
+        raise ValueError(
+            f"unknown search backend {backend!r}; use one of {sorted(_BACKENDS)}"
+        ) from None
     return cls(data, seed=seed)

@@ -33,8 +33,21 @@ def test_synthesize_end_to_end(files, tmp_path):
     prov = tmp_path / "prov.png"
     report = tmp_path / "report.json"
     code = main(
-        ["synthesize", str(query), "--db", str(db), "-o", str(out), "--provenance", str(prov),
-         "--report", str(report), "--quiet", "--m", "2"]
+        [
+            "synthesize",
+            str(query),
+            "--db",
+            str(db),
+            "-o",
+            str(out),
+            "--provenance",
+            str(prov),
+            "--report",
+            str(report),
+            "--quiet",
+            "--m",
+            "2",
+        ]
     )
     assert code == 0
     import imageio.v3 as iio
@@ -51,8 +64,21 @@ def test_synthesize_end_to_end(files, tmp_path):
 def test_synthesize_background_colour_and_examples(files, tmp_path):
     db, query, depth = files
     out = tmp_path / "map.png"
-    code = main(["synthesize", str(query), "--db", str(db), "-o", str(out), "--quiet",
-                 "--background", "white", "--examples", "blob_2"])
+    code = main(
+        [
+            "synthesize",
+            str(query),
+            "--db",
+            str(db),
+            "-o",
+            str(out),
+            "--quiet",
+            "--background",
+            "white",
+            "--examples",
+            "blob_2",
+        ]
+    )
     assert code == 0
     image = read_image(out)
     assert np.all(image[depth == 0] == 1.0)
@@ -80,8 +106,14 @@ def bad_cases(tmp_path, db, query):
 
 @pytest.mark.parametrize(
     "case",
-    ["missing query", "no foreground", "mismatched pair", "unpaired", "missing db",
-     "unknown example"],
+    [
+        "missing query",
+        "no foreground",
+        "mismatched pair",
+        "unpaired",
+        "missing db",
+        "unknown example",
+    ],
 )
 def test_bad_input_fails_cleanly(files, tmp_path, capsys, case):
     db, query, _ = files

@@ -69,8 +69,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="'transparent' (RGBA, default) or a colour: white, black, '#rrggbb'",
     )
     p.add_argument("--provenance", help="also write a picture of which example each region is from")
-    p.add_argument("--preview", help="also write the result rendered on its depth beside the best "
-                   "example's map on the same depth")
+    p.add_argument(
+        "--preview",
+        help="also write the result rendered on its depth beside the best "
+        "example's map on the same depth",
+    )
     p.add_argument("--report", help="also write a JSON report (examples, timings, memory, target)")
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
     add_common_options(p)
