@@ -18,10 +18,18 @@ from __future__ import annotations
 from data_gen.busts import BUSTS
 from data_gen.core import Instance, ObjectClass
 from data_gen.core import make_instance as _make_instance
+from data_gen.dataset import contact_sheet, write_class
 from data_gen.fish import FISH
 from data_gen.humans import HUMANS
 
-__all__ = ["CLASSES", "Instance", "ObjectClass", "make_instance"]
+__all__ = [
+    "CLASSES",
+    "Instance",
+    "ObjectClass",
+    "contact_sheet",
+    "make_instance",
+    "write_class",
+]
 
 CLASSES: dict[str, ObjectClass] = {"fish": FISH, "busts": BUSTS, "humans": HUMANS}
 

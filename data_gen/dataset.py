@@ -73,7 +73,7 @@ def contact_sheet(
 
 
 def write_class(
-    object_class: ObjectClass,
+    object_class: ObjectClass | str,
     out: str | os.PathLike,
     count: int = 20,
     seed: int = 0,
@@ -85,7 +85,8 @@ def write_class(
 
     Parameters
     ----------
-    object_class : ObjectClass
+    object_class : ObjectClass or str
+        The class or its name (``"fish"``, ``"busts"``, ``"humans"``).
     out : path-like
         Output directory (created). ``out/contact_sheet.png`` shows all instances.
     count : int, optional
@@ -102,7 +103,19 @@ def write_class(
     Returns
     -------
     list of Instance (without meshes)
+
+    Example
+    -------
+    >>> write_class("fish", "examples/fish", count=9, holdout=1)  # doctest: +SKIP
     """
+    if isinstance(object_class, str):
+        from data_gen import CLASSES
+
+        if object_class not in CLASSES:
+            raise InputError(
+                f"class: unknown class {object_class!r} (choose from {sorted(CLASSES)})"
+            )
+        object_class = CLASSES[object_class]
     if count < 1:
         raise InputError(f"--count: must be at least 1, got {count}")
     if not 0 <= holdout < count:
