@@ -32,9 +32,12 @@ def test_synthesize_end_to_end(files, tmp_path):
     out = tmp_path / "out" / "map.png"
     prov = tmp_path / "prov.png"
     report = tmp_path / "report.json"
+    preview = tmp_path / "preview.png"
     code = main(
         [
             "synthesize",
+            "--preview",
+            str(preview),
             str(query),
             "--db",
             str(db),
@@ -57,6 +60,8 @@ def test_synthesize_end_to_end(files, tmp_path):
     # Transparent exactly where the depth is background.
     np.testing.assert_array_equal(rgba[..., 3] > 0, depth > 0)
     assert read_image(prov).shape == (*depth.shape, 3)
+    # Preview: 2 x 2 panels of the depth's size.
+    assert read_image(preview).shape[0] > 2 * depth.shape[0]
     info = json.loads(report.read_text())
     assert len(info["examples"]) == 2 and info["seconds"] > 0
 

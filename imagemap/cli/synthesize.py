@@ -143,18 +143,14 @@ def run_synthesize(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    image = result.rgba if background is None else result.on_background(background)
-    write_image(args.output, image)
+    # Every output is made before any is written: a failure leaves none behind.
+    images = {args.output: result.rgba if background is None else result.on_background(background)}
     if args.provenance:
-        write_image(args.provenance, result.provenance)
+        images[args.provenance] = result.provenance
     if args.preview:
-        from imagemap.render import preview_pair
-
-        best = database[result.example_names[0]]
-        write_image(args.preview, preview_pair(depth, result.image, best.image))
+        images[args.preview] = _preview(depth, result, database)
+    report = None
     if args.report:
-        from imagemap.io import atomic_path
-
         report = {
             "query": str(args.depth),
             "examples": result.example_names,
@@ -165,6 +161,11 @@ def run_synthesize(args: argparse.Namespace) -> int:
             "preset": args.preset,
             "seed": args.seed,
         }
+    for path, picture in images.items():
+        write_image(path, picture)
+    if report is not None:
+        from imagemap.io import atomic_path
+
         with atomic_path(args.report) as tmp:
             tmp.write_text(json.dumps(report, indent=2))
     if not args.quiet:
@@ -174,6 +175,18 @@ def run_synthesize(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _preview(depth, result, database):
+    """The result on its depth beside the best example's map copied over (centroid-aligned)."""
+    from imagemap.colorization import centroid_shift, translate
+    from imagemap.render import preview_pair
+
+    best = database[result.example_names[0]]
+    shift = centroid_shift(best.mask, depth > 0)
+    reference = translate(best.image, shift, depth.shape)
+    reference_mask = translate(best.mask.astype("float32"), shift, depth.shape) > 0.5
+    return preview_pair(depth, result.image, reference, reference_mask=reference_mask)
 
 
 def run_db_check(args: argparse.Namespace) -> int:
