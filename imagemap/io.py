@@ -191,6 +191,9 @@ def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Pa
     array = np.asarray(image)
     if not (array.ndim == 2 or (array.ndim == 3 and array.shape[2] in (1, 3, 4))):
         raise ValueError(f"{path}: cannot write an image of shape {array.shape}")
+    colour16 = array.ndim == 3 and array.shape[2] > 1 and (bits == 16 or array.dtype == np.uint16)
+    if colour16:  # Pillow, imageio's PNG writer, stores 16-bit only for grey
+        raise ValueError(f"{path}: 16-bit colour PNG is not supported; write 8-bit or a .tif")
     if np.issubdtype(array.dtype, np.floating):
         if bits not in (8, 16):
             raise ValueError("bits must be 8 or 16")
