@@ -103,7 +103,7 @@ def _narrow_phase(
         line_directions=directions[candidate_rays],
     )
     barycentric = triangles_mod.points_to_barycentric(triangles[valid], location)
-    inside = np.all((barycentric > -tol_zero()) & (barycentric < 1 + tol_zero()), axis=1)
+    inside = np.all((barycentric > -_tol_zero()) & (barycentric < 1 + _tol_zero()), axis=1)
     faces = candidate_faces[valid][inside]
     rays = candidate_rays[valid][inside]
     location = location[inside]
@@ -117,7 +117,7 @@ def _narrow_phase(
     return location[first], rays[first], faces[first]
 
 
-def tol_zero() -> float:
+def _tol_zero() -> float:
     """trimesh's zero tolerance for the barycentric inside test."""
     from trimesh.constants import tol
 
