@@ -495,19 +495,26 @@ class _LevelSolver:
             )
         self.timer.add("features", start)
 
-    def costs(self, matches: np.ndarray) -> np.ndarray:
+    def costs(self, matches: np.ndarray, subset: np.ndarray | None = None) -> np.ndarray:
+        """Exact window distances of query centres (all, or ``subset``) to ``matches``."""
         start = time.perf_counter()
+        if subset is None:
+            centres_y, centres_x, positions = self.query_y, self.query_x, self.query_position
+        else:
+            matches = matches[subset]
+            centres_y, centres_x = self.query_y[subset], self.query_x[subset]
+            positions = self.query_position[subset]
         out = _kernels.window_costs(
             self.query_active,
             self.exemplar_active,
             self.window,
-            self.query_y,
-            self.query_x,
+            centres_y,
+            centres_x,
             self.cand_e,
             self.cand_y,
             self.cand_x,
-            matches,
-            self.query_position,
+            np.ascontiguousarray(matches),
+            positions,
             self.cand_position,
             np.float32(self.params.position_weight**2),
         )
@@ -707,7 +714,10 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 matches, init=False, seed=level_seed + 1 + iteration, rng=rng
             )
             old_cost = solver.costs(matches)
-            new_cost = solver.costs(candidates)
+            # Exact costs of new candidates only where they differ from the old match.
+            differ = np.flatnonzero(candidates != matches)
+            new_cost = old_cost.copy()
+            new_cost[differ] = solver.costs(candidates, differ)
             better = new_cost < old_cost
             matches = np.where(better, candidates, matches)
             value = float(np.where(better, new_cost, old_cost).mean(dtype=np.float64))
