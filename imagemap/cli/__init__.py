@@ -17,6 +17,7 @@ from imagemap.io import InputError
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",
     "imagemap.cli.btf",
+    "imagemap.cli.evaluate",
 ]
 
 EPILOG = """\
