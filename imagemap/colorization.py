@@ -53,8 +53,8 @@ class ColorizeParams:
     frequencies, Y, Cb, Cr, relative position) restated for our units: each band
     weight is per standard deviation of that band over the selected examples at
     that pyramid level (so depth in metres, millimetres or [0, 1] gives the same
-    result), and the position weight is per standard deviation of the object's
-    pixel coordinates along each axis. See ``docs/presets.md`` for how the presets
+    result), and the position weight is per RMS radius of the object's pixel
+    coordinates. See ``docs/presets.md`` for how the presets
     were set.
 
     Parameters

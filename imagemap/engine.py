@@ -227,13 +227,14 @@ def _gaussian_window(k: int, sigma_fraction: float) -> np.ndarray:
 
 
 def _centroid_frame(mask: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
-    """(yc, xc, sy, sx): centroid and per-axis std of the mask (or the whole frame)."""
+    """(yc, xc, s, s): centroid and RMS radius of the mask (or of the whole frame)."""
     if mask is None:
         mask = np.ones(shape, dtype=bool)
     ys, xs = np.nonzero(mask)
-    sy = max(float(ys.std()), 1.0)
-    sx = max(float(xs.std()), 1.0)
-    return np.array([ys.mean(), xs.mean(), sy, sx], dtype=np.float64)
+    # One isotropic scale, the object's RMS radius: limbs that move (an arm raised)
+    # change the spread along one axis, and must not rescale that axis alone.
+    radius = max(float(np.sqrt(ys.var() + xs.var())), 1.0)
+    return np.array([ys.mean(), xs.mean(), radius, radius], dtype=np.float64)
 
 
 def _positions(ys: np.ndarray, xs: np.ndarray, frame: np.ndarray) -> np.ndarray:
