@@ -122,7 +122,7 @@ class EngineParams:
         matching on it.
     position_weight : float
         Weight of the position relative to the mask centroid, in units of the
-        mask's standard deviation per axis (0 switches the term off).
+        mask's RMS radius (0 switches the term off).
     pca_fraction : float
         Fraction of the PCA basis kept, separately for guide and appearance windows.
     pca_max_components : int, optional
