@@ -1,0 +1,147 @@
+"""Metrics of synthesized image-maps: known pairs, invariants, the faulty rule."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from skimage import color
+
+from imagemap.database import Example
+from imagemap.io import InputError
+from imagemap.metrics import (
+    FaultyRule,
+    ImageMetrics,
+    ciede2000,
+    class_reference,
+    image_metrics,
+    luminance_ssim,
+    part_accuracy,
+    paste_aligned,
+)
+
+RED, BLUE, GREEN = (0.85, 0.15, 0.1), (0.1, 0.2, 0.8), (0.2, 0.7, 0.25)
+
+
+def three_parts(shape=(40, 50)):
+    """Flat-coloured parts: 1 = top band (red), 2 = middle (blue), 3 = bottom (green)."""
+    h, w = shape
+    labels = np.zeros(shape, dtype=np.int32)
+    labels[5:15, 5:45] = 1
+    labels[15:22, 5:45] = 2
+    labels[22:35, 5:45] = 3
+    image = np.zeros(shape + (3,), dtype=np.float32)
+    for part, colour in ((1, RED), (2, BLUE), (3, GREEN)):
+        image[labels == part] = colour
+    return image, labels
+
+
+def test_identical_images_score_perfectly_even_with_patterned_parts():
+    image, labels = three_parts()
+    # Stripes inside part 1 (two colours of one part) and noise on part 3: the truth's
+    # own part accuracy must still be 1, so a patterned part is judged by all its colours.
+    image[(labels == 1) & (np.arange(50) % 4 < 2)[None, :]] = (0.95, 0.8, 0.2)
+    rng = np.random.default_rng(0)
+    image[labels == 3] += rng.normal(0, 0.03, size=(int((labels == 3).sum()), 3))
+    image = np.clip(image, 0, 1)
+    m = image_metrics(image, image, labels > 0, labels)
+    assert m.ciede2000 == 0.0
+    assert m.ssim == pytest.approx(1.0, abs=1e-9)
+    assert m.part_accuracy == 1.0
+
+
+def test_colour_swap_between_parts_by_hand():
+    truth, labels = three_parts()
+    swapped = truth.copy()
+    swapped[labels == 1] = BLUE
+    swapped[labels == 2] = RED
+    mask = labels > 0
+    n1, n2, n3 = ((labels == p).sum() for p in (1, 2, 3))
+    # Parts 1 and 2 are now exactly the other's colour: only part 3 is right.
+    assert part_accuracy(swapped, truth, labels) == pytest.approx(n3 / (n1 + n2 + n3))
+    lab_red, lab_blue = (color.rgb2lab(np.array([c], np.float32)) for c in (RED, BLUE))
+    delta = float(color.deltaE_ciede2000(lab_red, lab_blue)[0])
+    assert ciede2000(swapped, truth, mask) == pytest.approx((n1 + n2) * delta / mask.sum(), 1e-4)
+    assert luminance_ssim(swapped, truth, mask) < 0.95
+
+
+def test_part_accuracy_counts_only_the_pixels_that_moved_to_the_wrong_side():
+    truth, labels = three_parts()
+    synthesized = truth.copy()
+    # Half of part 2 painted green (part 3's colour); a slightly darker red on part 1
+    # is still nearer to red than to anything else.
+    rows = np.nonzero((labels == 2).any(axis=1))[0]
+    synthesized[rows[:3][:, None], np.arange(5, 45)[None, :]] = GREEN
+    synthesized[labels == 1] *= 0.9
+    wrong = 3 * 40
+    assert part_accuracy(synthesized, truth, labels) == pytest.approx(
+        1 - wrong / (labels > 0).sum()
+    )
+
+
+def test_background_does_not_count():
+    truth, labels = three_parts()
+    noisy = truth.copy()
+    noisy[labels == 0] = np.random.default_rng(1).random(((labels == 0).sum(), 3))
+    assert image_metrics(noisy, truth, labels > 0, labels) == image_metrics(
+        truth, truth, labels > 0, labels
+    )
+
+
+def test_single_part_has_no_part_accuracy_and_bad_input_is_named():
+    truth, labels = three_parts()
+    assert math.isnan(part_accuracy(truth, truth, (labels > 0).astype(int)))
+    assert math.isnan(image_metrics(truth, truth, labels > 0).part_accuracy)
+    with pytest.raises(InputError, match="mask is empty"):
+        ciede2000(truth, truth, np.zeros(labels.shape, bool))
+    with pytest.raises(InputError, match="must both be"):
+        ciede2000(truth[:, :-1], truth, labels > 0)
+
+
+def test_ssim_sees_structure_not_just_colour():
+    truth, labels = three_parts()
+    mask = labels > 0
+    stripes = truth.copy()
+    stripes[(labels == 3) & (np.arange(50) % 6 < 3)[None, :]] *= 0.4
+    flat_darker = truth * 0.97
+    assert luminance_ssim(stripes, truth, mask) < luminance_ssim(flat_darker, truth, mask) - 0.1
+
+
+def test_paste_aligned_moves_the_centroid():
+    image, labels = three_parts()
+    mask = labels > 0
+    target = np.roll(mask, (3, -2), axis=(0, 1))
+    pasted = paste_aligned(image, mask, target)
+    np.testing.assert_array_equal(pasted, np.roll(image, (3, -2), axis=(0, 1)))
+
+
+def test_faulty_rule_limits():
+    rule = FaultyRule(ciede2000_limit=10.0, part_accuracy_limit=0.5)
+    assert not rule.is_faulty(ImageMetrics(10.0, 0.9, 0.5))
+    assert rule.is_faulty(ImageMetrics(10.01, 0.9, 0.9))
+    assert rule.is_faulty(ImageMetrics(1.0, 0.9, 0.49))
+    assert not FaultyRule(10.0).is_faulty(ImageMetrics(1.0, 0.9, 0.0))  # no part test
+    assert "part accuracy < 0.500" in rule.describe()
+
+
+def test_class_reference_from_pastes():
+    image, labels = three_parts()
+    depth = np.where(labels > 0, 0.5, 0).astype(np.float32)
+    shifted = Example.from_arrays(
+        "b",
+        np.roll(depth, 2, axis=1),
+        np.roll(image, 2, axis=1),
+        np.roll(labels, 2, axis=1),
+    )
+    same = Example.from_arrays("a", depth, image, labels)
+    # The same map at another place: every paste is perfect, so the bar is perfection.
+    rule, stats = class_reference([same, shifted])
+    assert stats["pairs"] == 2
+    assert rule.ciede2000_limit == pytest.approx(0.0, abs=1e-9)
+    assert rule.part_accuracy_limit == 1.0
+    recoloured = Example.from_arrays("c", depth, image[..., ::-1].copy(), labels)
+    rule, _ = class_reference([same, recoloured])
+    assert rule.ciede2000_limit > 20
+    with pytest.raises(InputError):
+        class_reference([same])
