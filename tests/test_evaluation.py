@@ -63,7 +63,7 @@ def test_twin_gives_a_near_perfect_leave_one_out_and_the_metrics_say_so(twin_dir
     assert full.metrics.ciede2000 < 1.5
     assert full.metrics.ssim > 0.95
     assert full.metrics.part_accuracy > 0.97
-    assert full.part_transfer > 0.97
+    assert full.metrics.part_transfer > 0.97
     # Pasting the twin is the truth itself.
     copy = twin.results["copy_nearest"]
     assert copy.examples == ["fish_102"]
@@ -102,13 +102,12 @@ def test_evaluation_rows_and_faulty_follow_the_class_rule(class_evaluation):
     assert len(rows) == COUNT * 3
     assert [r["object"] for r in rows[:3]] == ["fish_000"] * 3
     rule = class_evaluation.rules[CLASS]
-    assert 0 < rule.ciede2000_limit < 100 and 0 < rule.part_accuracy_limit < 1
+    assert 0 < rule.ssim < 1 and 0 < rule.part_transfer < 1
     for obj in class_evaluation.objects:
         for result in obj.results.values():
-            expected = result.metrics.ciede2000 > rule.ciede2000_limit or (
-                result.metrics.part_accuracy < rule.part_accuracy_limit
-            )
-            assert result.faulty == expected
+            m = result.metrics
+            assert 0 <= m.part_transfer <= 1
+            assert result.faulty == (m.ssim < rule.ssim or m.part_transfer < rule.part_transfer)
     # copy_nearest leaves holes where the nearest silhouette does not cover the query.
     holes = [
         (~obj.results["copy_nearest"].image.any(axis=2) & obj.mask).sum()

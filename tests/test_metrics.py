@@ -117,12 +117,14 @@ def test_paste_aligned_moves_the_centroid():
 
 
 def test_faulty_rule_limits():
-    rule = FaultyRule(ciede2000_limit=10.0, part_accuracy_limit=0.5)
-    assert not rule.is_faulty(ImageMetrics(10.0, 0.9, 0.5))
-    assert rule.is_faulty(ImageMetrics(10.01, 0.9, 0.9))
-    assert rule.is_faulty(ImageMetrics(1.0, 0.9, 0.49))
-    assert not FaultyRule(10.0).is_faulty(ImageMetrics(1.0, 0.9, 0.0))  # no part test
-    assert "part accuracy < 0.500" in rule.describe()
+    rule = FaultyRule(ssim=0.5, part_transfer=0.8)
+    assert not rule.is_faulty(ImageMetrics(90.0, 0.5, 0.0, 0.8))  # palette metrics unused
+    assert rule.is_faulty(ImageMetrics(1.0, 0.49, 1.0, 0.9))
+    assert rule.is_faulty(ImageMetrics(1.0, 0.9, 1.0, 0.79))
+    assert not rule.is_faulty(ImageMetrics(1.0, 0.9, 1.0))  # NaN transfer fails nothing
+    assert FaultyRule(ciede2000=10.0).is_faulty(ImageMetrics(10.01, 1.0, 1.0))
+    assert rule.describe() == "SSIM < 0.500 or part transfer < 0.800"
+    assert FaultyRule().describe() == "never"
 
 
 def test_class_reference_from_pastes():
@@ -138,10 +140,16 @@ def test_class_reference_from_pastes():
     # The same map at another place: every paste is perfect, so the bar is perfection.
     rule, stats = class_reference([same, shifted])
     assert stats["pairs"] == 2
-    assert rule.ciede2000_limit == pytest.approx(0.0, abs=1e-9)
-    assert rule.part_accuracy_limit == 1.0
+    assert rule.ssim == pytest.approx(1.0) and rule.part_transfer == 1.0
+    assert math.isnan(rule.ciede2000)  # labels known: the palette is not judged
+    assert stats["ciede2000_quartiles"][1] == pytest.approx(0.0, abs=1e-9)
+    # Another palette on the same parts: colour is far off, parts are all right.
     recoloured = Example.from_arrays("c", depth, image[..., ::-1].copy(), labels)
-    rule, _ = class_reference([same, recoloured])
-    assert rule.ciede2000_limit > 20
+    rule, stats = class_reference([same, recoloured])
+    assert stats["ciede2000_quartiles"][1] > 20 and rule.part_transfer == 1.0
+    # Without labels the colour is judged.
+    unlabelled = [Example.from_arrays(e.name, e.depth, e.image) for e in (same, recoloured)]
+    rule, _ = class_reference(unlabelled)
+    assert rule.ciede2000 > 20 and math.isnan(rule.part_transfer)
     with pytest.raises(InputError):
         class_reference([same])
