@@ -145,3 +145,25 @@ def test_help_teaches(capsys):
         main(["synthesize", "--help"])
     text = capsys.readouterr().out
     assert "examples:" in text and "--preset" in text
+
+
+def test_batch_writes_a_database_of_results(files, tmp_path, blob_database):
+    db, query, depth = files
+    second = tmp_path / "other_depth.png"
+    write_image(second, np.round(blob_database[1].depth * 65535).astype(np.uint16))
+    out = tmp_path / "maps"
+    report = tmp_path / "batch.json"
+    argv = ["synthesize", str(query), str(second), "--db", str(db), "-o", str(out)]
+    assert main([*argv, "--provenance", str(tmp_path / "prov"), "--report", str(report), "-q"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["other_image.png", "query_image.png"]
+    assert len(list((tmp_path / "prov").iterdir())) == 2
+    assert [r["query"] for r in json.loads(report.read_text())] == [str(query), str(second)]
+
+
+def test_batch_checks_every_input_before_any_work(files, tmp_path, capsys):
+    db, query, _ = files
+    out = tmp_path / "maps"
+    missing = tmp_path / "missing_depth.png"
+    assert main(["synthesize", str(query), str(missing), "--db", str(db), "-o", str(out)]) == 2
+    assert "missing_depth.png" in capsys.readouterr().err
+    assert not out.exists()

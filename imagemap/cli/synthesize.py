@@ -29,6 +29,9 @@ examples:
   imagemap synthesize examples/fish/holdout/fish_008_depth.png --db examples/fish \\
       -o fish_map.png --preset fish --provenance fish_provenance.png
 
+  # a whole batch in one process (outputs NAME_image.png in maps/)
+  imagemap synthesize crowd/*_depth.png --db humans/ -o maps/ --preset humans
+
   # two chosen examples, white background, exact search
   imagemap synthesize bust_depth.png --db busts/ -o bust_map.png --preset busts \\
       --examples bust_003,bust_017 --background white --backend exact
@@ -46,7 +49,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=SYNTHESIZE_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("depth", help="query depth map (.png 8/16-bit, .tif float, .npy)")
+    p.add_argument(
+        "depth",
+        nargs="+",
+        help="query depth map(s) (.png 8/16-bit, .tif float, .npy); with several, -o, "
+        "--provenance and --preview name directories and each map is written as "
+        "NAME_image.png (a database of the results, with the depths beside them)",
+    )
     p.add_argument("--db", required=True, help="database directory of NAME_depth/NAME_image pairs")
     p.add_argument("-o", "--output", required=True, help="output image-map (.png, RGBA)")
     p.add_argument(
@@ -108,19 +117,59 @@ def parse_colour(text: str) -> tuple[float, float, float] | None:
     raise InputError(f"--background: not a colour: {text!r} (use transparent, white or #rrggbb)")
 
 
-def run_synthesize(args: argparse.Namespace) -> int:
+def _name_of(depth_path) -> str:
+    """``fish_008_depth.png`` -> ``fish_008``."""
     from pathlib import Path
 
+    stem = Path(depth_path).stem
+    return stem[: -len("_depth")] if stem.endswith("_depth") else stem
+
+
+def _plan_outputs(args: argparse.Namespace) -> list[dict]:
+    """One job per query depth: its output paths, checked before any work."""
+    from pathlib import Path
+
+    batch = len(args.depth) > 1
+    for path in [p for p in (args.output, args.provenance, args.preview) if p]:
+        if not batch and Path(path).suffix.lower() != ".png":
+            raise InputError(f"{path}: output must be a .png")
+        if batch and Path(path).suffix:
+            raise InputError(f"{path}: with several depth maps, give a directory (no suffix)")
+    if args.report and Path(args.report).suffix.lower() != ".json":
+        raise InputError(f"{args.report}: --report must be a .json")
+    names = [_name_of(p) for p in args.depth]
+    if batch and len(set(names)) != len(names):
+        raise InputError("several query depth maps have the same name")
+    jobs = []
+    for depth_path, name in zip(args.depth, names, strict=True):
+
+        def place(target, kind, name=name):
+            if not target:
+                return None
+            return Path(target) / f"{name}_{kind}.png" if batch else Path(target)
+
+        jobs.append(
+            {
+                "depth": depth_path,
+                "name": name,
+                "output": place(args.output, "image"),
+                "provenance": place(args.provenance, "provenance"),
+                "preview": place(args.preview, "preview"),
+            }
+        )
+    return jobs
+
+
+def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.colorization import colorize
     from imagemap.database import Database
-    from imagemap.io import read_depth, write_image
+    from imagemap.io import atomic_path, read_depth, write_image
+    from imagemap.progress import progress
 
     background = parse_colour(args.background)
-    outputs = [Path(p) for p in (args.output, args.provenance, args.preview, args.report) if p]
-    for path in outputs:
-        if path.suffix.lower() not in (".png", ".json"):
-            raise InputError(f"{path}: output must be a .png (or .json for --report)")
-    depth = read_depth(args.depth)
+    jobs = _plan_outputs(args)
+    # Bad input stops at the door, before any synthesis: every depth is read first.
+    depths = [read_depth(job["depth"]) for job in jobs]
     database = Database.from_directory(args.db)
     if args.exclude:
         database = database.without(*[n.strip() for n in args.exclude.split(",")])
@@ -128,52 +177,58 @@ def run_synthesize(args: argparse.Namespace) -> int:
     if examples:
         for name in examples:
             database[name]  # unknown names fail here, before any work
-    tracemalloc.start()
-    start = time.perf_counter()
-    result = colorize(
-        depth,
-        database,
-        preset=args.preset,
-        m=args.m,
-        examples=examples,
-        backend=args.backend,
-        seed=args.seed,
-        quiet=args.quiet or not sys.stderr.isatty(),
-    )
-    seconds = time.perf_counter() - start
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    # Every output is made before any is written: a failure leaves none behind.
-    images = {args.output: result.rgba if background is None else result.on_background(background)}
-    if args.provenance:
-        images[args.provenance] = result.provenance
-    if args.preview:
-        images[args.preview] = _preview(depth, result, database)
-    report = None
-    if args.report:
-        report = {
-            "query": str(args.depth),
-            "examples": result.example_names,
-            "seconds": seconds,
-            "peak_traced_memory_mb": peak / 2**20,
-            "timings": result.timings,
-            "objective": result.objective,
-            "preset": args.preset,
-            "seed": args.seed,
-        }
-    for path, picture in images.items():
-        write_image(path, picture)
-    if report is not None:
-        from imagemap.io import atomic_path
-
-        with atomic_path(args.report) as tmp:
-            tmp.write_text(json.dumps(report, indent=2))
-    if not args.quiet:
-        print(
-            f"wrote {args.output} ({depth.shape[1]}x{depth.shape[0]}) from "
-            f"{', '.join(result.example_names)} in {seconds:.2f} s",
-            file=sys.stderr,
+    interactive = not args.quiet and sys.stderr.isatty()
+    reports = []
+    for job, depth in progress(
+        list(zip(jobs, depths, strict=True)), desc="maps", quiet=len(jobs) == 1 or not interactive
+    ):
+        tracemalloc.start()
+        start = time.perf_counter()
+        result = colorize(
+            depth,
+            database,
+            preset=args.preset,
+            m=args.m,
+            examples=examples,
+            backend=args.backend,
+            seed=args.seed,
+            quiet=len(jobs) > 1 or not interactive,
         )
+        seconds = time.perf_counter() - start
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        # Every output of a map is made before any is written: a failure leaves none.
+        images = {
+            job["output"]: result.rgba if background is None else result.on_background(background)
+        }
+        if job["provenance"]:
+            images[job["provenance"]] = result.provenance
+        if job["preview"]:
+            images[job["preview"]] = _preview(depth, result, database)
+        for path, picture in images.items():
+            write_image(path, picture)
+        reports.append(
+            {
+                "query": str(job["depth"]),
+                "output": str(job["output"]),
+                "examples": result.example_names,
+                "seconds": seconds,
+                "peak_traced_memory_mb": peak / 2**20,
+                "timings": result.timings,
+                "objective": result.objective,
+                "preset": args.preset,
+                "seed": args.seed,
+            }
+        )
+        if not args.quiet:
+            print(
+                f"wrote {job['output']} ({depth.shape[1]}x{depth.shape[0]}) from "
+                f"{', '.join(result.example_names)} in {seconds:.2f} s",
+                file=sys.stderr,
+            )
+    if args.report:
+        with atomic_path(args.report) as tmp:
+            tmp.write_text(json.dumps(reports[0] if len(reports) == 1 else reports, indent=2))
     return 0
 
 
