@@ -356,7 +356,9 @@ def leave_one_out(
     methods : sequence of str
         Some of :data:`METHODS` (all by default).
     workers : int
-        Processes; 1 runs in this process.
+        Processes; 1 runs in this process. Workers are spawned (not forked), so a
+        script that calls this with ``workers > 1`` must guard its top level with
+        ``if __name__ == "__main__":``, as for any ``multiprocessing`` spawn.
     limit : int, optional
         Evaluate only the first ``limit`` objects (each still synthesized from all
         the others).
@@ -604,6 +606,7 @@ section{border-top:1px solid #ccc;padding:.6em 0}
 figure{margin:0;font-size:.8em;text-align:center}
 figure img{display:block;image-rendering:pixelated;border:1px solid #999}
 .faulty{color:#b00;font-weight:bold}
+.ex{margin-top:.4em}
 .ex img{width:100px}
 """
 
