@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from data_gen.core import ObjectClass, SurfaceHits, hsv, mix
+from data_gen.core import ObjectClass, SurfaceHits, hsv, mix, smoothstep
 from data_gen.geometry import assemble, ellipsoid, limb, sphere_component
 from imagemap.procedural import fbm, marble, stripes
 
@@ -19,11 +19,6 @@ __all__ = ["BUSTS"]
 
 PARTS = ("skin", "hair", "eyebrows", "eyes", "lips", "clothing")
 _LABEL = {part: i + 1 for i, part in enumerate(PARTS)}
-
-
-def _smoothstep(edge0: float, edge1: float, x: np.ndarray) -> np.ndarray:
-    t = np.clip((x - edge0) / (edge1 - edge0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
 
 
 def sample_params(rng: np.random.Generator) -> dict:
@@ -89,10 +84,10 @@ def _gauss(d2: np.ndarray, sigma: float) -> np.ndarray:
 
 def _hair_mask(shape: dict, c: np.ndarray, seed: int) -> np.ndarray:
     """Soft hair region on the canonical head: above a line that falls from front to back."""
-    front = _smoothstep(-0.3, 0.9, c[:, 2])
+    front = smoothstep(-0.3, 0.9, c[:, 2])
     line = shape["hair_back"] + (shape["hairline"] - shape["hair_back"]) * front
     line = line - 0.25 * c[:, 0] ** 2 * front + 0.05 * fbm(c, seed=seed, frequency=3.0)
-    return _smoothstep(-0.03, 0.03, c[:, 1] - line)
+    return smoothstep(-0.03, 0.03, c[:, 1] - line)
 
 
 def _head(shape: dict, seed: int):

@@ -112,6 +112,12 @@ def instance_rng(class_name: str, index: int, seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), class_key, int(index)]))
 
 
+def smoothstep(edge0: float, edge1: float, x: np.ndarray) -> np.ndarray:
+    """Hermite step from 0 at ``edge0`` to 1 at ``edge1`` (either order)."""
+    t = np.clip((x - edge0) / (edge1 - edge0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
 def hsv(hue: float, saturation: float, value: float) -> list[float]:
     """An RGB triple (list of float in [0, 1]) from HSV; hue wraps around 1."""
     return [float(c) for c in colorsys.hsv_to_rgb(hue % 1.0, saturation, value)]

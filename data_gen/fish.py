@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from data_gen.core import ObjectClass, SurfaceHits, hsv, mix
+from data_gen.core import ObjectClass, SurfaceHits, hsv, mix, smoothstep
 from data_gen.geometry import Component, _outward, assemble, ellipsoid, sphere_component
 from imagemap.procedural import fbm, marble, spots, stripes
 
@@ -18,11 +18,6 @@ __all__ = ["FISH"]
 
 PARTS = ("back", "belly", "fins", "tail", "eye", "gill")
 _LABEL = {part: i + 1 for i, part in enumerate(PARTS)}
-
-
-def _smoothstep(edge0: float, edge1: float, x: np.ndarray) -> np.ndarray:
-    t = np.clip((x - edge0) / (edge1 - edge0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
 
 
 def sample_params(rng: np.random.Generator) -> dict:
@@ -94,7 +89,7 @@ def _body(shape: dict, seed: int):
 
     def deform(c: np.ndarray) -> np.ndarray:
         t = (c[:, 0] + 1.0) / 2.0  # 0 at the head (x = -L/2), 1 at the tail
-        taper = 1.0 - (1.0 - shape["peduncle"]) * _smoothstep(shape["taper_start"], 1.0, t)
+        taper = 1.0 - (1.0 - shape["peduncle"]) * smoothstep(shape["taper_start"], 1.0, t)
         # Smooth switch between the back and belly half-heights (no crease at the midline).
         upper = 0.5 + 0.5 * np.tanh(3.0 * c[:, 1])
         half_height = height * ((1 - shape["back_ratio"]) + (2 * shape["back_ratio"] - 1) * upper)
@@ -257,7 +252,7 @@ def colorize(params: dict, hits: SurfaceHits) -> tuple[np.ndarray, np.ndarray]:
         )
     body_rgb = np.empty((len(cb), 3), dtype=np.float32)
     body_rgb[back] = mix(palette["back"], pattern[back], grain[body][back])
-    counter_shade = _smoothstep(-1.0, 0.3, v[belly])  # belly darkens towards the flank
+    counter_shade = smoothstep(-1.0, 0.3, v[belly])  # belly darkens towards the flank
     body_rgb[belly] = mix(palette["belly"], counter_shade, grain[body][belly])
     body_rgb[gill] = mix(palette["gill"], 0.5 + 0.5 * np.sin(40 * v[gill]))
     body_labels = np.where(gill, _LABEL["gill"], np.where(back, _LABEL["back"], _LABEL["belly"]))
@@ -270,14 +265,14 @@ def colorize(params: dict, hits: SurfaceHits) -> tuple[np.ndarray, np.ndarray]:
 
     tail = hits.where("tail")
     ct = c[tail]
-    tail_band = _smoothstep(0.55, 0.75, ct[:, 0]) * (0.6 + 0.4 * np.abs(ct[:, 1]))
+    tail_band = smoothstep(0.55, 0.75, ct[:, 0]) * (0.6 + 0.4 * np.abs(ct[:, 1]))
     tail_rays = 0.25 * stripes(ct[:, [1, 0, 2]], direction=(1, 0, 0), frequency=5.0)
     rgb[tail] = mix(palette["tail"], np.clip(tail_band + tail_rays, 0, 1), grain[tail])
     labels[tail] = _LABEL["tail"]
 
     eye = hits.where("eye")
     radial = np.hypot(c[eye][:, 0], c[eye][:, 1])
-    pupil = _smoothstep(0.5, 0.42, radial)
+    pupil = smoothstep(0.5, 0.42, radial)
     labels[eye], rgb[eye] = _LABEL["eye"], mix(palette["eye"], pupil)
     return labels, rgb
 

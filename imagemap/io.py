@@ -21,6 +21,7 @@ __all__ = [
     "atomic_path",
     "read_depth",
     "read_image",
+    "read_npz",
     "write_image",
     "write_npz",
 ]
@@ -203,6 +204,21 @@ def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Pa
     with atomic_path(path) as tmp:
         iio.imwrite(tmp, array, extension=path.suffix or ".png")
     return path
+
+
+def read_npz(path: str | os.PathLike, what: str = ".npz") -> dict[str, np.ndarray]:
+    """All arrays of an ``.npz`` (no pickles), or :class:`InputError` naming the file.
+
+    ``what`` names the expected content in the message (e.g. "BTF").
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {name: data[name] for name in data.files}
+    except Exception as exc:
+        raise InputError(f"{path}: not a readable {what} ({exc})") from exc
 
 
 def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:

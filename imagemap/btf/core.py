@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imagemap.io import InputError, write_npz
+from imagemap.io import InputError, read_npz, write_npz
 
 __all__ = [
     "BTF",
@@ -293,13 +293,7 @@ class BTF:
     def load(cls, path: str | os.PathLike) -> BTF:
         """Load a BTF written by :meth:`save`."""
         path = Path(path)
-        if not path.is_file():
-            raise InputError(f"{path}: file not found")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                fields = {name: data[name] for name in data.files}
-        except Exception as exc:
-            raise InputError(f"{path}: not a readable .npz BTF ({exc})") from exc
+        fields = read_npz(path, what=".npz BTF")
         required = ("eigen_abrdfs", "singular_values", "eigentextures", "light_dirs", "view_dirs")
         missing = [name for name in required if name not in fields]
         if missing:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imagemap.io import InputError, write_npz
+from imagemap.io import InputError, read_npz, write_npz
 from imagemap.pyramid import laplacian_pyramid, level_shapes
 from imagemap.render import normals_from_height
 
@@ -466,13 +466,7 @@ class MovingAverageModel:
         import ast
 
         path = Path(path)
-        if not path.is_file():
-            raise InputError(f"{path}: file not found")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                fields = {name: data[name] for name in data.files}
-        except Exception as exc:
-            raise InputError(f"{path}: not a readable .npz ({exc})") from exc
+        fields = read_npz(path)
         if str(fields.get("format", "")) != "imagemap-moving-average-btf-1":
             raise InputError(f"{path}: not a moving-average BTF model (see 'imagemap btf ma-fit')")
         k_count, levels = fields["level_means"].shape[:2]
