@@ -37,6 +37,7 @@ __all__ = [
     "colorize",
     "depth_mappings",
     "example_mappings",
+    "pyramid_levels",
     "select_examples",
     "translate",
     "centroid_shift",
@@ -182,6 +183,32 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
         distances.append(float(np.square(depth - shifted, dtype=np.float64).sum()) + outside)
     order = np.argsort(distances, kind="stable")
     return [int(i) for i in order[:m]]
+
+
+#: The coarsest level must see the object at least this many windows across.
+MIN_WINDOWS_ACROSS = 1.25
+
+
+def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...]) -> int:
+    """How many of the preset's levels the object's size supports.
+
+    A level is dropped, coarsest first, while the object's size at that level
+    (square root of its area) is less than ``MIN_WINDOWS_ACROSS`` windows: a
+    window larger than the object matches nothing but the silhouette. The
+    paper's three levels and 7/11/9 windows were set for 200x150 images; this
+    keeps them there and scales down for small depth maps.
+
+    Examples
+    --------
+    >>> mask = np.zeros((60, 80), bool); mask[20:40, 10:70] = True
+    >>> pyramid_levels(mask, (7, 11, 9))
+    2
+    """
+    size = float(np.sqrt(mask.sum()))
+    levels = len(patch_sizes)
+    while levels > 1 and size / 2 ** (levels - 1) < MIN_WINDOWS_ACROSS * patch_sizes[levels - 1]:
+        levels -= 1
+    return levels
 
 
 def _depth_guides(depth: np.ndarray, levels: int) -> list[np.ndarray]:
@@ -380,7 +407,10 @@ def colorize(
     selection_seconds = time.perf_counter() - start
 
     start = time.perf_counter()
-    levels = params.levels
+    levels = pyramid_levels(depth > 0, params.patch_sizes)
+    if levels < params.levels:
+        log.info("object too small for %d levels: using %d", params.levels, levels)
+        params = replace(params, patch_sizes=params.patch_sizes[:levels])
     query = depth_mappings(depth, levels)
     exemplar_levels = [example_mappings(e, levels, params.use_pyramid) for e in chosen]
     pyramid_seconds = time.perf_counter() - start

@@ -291,6 +291,7 @@ def test_cli_extrapolate_and_render(tmp_path, tiny_experiment):
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow
 def test_cli_experiment_writes_table2(tmp_path):
     from imagemap.cli import main
 

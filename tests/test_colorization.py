@@ -57,3 +57,18 @@ def test_ycbcr_round_trip_and_presets_follow_table_1():
     assert PRESETS["humans"].m == 1 and PRESETS["humans"].patch_sizes == (7, 9, 9)
     assert PRESETS["fish"].m == 2 and PRESETS["fish"].patch_sizes == (7, 11, 9)
     assert PRESETS["fish"].position_weight < PRESETS["busts"].position_weight
+
+
+def test_pyramid_depth_follows_object_size():
+    """Three levels where the coarsest still sees the object 1.25 windows across."""
+    from imagemap.colorization import pyramid_levels
+
+    def square(side):
+        mask = np.zeros((400, 400), bool)
+        mask[:side, :side] = True
+        return mask
+
+    sizes = (7, 11, 9)
+    assert pyramid_levels(square(47), sizes) == 3
+    assert pyramid_levels(square(44), sizes) == 2
+    assert pyramid_levels(square(27), sizes) == 1
