@@ -171,12 +171,14 @@ def window_costs(
     query_position,
     cand_position,
     position_weight2,
+    cand_bias,
 ):
     """Exact weighted window distance for each query centre and its match.
 
     ``query_bands`` (Hq + 2r, Wq + 2r, C) and ``exemplar_bands`` (E, Hmax + 2r,
     Wmax + 2r, C) hold the matched bands already multiplied by their weights;
-    ``window_weights`` (k, k) is the Gaussian window, summing to one.
+    ``window_weights`` (k, k) is the Gaussian window, summing to one;
+    ``cand_bias`` (N,) an additive cost per candidate (exemplar preference).
     """
     k = window_weights.shape[0]
     channels = query_bands.shape[2]
@@ -199,7 +201,7 @@ def window_costs(
                 s += w * acc
         dy = query_position[m, 0] - cand_position[c, 0]
         dx = query_position[m, 1] - cand_position[c, 1]
-        s += position_weight2 * (dy * dy + dx * dx)
+        s += position_weight2 * (dy * dy + dx * dx) + cand_bias[c]
         out[m] = s
     return out
 

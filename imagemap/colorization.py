@@ -74,6 +74,10 @@ class ColorizeParams:
         Search backend of the engine (``"patchmatch"``, ``"exact"``, ``"pynndescent"``).
     use_pyramid : bool
         Synthesise YCbCr Laplacian bands (the paper) or plain YCbCr at every level.
+    example_preference : float
+        Extra window cost per rank of an example in the selection (the nearest
+        example costs nothing, the second this much...): fewer seams between
+        examples of different colours.
     """
 
     m: int = 2
@@ -88,13 +92,16 @@ class ColorizeParams:
     max_iterations: int = 8
     tolerance: float = 2e-3
     use_pyramid: bool = True
+    example_preference: float = 0.0
 
     @property
     def levels(self) -> int:
         return len(self.patch_sizes)
 
-    def engine_params(self) -> EngineParams:
+    def engine_params(self, n_examples: int = 0) -> EngineParams:
+        costs = tuple(self.example_preference * rank for rank in range(n_examples))
         return EngineParams(
+            exemplar_costs=costs if self.example_preference else (),
             patch_sizes=self.patch_sizes,
             guide_weights=(self.depth_weight, self.depth_detail_weight),
             appearance_weights=(self.luma_weight, self.chroma_weight, self.chroma_weight),
@@ -356,6 +363,7 @@ def colorize(
     m: int | None = None,
     examples: list[str] | None = None,
     backend: str | None = None,
+    example_preference: float | None = None,
     seed: int = 0,
     quiet: bool = True,
 ) -> ColorizeResult:
@@ -375,6 +383,8 @@ def colorize(
         Use these examples by name instead of the automatic selection.
     backend : str, optional
         Search backend (overrides the preset).
+    example_preference : float, optional
+        Extra cost per rank of a selected example (overrides the preset).
     seed : int
         The same seed gives the same bytes.
     quiet : bool
@@ -390,7 +400,7 @@ def colorize(
     >>> result.rgba.shape  # doctest: +SKIP
     (150, 200, 4)
     """
-    params = _resolve(preset, m=m, backend=backend)
+    params = _resolve(preset, m=m, backend=backend, example_preference=example_preference)
     depth = validate_depth(depth)
     if len(database) == 0:
         raise InputError("the database has no examples")
@@ -416,7 +426,7 @@ def colorize(
     pyramid_seconds = time.perf_counter() - start
 
     result: EngineResult = synthesize(
-        query, exemplar_levels, params.engine_params(), seed=seed, quiet=quiet
+        query, exemplar_levels, params.engine_params(len(chosen)), seed=seed, quiet=quiet
     )
     start = time.perf_counter()
     if params.use_pyramid:

@@ -148,6 +148,9 @@ class EngineParams:
         At the coarsest level, start from matches on guide and position only.
     window_sigma : float
         Standard deviation of the Gaussian window, as a fraction of its width.
+    exemplar_costs : tuple of float
+        Additive cost of matching into each exemplar (empty: none), in the units of
+        the window distance: a preference for some exemplars over others.
     """
 
     patch_sizes: tuple[int, ...] = (7, 11, 9)
@@ -166,6 +169,7 @@ class EngineParams:
     stride: int = 1
     init_from_guide: bool = True
     window_sigma: float = 1.0 / 3.0
+    exemplar_costs: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if any(k < 1 or k % 2 == 0 for k in self.patch_sizes):
@@ -392,6 +396,14 @@ class _LevelSolver:
         self.cand_y = np.concatenate(cand_y)
         self.cand_x = np.concatenate(cand_x)
         self.cand_position = np.concatenate(positions)
+        costs = np.zeros(n_ex, dtype=np.float32)
+        if params.exemplar_costs:
+            if len(params.exemplar_costs) != n_ex:
+                raise ValueError(f"{n_ex} exemplars need as many exemplar_costs")
+            costs[:] = params.exemplar_costs
+        if np.any(costs < 0):
+            raise ValueError("exemplar_costs must not be negative")
+        self.cand_bias = costs[self.cand_e]
 
         # Query: centres inside the (dilated) mask on the stride grid.
         self.query_shape = query.shape
@@ -430,10 +442,11 @@ class _LevelSolver:
                 projection.fit(samples, params.pca_fraction, params.pca_max_components, rng)
         timer.add("pca", start)
 
-        # Features: [guide PCA | weighted position | appearance PCA].
+        # Features: [guide PCA | weighted position | exemplar cost | appearance PCA].
         start = time.perf_counter()
         index = (self.cand_e, self.cand_y, self.cand_x)
-        self.n_init_dims = self.guide_projection.n_components + 2
+        # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
+        self.n_init_dims = self.guide_projection.n_components + 3
         self.candidate_features = self._features(
             self.exemplar_view, index, self.cand_position, with_appearance=True
         )
@@ -477,6 +490,9 @@ class _LevelSolver:
         if self.guide_projection.n_components:
             parts.append(self.guide_projection.project(view, index))
         parts.append(position * np.float32(self.params.position_weight))
+        # sqrt of the exemplar cost for candidates, 0 for the query: adds the cost.
+        bias = np.sqrt(self.cand_bias) if view is self.exemplar_view else np.zeros(len(position))
+        parts.append(bias.astype(np.float32)[:, None])
         if with_appearance and self.appearance_projection.n_components:
             parts.append(self.appearance_projection.project(view, index))
         return np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32)
@@ -518,6 +534,7 @@ class _LevelSolver:
             positions,
             self.cand_position,
             np.float32(self.params.position_weight**2),
+            self.cand_bias,
         )
         self.timer.add("costs", start)
         return out

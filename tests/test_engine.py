@@ -122,3 +122,17 @@ def test_bad_engine_input():
         Mapping(guide=np.zeros((5, 5)), mask=np.zeros((5, 5), bool))
     with pytest.raises(ValueError, match="odd"):
         EngineParams(patch_sizes=(4,))
+
+
+def test_exemplar_costs_steer_the_source(blob_database, query_blob):
+    """A large cost on every example but one leaves that one as the only source."""
+    depth, _ = query_blob
+    free = colorize(depth, blob_database, "busts", m=2)
+    assert len(set(np.unique(free.source[..., 0][depth > 0]))) == 2
+    steered = colorize(depth, blob_database, "busts", m=2, example_preference=100.0)
+    assert set(np.unique(steered.source[..., 0][depth > 0])) == {0}
+    with pytest.raises(ValueError, match="exemplar_costs"):
+        rng = np.random.default_rng(0)
+        exemplar = Mapping(guide=rng.random((20, 20)), appearance=rng.random((20, 20)))
+        params = EngineParams(patch_sizes=(5,), exemplar_costs=(0.0, 1.0))
+        synthesize([Mapping(guide=rng.random((20, 20)))], [[exemplar]], params)

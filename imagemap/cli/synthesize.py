@@ -73,6 +73,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="nearest-neighbour search (default patchmatch: fastest; exact: reference)",
     )
     p.add_argument(
+        "--example-preference",
+        type=float,
+        help="extra cost per rank of a selected example (e.g. 0.3): one coherent source "
+        "per region instead of seams between examples of different colours (busts: faulty "
+        "maps 25%% -> 8%%, but mean colour error up; default 0 as in the paper)",
+    )
+    p.add_argument(
         "--background",
         default="transparent",
         help="'transparent' (RGBA, default) or a colour: white, black, '#rrggbb'",
@@ -191,6 +198,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
             m=args.m,
             examples=examples,
             backend=args.backend,
+            example_preference=args.example_preference,
             seed=args.seed,
             quiet=len(jobs) > 1 or not interactive,
         )
