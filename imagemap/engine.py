@@ -57,6 +57,8 @@ _CHUNK = 16384  # windows per block when extracting features: bounds memory
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
 # at least _BAND_ROWS rows, since propagation does not cross band borders.
 _MAX_BANDS = 8
+# Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
+_EXACT_START_FLOPS = 2e9
 _BAND_ROWS = 64
 
 
@@ -564,8 +566,14 @@ class _LevelSolver:
             start = time.perf_counter()
             passes = self.params.patchmatch_passes
             if matches is None:
-                matches = rng.integers(0, len(self.cand_e), size=len(self.query_y))
-                passes *= 2
+                n_query, n_cand = len(self.query_y), len(self.cand_e)
+                if n_query * n_cand * ndims <= _EXACT_START_FLOPS:
+                    # A small (coarsest) level: an exact global start costs little.
+                    start_index = make_index("exact", self.candidate_features[:, :ndims])
+                    matches, _ = start_index.query(self.query_features[:, :ndims])
+                else:
+                    matches = rng.integers(0, n_cand, size=n_query)
+                    passes *= 2
             new = np.ascontiguousarray(matches, dtype=np.int64).copy()
             distances = _kernels.feature_distances(
                 self.query_features, self.candidate_features, new, ndims
