@@ -64,8 +64,8 @@ TARGETS = {
     "colorize 200x150": 1.0,
     "colorize 512x512": 8.0,
     "colorize 1024x1024": 40.0,
-    "btf pixelwise R=2": 10.0,
-    "btf texture optimization": 60.0,
+    "btf pixelwise R=2 128->512": 10.0,
+    "btf texture optimization 128->512": 60.0,
 }
 #: Peak memory target of issue 7 (MB), by case name.
 MEMORY_TARGETS = {"colorize 1024x1024": 4096.0}
@@ -418,7 +418,7 @@ def run_btf(data_dir: Path, settings: Settings, backends: list[str], trace: bool
 
             (result, _), figures = measure(call, trace=trace)
             rows.append(
-                _row("btf", f"btf pixelwise R={radius}", backend, figures, size=shape,
+                _row("btf", f"btf pixelwise R={radius} {shape}", backend, figures, size=shape,
                      ws=ws, wc=wc, image_error_pct=_image_error(result, data))
             )  # fmt: skip
             _progress(rows[-1])
@@ -431,7 +431,7 @@ def run_btf(data_dir: Path, settings: Settings, backends: list[str], trace: bool
 
         (result, engine_result), figures = measure(call, trace=trace)
         rows.append(
-            _row("btf", "btf texture optimization", backend, figures, size=shape,
+            _row("btf", f"btf texture optimization {shape}", backend, figures, size=shape,
                  image_error_pct=_image_error(result, data),
                  objective=float(engine_result.objective[0][-1]),
                  iterations=[len(level) for level in engine_result.objective],

@@ -18,6 +18,7 @@ SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",
     "imagemap.cli.btf",
     "imagemap.cli.evaluate",
+    "imagemap.cli.bench",
 ]
 
 EPILOG = """\

@@ -1,0 +1,112 @@
+"""The benchmark script's plumbing at tiny sizes: rows, figures, JSON (no timing assertions)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from imagemap.cli import main as imagemap_main
+from imagemap.cli.bench import SCRIPT, load_script
+from imagemap.io import InputError
+
+pytestmark = pytest.mark.skipif(not SCRIPT.is_file(), reason="no benchmarks/run.py checkout")
+
+
+@pytest.fixture(scope="module")
+def bench():
+    return load_script()
+
+
+@pytest.fixture(scope="module")
+def quick_report(bench, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("bench")
+    out = tmp / "results.json"
+    code = bench.main(["--quick", "--json", str(out), "--data", str(tmp / "data")])
+    assert code == 0
+    return json.loads(out.read_text())
+
+
+def test_memory_probe_sees_an_allocation(bench):
+    def allocate():
+        block = np.ones(64 * 1024 * 1024 // 8)  # 64 MB, touched
+        return float(block.sum())
+
+    _, figures = bench.measure(allocate)
+    assert figures["seconds"] > 0
+    assert figures["traced_peak_mb"] >= 63
+    if figures["rss_method"].startswith("VmHWM"):
+        assert figures["rss_delta_mb"] >= 50
+    assert figures["rss_peak_mb"] >= figures["rss_delta_mb"]
+
+
+def test_quick_run_has_every_row_with_positive_figures(quick_report):
+    rows = quick_report["rows"]
+    cases = {(r["case"], r["backend"]) for r in rows}
+    expected = {
+        ("first call (JIT / cache load) 40x30", "patchmatch"),
+        ("second call 40x30", "patchmatch"),
+        ("colorize 80x60", "patchmatch"),
+        ("colorize 80x60", "exact"),
+        ("colorize 128x96", "patchmatch"),
+        ("colorize 128x96", "exact"),
+        ("btf pixelwise R=0 32->64", "exact"),
+        ("btf pixelwise R=2 32->64", "exact"),
+        ("btf texture optimization 32->64", "patchmatch"),
+        ("btf texture optimization 32->64", "exact"),
+        ("imagemap synthesize 80x60 (first process)", "patchmatch"),
+        ("imagemap synthesize 80x60 (second process)", "patchmatch"),
+    }
+    assert expected <= cases
+    for row in rows:
+        assert row["seconds"] > 0, row["case"]
+        assert row["rss_peak_mb"] > 10, row["case"]  # a Python process with NumPy at least
+        if row["group"] != "cli":
+            assert row["traced_peak_mb"] > 0, row["case"]
+            assert row["rss_delta_mb"] >= 0, row["case"]
+    for row in rows:
+        if row["group"] in ("colorize", "jit"):
+            assert math.isfinite(row["objective"]) and row["objective"] > 0
+            assert {"search", "vote", "pca", "pyramids", "collapse"} <= set(row["stages"])
+            assert 0 < sum(row["stages"].values()) <= row["seconds"] * 1.01
+        if row["group"] == "btf":
+            assert 0 < row["image_error_pct"] < 100
+
+
+def test_quick_run_exact_is_no_worse_than_patchmatch(quick_report):
+    # Exact search finds the best window of each query: its final target value is
+    # at most the approximate one (up to EM taking a different path, hence the slack).
+    by = {(r["case"], r["backend"]): r for r in quick_report["rows"]}
+    exact = by[("colorize 128x96", "exact")]["objective"]
+    approximate = by[("colorize 128x96", "patchmatch")]["objective"]
+    assert exact <= approximate * 1.05
+
+
+def test_quick_run_report_names_the_machine_and_breaks_down_stages(bench, quick_report):
+    assert quick_report["machine"]["cores"] >= 1
+    assert quick_report["machine"]["memory_gb"] > 0
+    text = bench.format_report(quick_report)
+    assert "| colorize 128x96 | patchmatch |" in text
+    assert "Stages of colorize 128x96 (patchmatch)" in text
+    assert "| search |" in text
+
+
+def test_imagemap_bench_quality(tmp_path, capsys):
+    out = tmp_path / "q.json"
+    code = imagemap_main(
+        ["bench", "--quick", "--only", "quality", "--json", str(out), "--data", str(tmp_path)]
+    )
+    assert code == 0
+    quality = json.loads(out.read_text())["quality"]
+    assert quality["objects"] == 4
+    assert 0 < quality["ciede2000"] < 100
+    assert "mean CIEDE2000" in capsys.readouterr().out
+
+
+def test_unknown_group_is_an_input_error(bench, tmp_path):
+    args = bench.build_parser().parse_args(["--only", "colourise", "--json", str(tmp_path / "x")])
+    with pytest.raises(InputError, match="--only"):
+        bench.run(args)
+    assert not (tmp_path / "x").exists()
