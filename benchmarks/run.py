@@ -53,7 +53,7 @@ if str(BENCHMARKS.parent) not in sys.path:
     # Run as a script from a checkout: import this checkout's imagemap and data_gen.
     sys.path.insert(0, str(BENCHMARKS.parent))
 
-from imagemap.io import InputError, atomic_path  # noqa: E402
+from imagemap.io import InputError, atomic_path, write_image  # noqa: E402
 
 GROUPS = ("jit", "colorize", "btf", "cli", "quality")
 BACKENDS = ("patchmatch", "exact", "pynndescent")
@@ -355,7 +355,7 @@ def run_jit(data_dir: Path, settings: Settings, backends: list[str], trace: bool
 
 
 def run_colorize(
-    data_dir: Path, settings: Settings, backends: list[str], trace: bool
+    data_dir: Path, settings: Settings, backends: list[str], trace: bool, images: Path | None = None
 ) -> list[dict]:
     rows = []
     for size in settings.colorize_sizes:
@@ -375,19 +375,32 @@ def run_colorize(
                 continue
             result, figures = measure(_colorize_call(class_dir, backend), trace=trace)
             rows.append(_colorize_row(case, size, backend, result, figures))
+            if images is not None:
+                name = f"colorize_{size[0]}x{size[1]}_{backend}.png"
+                write_image(images / name, result.on_background((1.0, 1.0, 1.0)))
             _progress(rows[-1])
     return rows
 
 
-def _image_error(result_btf, data: BtfData) -> float:
-    """Relative error (%) of the result rendered at the comparison light, top view."""
+def _rendering(result_btf, data: BtfData) -> np.ndarray:
+    """The result rendered at the comparison light, top view (linear RGB)."""
     light = result_btf.nearest_light(*data.light)
-    view = result_btf.nearest_view(0.0, 0.0)
-    image = result_btf.image(light, view)
+    return result_btf.image(light, result_btf.nearest_view(0.0, 0.0))
+
+
+def _image_error(image: np.ndarray, data: BtfData) -> float:
+    """Relative error (%) of a rendering against the truth at the same light and view."""
     return float(100.0 * np.linalg.norm(image - data.truth) / np.linalg.norm(data.truth))
 
 
-def run_btf(data_dir: Path, settings: Settings, backends: list[str], trace: bool) -> list[dict]:
+def _display(image: np.ndarray) -> np.ndarray:
+    """Linear radiance to a viewable image (gamma 2.2)."""
+    return np.clip(image, 0.0, 1.0) ** (1 / 2.2)
+
+
+def run_btf(
+    data_dir: Path, settings: Settings, backends: list[str], trace: bool, images: Path | None = None
+) -> list[dict]:
     from imagemap.btf.experiment import PIXELWISE_SETTINGS
     from imagemap.btf.extrapolate import (
         ExtrapolationParams,
@@ -403,6 +416,9 @@ def run_btf(data_dir: Path, settings: Settings, backends: list[str], trace: bool
     sample_images = constraint_images(sample)
     by_radius = {r: (ws, wc) for r, ws, wc in PIXELWISE_SETTINGS.values()}
     shape = f"{settings.btf_sample}->{settings.btf_size}"
+    tag = f"{settings.btf_material}_{settings.btf_sample}to{settings.btf_size}"
+    if images is not None:
+        write_image(images / f"btf_{tag}_truth.png", _display(data.truth))
     rows = []
     # The pixel-wise method has two searches: pynndescent ("approximate") or exact.
     pixel_searches = [("pynndescent", "approximate")] if "pynndescent" in backends else []
@@ -417,9 +433,14 @@ def run_btf(data_dir: Path, settings: Settings, backends: list[str], trace: bool
                 return pixelwise(sample, sample_images, targets, params)
 
             (result, _), figures = measure(call, trace=trace)
+            image = _rendering(result, data)
+            if images is not None:
+                write_image(
+                    images / f"btf_{tag}_pixelwise_R{radius}_{backend}.png", _display(image)
+                )
             rows.append(
                 _row("btf", f"btf pixelwise R={radius} {shape}", backend, figures, size=shape,
-                     ws=ws, wc=wc, image_error_pct=_image_error(result, data))
+                     ws=ws, wc=wc, image_error_pct=_image_error(image, data))
             )  # fmt: skip
             _progress(rows[-1])
     for backend in backends:
@@ -430,9 +451,12 @@ def run_btf(data_dir: Path, settings: Settings, backends: list[str], trace: bool
             return texture_optimization(sample, sample_images, targets, params)
 
         (result, engine_result), figures = measure(call, trace=trace)
+        image = _rendering(result, data)
+        if images is not None:
+            write_image(images / f"btf_{tag}_texture_optimization_{backend}.png", _display(image))
         rows.append(
             _row("btf", f"btf texture optimization {shape}", backend, figures, size=shape,
-                 image_error_pct=_image_error(result, data),
+                 image_error_pct=_image_error(image, data),
                  objective=float(engine_result.objective[0][-1]),
                  iterations=[len(level) for level in engine_result.objective],
                  stages={k: float(v) for k, v in engine_result.timings.items()})
@@ -724,6 +748,7 @@ def run(args: argparse.Namespace) -> dict:
     data_dir = Path(args.data)
     data_dir.mkdir(parents=True, exist_ok=True)
     trace = not args.no_tracemalloc
+    images = data_dir / "images"  # every result as a PNG: look at them
     report = {
         "machine": machine(),
         "settings": {"quick": bool(args.quick), "groups": groups, "backends": backends,
@@ -740,13 +765,13 @@ def run(args: argparse.Namespace) -> dict:
     if "jit" in groups:
         report["rows"] += jit_rows
     if "colorize" in groups:
-        report["rows"] += run_colorize(data_dir, settings, backends, trace)
+        report["rows"] += run_colorize(data_dir, settings, backends, trace, images)
     if "btf" in groups:
         if "pynndescent" in backends:
             from imagemap.btf.experiment import _warm_up_pynndescent
 
             _warm_up_pynndescent(0)
-        report["rows"] += run_btf(data_dir, settings, backends, trace)
+        report["rows"] += run_btf(data_dir, settings, backends, trace, images)
     if "cli" in groups:
         report["rows"] += run_cli(data_dir, settings, data_dir / "cli")
     if "quality" in groups:
