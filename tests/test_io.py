@@ -53,3 +53,15 @@ def test_write_is_atomic_on_failure(tmp_path):
         raise RuntimeError("interrupted")
     assert target.read_bytes() == before  # the old file is untouched
     assert [p.name for p in tmp_path.iterdir()] == ["out.png"]  # no temporary left
+
+
+def test_outputs_get_the_usual_file_mode(tmp_path):
+    import os
+    import stat
+
+    umask = os.umask(0o022)
+    try:
+        path = write_image(tmp_path / "mode.png", np.zeros((4, 4, 3)))
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
