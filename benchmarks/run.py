@@ -420,8 +420,10 @@ def run_btf(
     if images is not None:
         write_image(images / f"btf_{tag}_truth.png", _display(data.truth))
     rows = []
-    # The pixel-wise method has two searches: pynndescent ("approximate") or exact.
-    pixel_searches = [("pynndescent", "approximate")] if "pynndescent" in backends else []
+    # The pixel-wise method's searches: PCA + k-d tree ("approximate", the default),
+    # pynndescent, or exact.
+    pixel_searches = [("pca+kdtree", "approximate")] if "patchmatch" in backends else []
+    pixel_searches += [("pynndescent", "pynndescent")] if "pynndescent" in backends else []
     pixel_searches += [("exact", "exact")] if "exact" in backends else []
     for radius in settings.radii:
         ws, wc = by_radius[radius]

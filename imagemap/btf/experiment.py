@@ -87,7 +87,7 @@ class ExperimentParams:
         Colour and brightness of the scanner lamp relative to the BTF dome.
     scanner_noise : float
         Standard deviation of the scanner noise in scan units.
-    search : {"approximate", "exact"}
+    search : {"approximate", "exact", "pynndescent"}
         Nearest-neighbour search of the pixel-wise method.
     texture : TextureOptimizationParams
     comparison_light : (theta, phi)
@@ -280,7 +280,7 @@ def run_experiment(
     out.mkdir(parents=True, exist_ok=True)
     if extra_methods is None:
         extra_methods = default_extra_methods()
-    if params.search == "approximate":
+    if params.search == "pynndescent":
         _warm_up_pynndescent(params.seed)
     rows: list[dict] = []
     total = time.perf_counter()

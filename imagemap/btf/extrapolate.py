@@ -66,9 +66,11 @@ class ExtrapolationParams:
         Neighbourhood radius R of the extended constraint vectors.
     ws, wc : float
         Weights of the surface descriptors and the colours.
-    search : {"approximate", "exact"}
-        "approximate": pynndescent (seeded). "exact": a k-d tree (scipy) for at
-        most 16 dimensions, chunked brute force (BLAS) beyond.
+    search : {"approximate", "exact", "pynndescent"}
+        "approximate": vectors of more than 16 dimensions are reduced by PCA (fit on
+        the sample) to 16, then searched exactly with a k-d tree. "exact": a k-d tree
+        (scipy) for at most 16 dimensions, chunked brute force (BLAS) beyond.
+        "pynndescent": pynndescent's graph (seeded; compiles on first use).
     seed : int
         Seed of the approximate search.
     """
@@ -183,8 +185,20 @@ def _search(sample: np.ndarray, target: np.ndarray, params: ExtrapolationParams)
             return cKDTree(sample).query(target, k=1, workers=-1)[1].astype(np.int64)
         return ExactIndex(sample).query(target)[0]
     if params.search == "approximate":
+        if sample.shape[1] > _KDTREE_MAX_DIMS:
+            # Neighbourhood vectors are highly redundant: PCA (fit on the sample) to the
+            # k-d tree's comfortable size, then an exact search there. No compile step,
+            # unlike pynndescent (about 90 s in every new process on a 2-core machine).
+            mean = sample.mean(axis=0)
+            _, _, vt = np.linalg.svd(sample - mean, full_matrices=False)
+            basis = vt[:_KDTREE_MAX_DIMS].T
+            sample, target = (sample - mean) @ basis, (target - mean) @ basis
+        from scipy.spatial import cKDTree
+
+        return cKDTree(sample).query(target, k=1, workers=-1)[1].astype(np.int64)
+    if params.search == "pynndescent":
         return PynndescentIndex(sample, seed=params.seed).query(target)[0]
-    raise InputError(f"search: {params.search!r} is not 'approximate' or 'exact'")
+    raise InputError(f"search: {params.search!r} is not 'approximate', 'exact' or 'pynndescent'")
 
 
 def pixelwise(

@@ -59,7 +59,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--radius", type=int, default=None, help="R (pixelwise 0, texture 8)")
     p.add_argument("--ws", type=float, default=None, help="surface weight (pixelwise 0)")
     p.add_argument("--wc", type=float, default=None, help="colour weight (pixelwise 1)")
-    p.add_argument("--search", choices=("approximate", "exact"), default="approximate")
+    p.add_argument(
+        "--search", choices=("approximate", "exact", "pynndescent"), default="approximate"
+    )
     p.add_argument(
         "--linear-scans",
         action="store_true",
@@ -92,7 +94,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=int, default=512, help="full sample side (texels)")
     p.add_argument("--sample-size", type=int, default=None, help="cut-out side (size / 4)")
     p.add_argument("--methods", nargs="+", default=None, help="subset of the methods")
-    p.add_argument("--search", choices=("approximate", "exact"), default="approximate")
+    p.add_argument(
+        "--search", choices=("approximate", "exact", "pynndescent"), default="approximate"
+    )
     p.add_argument("--seed", type=int, default=0)
     add_common_options(p)
     p.set_defaults(func=_experiment)
