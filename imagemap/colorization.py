@@ -156,14 +156,14 @@ def translate(array: np.ndarray, shift, shape: tuple[int, int]) -> np.ndarray:
            [0, 1, 1],
            [0, 1, 1]])
     """
-    depth = np.asarray(array, dtype=np.float32)
+    array = np.asarray(array, dtype=np.float32)
     dy, dx = (int(round(s)) for s in shift)
-    out = np.zeros(tuple(shape) + depth.shape[2:], dtype=np.float32)
-    h, w = depth.shape[:2]
+    out = np.zeros(tuple(shape) + array.shape[2:], dtype=np.float32)
+    h, w = array.shape[:2]
     y0, x0 = max(0, dy), max(0, dx)
     y1, x1 = min(shape[0], h + dy), min(shape[1], w + dx)
     if y1 > y0 and x1 > x0:
-        out[y0:y1, x0:x1] = depth[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
+        out[y0:y1, x0:x1] = array[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
     return out
 
 

@@ -282,9 +282,8 @@ def _fit_pca(
 class _Projection:
     """Weighted window -> PCA coordinates, for one channel range of a band stack."""
 
-    def __init__(self, channels: slice, k: int, window: np.ndarray) -> None:
+    def __init__(self, channels: slice, window: np.ndarray) -> None:
         self.channels = channels
-        self.k = k
         n_channels = channels.stop - channels.start
         # Window order of sliding_window_view: (channel, ky, kx).
         self.sqrt_weights = np.tile(np.sqrt(window).ravel(), n_channels).astype(np.float32)
@@ -332,7 +331,6 @@ class _LevelSolver:
     ) -> None:
         start = time.perf_counter()
         self.params = params
-        self.k = k
         self.r = r = k // 2
         self.window = _gaussian_window(k, params.window_sigma)
         self.timer = timer
@@ -433,8 +431,8 @@ class _LevelSolver:
         # PCA, learned on exemplar windows, separately for guide and appearance.
         start = time.perf_counter()
         self.exemplar_view = sliding_window_view(self.exemplar_active, (k, k), axis=(1, 2))
-        self.guide_projection = _Projection(slice(0, n_ga), k, self.window)
-        self.appearance_projection = _Projection(slice(n_ga, n_ga + n_aa), k, self.window)
+        self.guide_projection = _Projection(slice(0, n_ga), self.window)
+        self.appearance_projection = _Projection(slice(n_ga, n_ga + n_aa), self.window)
         n_samples = min(params.pca_samples, len(self.cand_e))
         pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
         sample_index = (self.cand_e[pick], self.cand_y[pick], self.cand_x[pick])
@@ -501,14 +499,15 @@ class _LevelSolver:
 
     # -- the two steps ---------------------------------------------------------
 
-    def set_appearance(self, appearance_padded: np.ndarray) -> None:
-        """Install the current appearance estimate and refresh the query's features."""
+    def set_appearance(self, appearance_padded: np.ndarray, project: bool = True) -> None:
+        """Install the current appearance estimate; refresh the query's PCA features
+        too unless ``project`` is False (exact costs need only the bands)."""
         start = time.perf_counter()
         n_ga = self.n_guide_active
         self.query_active[..., n_ga:] = (
             appearance_padded[..., self.appearance_active] * self.appearance_scale
         )
-        if self.appearance_projection.n_components:
+        if project and self.appearance_projection.n_components:
             self.query_features[:, self.n_init_dims :] = self.appearance_projection.project(
                 self.query_view, (self.query_y, self.query_x)
             )
@@ -763,7 +762,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
-    solver.set_appearance(appearance)
+    solver.set_appearance(appearance, project=False)
     final_cost = solver.costs(matches)
     cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
     cost[solver.query_y, solver.query_x] = final_cost

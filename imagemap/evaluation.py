@@ -70,7 +70,13 @@ from imagemap.colorization import (
 )
 from imagemap.database import Database, Example
 from imagemap.io import InputError, atomic_path, write_image
-from imagemap.metrics import FaultyRule, ImageMetrics, class_reference, image_metrics
+from imagemap.metrics import (
+    FaultyRule,
+    ImageMetrics,
+    class_reference,
+    image_metrics,
+    paste_aligned,
+)
 from imagemap.progress import progress
 
 __all__ = [
@@ -240,9 +246,8 @@ def _part_transfer(
 def _copy_nearest(depth: np.ndarray, others: Database, labels: np.ndarray | None) -> tuple:
     mask = depth > 0
     nearest = others[select_examples(depth, others, 1)[0]]
+    image = paste_aligned(nearest.image, nearest.mask, mask)
     shift = centroid_shift(nearest.mask, mask)
-    image = translate(np.where(nearest.mask[..., None], nearest.image, 0.0), shift, mask.shape)
-    image[~mask] = 0.0
     transfer = math.nan
     if labels is not None and nearest.labels is not None:
         pasted = translate(nearest.labels.astype(np.float32), shift, mask.shape)
