@@ -106,8 +106,15 @@ def test_evaluation_rows_and_faulty_follow_the_class_rule(class_evaluation):
     for obj in class_evaluation.objects:
         for result in obj.results.values():
             m = result.metrics
-            assert 0 <= m.part_transfer <= 1
-            assert result.faulty == (m.ssim < rule.ssim or m.part_transfer < rule.part_transfer)
+            assert 0 <= m.part_transfer <= 1 and 0 <= m.part_transfer_macro <= 1
+            assert 0 <= m.features_drawn <= m.features_measured
+            assert result.faulty == (
+                m.ssim < rule.ssim or m.part_transfer < rule.part_transfer or m.features_missing
+            )
+        # copy_nearest is a pure copy through its source map: blur ratio 1 by definition.
+        assert obj.results["copy_nearest"].metrics.blur_ratio == pytest.approx(1.0)
+    # Every generated fish has an eye: a small feature to measure.
+    assert all(o.results["full"].metrics.features_measured >= 1 for o in class_evaluation.objects)
     # copy_nearest leaves holes where the nearest silhouette does not cover the query.
     holes = [
         (~obj.results["copy_nearest"].image.any(axis=2) & obj.mask).sum()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -123,8 +124,15 @@ def test_faulty_rule_limits():
     assert rule.is_faulty(ImageMetrics(1.0, 0.9, 1.0, 0.79))
     assert not rule.is_faulty(ImageMetrics(1.0, 0.9, 1.0))  # NaN transfer fails nothing
     assert FaultyRule(ciede2000=10.0).is_faulty(ImageMetrics(10.01, 1.0, 1.0))
-    assert rule.describe() == "SSIM < 0.500 or part transfer < 0.800"
-    assert FaultyRule().describe() == "never"
+    assert (
+        rule.describe() == "SSIM < 0.500 or part transfer < 0.800 or a small feature is not drawn"
+    )
+    assert FaultyRule(features=False).describe() == "never"
+    # A missing small feature makes an otherwise fine map faulty.
+    fine = ImageMetrics(1.0, 0.9, 1.0, 0.9, features_drawn=2, features_measured=2)
+    assert not rule.is_faulty(fine)
+    assert rule.is_faulty(replace(fine, features_drawn=1))
+    assert not FaultyRule(ssim=0.5, features=False).is_faulty(replace(fine, features_drawn=1))
 
 
 def test_class_reference_from_pastes():
