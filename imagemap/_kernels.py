@@ -256,3 +256,87 @@ def vote(
             if wsum > 0:
                 for ch in range(channels):
                     out[py, px, ch] = acc[ch] / wsum
+
+
+@njit(parallel=True, cache=True)
+def vote_mode(
+    exemplar_appearance,
+    window_weights,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    matches,
+    match_weights,
+    out,
+    chosen,
+):
+    """M-step by copying: every padded query pixel takes the exemplar pixel that most of
+    its overlapping windows agree on.
+
+    Each window covering a pixel proposes one exemplar pixel (its match shifted by
+    the pixel's offset in the window), with the Gaussian window weight times
+    ``match_weights[m]``. Proposals of the same exemplar pixel add up, and the
+    pixel copies the appearance of the heaviest (the weighted mode of source
+    positions). Where neighbouring windows are matched coherently they agree and
+    the copy is exact; where they disagree the boundary between sources falls
+    where the weights change sides, without averaging colours. ``chosen``
+    (Hq + 2r, Wq + 2r, 3) receives the exemplar index and *padded* source
+    coordinates (-1 where no window covers the pixel).
+    """
+    k = window_weights.shape[0]
+    height = query_lookup.shape[0]
+    width = query_lookup.shape[1]
+    channels = exemplar_appearance.shape[3]
+    for py in prange(out.shape[0]):
+        ke = np.empty(k * k, dtype=np.int64)
+        ky = np.empty(k * k, dtype=np.int64)
+        kx = np.empty(k * k, dtype=np.int64)
+        kw = np.empty(k * k, dtype=np.float64)
+        for px in range(out.shape[1]):
+            n = 0
+            for oy in range(k):
+                cy = py - oy
+                if cy < 0 or cy >= height:
+                    continue
+                for ox in range(k):
+                    cx = px - ox
+                    if cx < 0 or cx >= width:
+                        continue
+                    m = query_lookup[cy, cx]
+                    if m < 0:
+                        continue
+                    c = matches[m]
+                    e = cand_e[c]
+                    sy = cand_y[c] + oy
+                    sx = cand_x[c] + ox
+                    w = window_weights[oy, ox] * match_weights[m]
+                    found = False
+                    for j in range(n):
+                        if ke[j] == e and ky[j] == sy and kx[j] == sx:
+                            kw[j] += w
+                            found = True
+                            break
+                    if not found:
+                        ke[n] = e
+                        ky[n] = sy
+                        kx[n] = sx
+                        kw[n] = w
+                        n += 1
+            if n == 0:
+                chosen[py, px, 0] = -1
+                chosen[py, px, 1] = -1
+                chosen[py, px, 2] = -1
+                continue
+            best = 0
+            for j in range(1, n):
+                if kw[j] > kw[best]:
+                    best = j
+            e = ke[best]
+            sy = ky[best]
+            sx = kx[best]
+            for ch in range(channels):
+                out[py, px, ch] = exemplar_appearance[e, sy, sx, ch]
+            chosen[py, px, 0] = e
+            chosen[py, px, 1] = sy
+            chosen[py, px, 2] = sx

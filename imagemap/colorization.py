@@ -25,6 +25,7 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
+from imagemap.blend import seamless_copy
 from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
 from imagemap.io import InputError, validate_depth
@@ -93,6 +94,10 @@ class ColorizeParams:
     tolerance: float = 2e-3
     use_pyramid: bool = True
     example_preference: float = 0.0
+    vote: str = "mean"
+    finish: str = "vote"
+    blend_scale: float = 8.0
+    detail_clip: float = 0.0
 
     @property
     def levels(self) -> int:
@@ -111,6 +116,7 @@ class ColorizeParams:
             max_iterations=self.max_iterations,
             tolerance=self.tolerance,
             guide_padding="constant",
+            vote=self.vote,
         )
 
 
@@ -194,45 +200,85 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
 
 #: The coarsest level must see the object at least this many windows across.
 MIN_WINDOWS_ACROSS = 1.25
+#: A level is added while the next coarser one would still see the object this many
+#: windows across (the paper's 200x150 objects are about 2 to 3.5 windows across at
+#: its coarsest level): large maps get the pyramid their size calls for.
+ADD_WINDOWS_ACROSS = 2.0
 
 
 def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...]) -> int:
-    """How many of the preset's levels the object's size supports.
+    """How many pyramid levels the object's size calls for.
 
-    A level is dropped, coarsest first, while the object's size at that level
-    (square root of its area) is less than ``MIN_WINDOWS_ACROSS`` windows: a
-    window larger than the object matches nothing but the silhouette. The
-    paper's three levels and 7/11/9 windows were set for 200x150 images; this
-    keeps them there and scales down for small depth maps.
+    The object's size is the square root of its area. A preset's coarsest level
+    is dropped while the object, at that level, is less than
+    ``MIN_WINDOWS_ACROSS`` windows across (a window larger than the object
+    matches nothing but the silhouette); levels are added (with the coarsest
+    window width) while the next coarser level would still see the object
+    ``ADD_WINDOWS_ACROSS`` windows across, so that the coarsest level sees the
+    object's layout at any resolution. The paper's three levels and 7/11/9
+    windows were set for 200x150 images; this keeps them there.
 
     Examples
     --------
     >>> mask = np.zeros((60, 80), bool); mask[20:40, 10:70] = True
     >>> pyramid_levels(mask, (7, 11, 9))
     2
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> pyramid_levels(big, (7, 11, 9))
+    5
     """
     size = float(np.sqrt(mask.sum()))
     levels = len(patch_sizes)
     while levels > 1 and size / 2 ** (levels - 1) < MIN_WINDOWS_ACROSS * patch_sizes[levels - 1]:
         levels -= 1
+    if levels == len(patch_sizes):
+        while size / 2**levels >= ADD_WINDOWS_ACROSS * patch_sizes[-1]:
+            levels += 1
     return levels
 
 
-def _depth_guides(depth: np.ndarray, levels: int) -> list[np.ndarray]:
+def level_patch_sizes(patch_sizes: tuple[int, ...], levels: int) -> tuple[int, ...]:
+    """The preset's window widths cut or extended (coarsest width repeated) to ``levels``."""
+    return tuple(patch_sizes[:levels]) + (patch_sizes[-1],) * max(0, levels - len(patch_sizes))
+
+
+#: The depth detail band is measured in units of its spread inside the object and
+#: soft-clipped at this many units: the silhouette's jump (depth to background) would
+#: otherwise set the band's scale and leave interior relief (an eye's bulge, a fin's
+#: edge) a thousandth of it.
+DETAIL_CLIP = 3.0
+
+
+def _interior_scale(detail: np.ndarray, mask: np.ndarray) -> float:
+    """Robust spread (1.4826 x median absolute value) of a band inside the object."""
+    inner = ndimage.binary_erosion(mask, iterations=2) if mask.any() else mask
+    values = detail[inner] if inner.sum() >= 16 else detail[mask] if mask.any() else detail
+    scale = 1.4826 * float(np.median(np.abs(values))) if values.size else 0.0
+    return scale if scale > 0 else max(float(np.abs(detail).max()), 1e-12)
+
+
+def _depth_guides(depth: np.ndarray, levels: int, clip: float | None = None) -> list[np.ndarray]:
     """Per level: (H_l, W_l, 2) depth Gaussian level and its Laplacian (detail) band."""
     gaussian = gaussian_pyramid(depth, levels)
     # One level more, so that even the coarsest level has a true band-pass detail band.
     detail = laplacian_pyramid(depth, levels + 1)[:levels]
+    if clip:
+        masks = mask_pyramid(depth > 0, levels)
+        scaled = []
+        for d, m in zip(detail, masks, strict=True):
+            unit = _interior_scale(d, m)
+            scaled.append((clip * unit) * np.tanh(d / (clip * unit)))
+        detail = scaled
     return [np.stack([g, d], axis=-1) for g, d in zip(gaussian, detail, strict=True)]
 
 
-def depth_mappings(depth: np.ndarray, levels: int = 3) -> list[Mapping]:
+def depth_mappings(depth: np.ndarray, levels: int = 3, clip: float | None = None) -> list[Mapping]:
     """The query's pyramid of mappings (guide bands and mask) for a depth map."""
     depth = validate_depth(depth)
     masks = mask_pyramid(depth > 0, levels)
     return [
         Mapping(guide=guide, mask=mask if mask.any() else None)
-        for guide, mask in zip(_depth_guides(depth, levels), masks, strict=True)
+        for guide, mask in zip(_depth_guides(depth, levels, clip), masks, strict=True)
     ]
 
 
@@ -256,10 +302,16 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
     return np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0.0, 1.0).astype(np.float32)
 
 
-def example_mappings(example: Example, levels: int = 3, use_pyramid: bool = True) -> list[Mapping]:
+def _example_ycbcr(example: Example) -> np.ndarray:
+    return to_ycbcr(_fill_background(example.image, example.mask))
+
+
+def example_mappings(
+    example: Example, levels: int = 3, use_pyramid: bool = True, clip: float | None = None
+) -> list[Mapping]:
     """An example's pyramid of mappings: depth bands, YCbCr (Laplacian) bands, mask."""
     mask = example.mask
-    ycbcr = to_ycbcr(_fill_background(example.image, mask))
+    ycbcr = _example_ycbcr(example)
     if use_pyramid:
         appearance = laplacian_pyramid(ycbcr, levels)
     else:
@@ -268,7 +320,7 @@ def example_mappings(example: Example, levels: int = 3, use_pyramid: bool = True
     return [
         Mapping(guide=guide, appearance=bands, mask=level_mask if level_mask.any() else None)
         for guide, bands, level_mask in zip(
-            _depth_guides(example.depth, levels), appearance, masks, strict=True
+            _depth_guides(example.depth, levels, clip), appearance, masks, strict=True
         )
     ]
 
@@ -418,11 +470,12 @@ def colorize(
 
     start = time.perf_counter()
     levels = pyramid_levels(depth > 0, params.patch_sizes)
-    if levels < params.levels:
-        log.info("object too small for %d levels: using %d", params.levels, levels)
-        params = replace(params, patch_sizes=params.patch_sizes[:levels])
-    query = depth_mappings(depth, levels)
-    exemplar_levels = [example_mappings(e, levels, params.use_pyramid) for e in chosen]
+    if levels != params.levels:
+        log.info("object size calls for %d pyramid levels (preset: %d)", levels, params.levels)
+        params = replace(params, patch_sizes=level_patch_sizes(params.patch_sizes, levels))
+    clip = params.detail_clip or None
+    query = depth_mappings(depth, levels, clip)
+    exemplar_levels = [example_mappings(e, levels, params.use_pyramid, clip) for e in chosen]
     pyramid_seconds = time.perf_counter() - start
 
     result: EngineResult = synthesize(
@@ -434,6 +487,13 @@ def colorize(
     else:
         ycbcr = result.appearance[0]
     mask = depth > 0
+    source = result.source
+    if params.finish == "copy":
+        # Every pixel copied from the exemplar pixel its windows agree on, the seams
+        # blended in the gradient domain into the voted result.
+        source = result.copy_source
+        exemplars = [_example_ycbcr(example) for example in chosen]
+        ycbcr = seamless_copy(exemplars, source, ycbcr, scale=params.blend_scale)
     image = to_rgb(ycbcr)
     image[~mask] = 0.0
     timings = {"selection": selection_seconds, "pyramids": pyramid_seconds, **result.timings}
@@ -441,7 +501,7 @@ def colorize(
     return ColorizeResult(
         image=image,
         mask=mask,
-        source=result.source,
+        source=source,
         cost=result.cost,
         example_names=[e.name for e in chosen],
         objective=result.objective,

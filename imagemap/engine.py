@@ -37,7 +37,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -48,11 +48,12 @@ from imagemap import _kernels
 from imagemap.progress import progress
 from imagemap.search import make_index
 
-__all__ = ["BACKENDS", "EngineParams", "EngineResult", "Mapping", "synthesize"]
+__all__ = ["BACKENDS", "VOTES", "EngineParams", "EngineResult", "Mapping", "synthesize"]
 
 log = logging.getLogger("imagemap")
 
 BACKENDS = ("patchmatch", "exact", "pynndescent")
+VOTES = ("mean", "mode")
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
 # at least _BAND_ROWS rows, since propagation does not cross band borders.
@@ -153,6 +154,14 @@ class EngineParams:
     exemplar_costs : tuple of float
         Additive cost of matching into each exemplar (empty: none), in the units of
         the window distance: a preference for some exemplars over others.
+    vote : {"mean", "mode"}
+        The M-step. ``"mean"`` (the paper): every pixel becomes the Gaussian-weighted
+        mean of the estimates of the windows that cover it, the exact minimiser of
+        the target for fixed matches, which blurs where the estimates disagree.
+        ``"mode"``: every pixel copies the exemplar pixel that most of its windows
+        (Gaussian-weighted) agree on, so the output is made of exemplar pixels and
+        small features survive; a mode M-step that would raise the target is
+        refused (the level then stops), so the target still never increases.
     """
 
     patch_sizes: tuple[int, ...] = (7, 11, 9)
@@ -172,8 +181,11 @@ class EngineParams:
     init_from_guide: bool = True
     window_sigma: float = 1.0 / 3.0
     exemplar_costs: tuple[float, ...] = ()
+    vote: str = "mean"
 
     def __post_init__(self) -> None:
+        if self.vote not in VOTES:
+            raise ValueError(f"unknown vote {self.vote!r}; use one of {VOTES}")
         if any(k < 1 or k % 2 == 0 for k in self.patch_sizes):
             raise ValueError(f"patch sizes must be odd and positive, got {self.patch_sizes}")
         if self.backend not in BACKENDS:
@@ -206,6 +218,10 @@ class EngineResult:
         Seconds per stage.
     backend : str
         The search backend that ran.
+    copy_source : ndarray of int32, shape (H, W, 3)
+        Per pixel of the finest level: the exemplar pixel most of its windows agree
+        on (the weighted mode of their estimates' sources; see ``vote="mode"``),
+        for front ends that copy pixels instead of voting them.
     """
 
     appearance: list[np.ndarray]
@@ -214,6 +230,7 @@ class EngineResult:
     objective: list[list[float]]
     timings: dict[str, float] = field(default_factory=dict)
     backend: str = ""
+    copy_source: np.ndarray | None = None
 
 
 class _Timer:
@@ -334,6 +351,7 @@ class _LevelSolver:
         self.r = r = k // 2
         self.window = _gaussian_window(k, params.window_sigma)
         self.timer = timer
+        self.chosen: np.ndarray | None = None  # sources the mode vote copied
         n_appearance = exemplars[0].appearance.shape[2]
         guide_w = np.asarray(params.guide_weights, dtype=np.float32)
         appearance_w = np.asarray(params.appearance_weights, dtype=np.float32)
@@ -541,6 +559,24 @@ class _LevelSolver:
         return out
 
     def vote(self, matches: np.ndarray, appearance_padded: np.ndarray) -> np.ndarray:
+        """M-step into ``appearance_padded`` (in place, also returned)."""
+        if self.params.vote == "mode":
+            start = time.perf_counter()
+            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int64)
+            _kernels.vote_mode(
+                self.exemplar_appearance,
+                self.window,
+                self.query_lookup,
+                self.cand_e,
+                self.cand_y,
+                self.cand_x,
+                matches,
+                np.ones(len(matches), dtype=np.float64),
+                appearance_padded,
+                self.chosen,
+            )
+            self.timer.add("vote", start)
+            return appearance_padded
         start = time.perf_counter()
         coverage = np.zeros(appearance_padded.shape[:2], dtype=np.float64)
         _kernels.vote(
@@ -627,15 +663,25 @@ class _LevelSolver:
         return matches
 
     def dense_source(self, matches: np.ndarray) -> np.ndarray:
-        """(H, W, 3) exemplar, y, x for every pixel, from its nearest window centre."""
+        """(H, W, 3) exemplar, y, x for every pixel: the pixel it copied (mode vote), else
+        its position in the match of its nearest window centre."""
         h, w = self.query_shape
         _, (ny, nx) = ndimage.distance_transform_edt(self.query_lookup < 0, return_indices=True)
         nearest = self.query_lookup[ny, nx]
         c = matches[nearest]
         e = self.cand_e[c]
         yy, xx = np.mgrid[0:h, 0:w]
-        sy = np.clip(self.cand_y[c] + (yy - ny), 0, self.exemplar_shape[e, 0] - 1)
-        sx = np.clip(self.cand_x[c] + (xx - nx), 0, self.exemplar_shape[e, 1] - 1)
+        sy = self.cand_y[c] + (yy - ny)
+        sx = self.cand_x[c] + (xx - nx)
+        if self.params.vote == "mode" and self.chosen is not None:
+            r = self.r
+            chosen = self.chosen[r : r + h, r : r + w]
+            copied = chosen[..., 0] >= 0
+            e = np.where(copied, chosen[..., 0], e)
+            sy = np.where(copied, chosen[..., 1] - r, sy)
+            sx = np.where(copied, chosen[..., 2] - r, sx)
+        sy = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
+        sx = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
         return np.stack([e, sy, sx], axis=-1).astype(np.int32)
 
 
@@ -747,7 +793,20 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             matches = np.where(better, candidates, matches)
             value = float(np.where(better, new_cost, old_cost).mean(dtype=np.float64))
             objective[level].append(value)
-            appearance = solver.vote(matches, appearance)
+            if params.vote == "mode":
+                # Generalised EM: a copying M-step is kept only if it does not raise the
+                # target for the new matches (the mean would be the exact minimiser).
+                previous_chosen = solver.chosen
+                voted = solver.vote(matches, appearance.copy())
+                solver.set_appearance(voted, project=False)
+                if float(solver.costs(matches).mean(dtype=np.float64)) > value:
+                    solver.chosen = previous_chosen
+                    solver.set_appearance(appearance, project=False)
+                    log.info("level %d iteration %d: copy would raise the target", level, iteration)
+                    break
+                appearance = voted
+            else:
+                appearance = solver.vote(matches, appearance)
             log.info(
                 "level %d iteration %d: target %.6g, %d matches changed",
                 level,
@@ -762,6 +821,13 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
+    if params.vote == "mode":
+        copy_source = coarse_source
+    else:  # the mode of the final matches' sources, for front ends that copy
+        solver.params = replace(params, vote="mode")
+        solver.vote(matches, appearance.copy())
+        copy_source = solver.dense_source(matches)
+        solver.params = params
     solver.set_appearance(appearance, project=False)
     final_cost = solver.costs(matches)
     cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
@@ -773,4 +839,5 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         objective=objective,
         timings=timer.seconds,
         backend=params.backend,
+        copy_source=copy_source,
     )

@@ -60,6 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imagemap.blend import copy_through
 from imagemap.colorization import (
     PRESETS,
     ColorizeParams,
@@ -74,7 +75,6 @@ from imagemap.metrics import (
     ImageMetrics,
     blur_ratio,
     class_reference,
-    copy_through,
     image_metrics,
     macro_part_transfer,
     paste_aligned,
@@ -274,7 +274,7 @@ def _detail_metrics(
 ) -> ImageMetrics:
     """Add the measures that need the source map: part transfer (micro and macro), blur."""
     covered = mask & (source[..., 0] >= 0)
-    copy = copy_through(source, [e.image for e in examples])
+    copy = copy_through([e.image for e in examples], source).astype(np.float32)
     copy[~mask] = 0.0  # as the map's own background
     blur = blur_ratio(image, copy, covered)
     if labels is None or any(e.labels is None for e in examples):

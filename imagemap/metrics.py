@@ -586,16 +586,6 @@ def macro_part_transfer(transferred: np.ndarray, labels: np.ndarray, mask: np.nd
     return float(np.mean([right[truth == p].mean() for p in parts]))
 
 
-def copy_through(source: np.ndarray, example_images: list[np.ndarray]) -> np.ndarray:
-    """The image a pure copy through ``source`` gives: each pixel its source pixel's colour."""
-    index, sy, sx = source[..., 0], source[..., 1], source[..., 2]
-    out = np.zeros(source.shape[:2] + (3,), dtype=np.float32)
-    for k, image in enumerate(example_images):
-        here = index == k
-        out[here] = image[sy[here], sx[here]]
-    return out
-
-
 def fine_energy(image: np.ndarray, mask: np.ndarray) -> float:
     """Mean squared finest Laplacian band of the luminance inside the eroded object.
 

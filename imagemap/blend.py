@@ -1,0 +1,150 @@
+"""Seamless copying: exemplar pixels copied through a source map, seams blended.
+
+A map whose every pixel is copied from an exemplar pixel keeps the exemplars'
+detail (eyes, stripes, edges) exactly where the source map is coherent, and
+shows hard seams where two sources meet. :func:`seamless_copy` keeps the
+copy's gradients inside coherent regions and takes the gradients of a smooth
+reference (the voted result) across seams, then solves the screened Poisson
+equation that also holds the result near the reference at large scales
+(gradient-domain blending, Pérez, Gangnet & Blake 2003, "Poisson image
+editing"). It is one DCT solve per channel: O(N log N), no iterations.
+
+Examples
+--------
+The left half copied from a dark exemplar, the right half from a bright one,
+both with the same texture: the step between the palettes is spread out, the
+texture kept.
+
+>>> rng = np.random.default_rng(0)
+>>> texture = 0.05 * rng.standard_normal((32, 32, 1))
+>>> dark, bright = texture + 0.2, texture + 0.8
+>>> source = np.zeros((32, 32, 3), np.int32)
+>>> source[..., 1], source[..., 2] = np.mgrid[0:32, 0:32]
+>>> source[:, 16:, 0] = 1
+>>> out = seamless_copy([dark, bright], source, np.full((32, 32, 1), 0.5), scale=8.0)
+>>> step = abs(out[:, 16, 0] - out[:, 15, 0]).mean()
+>>> bool(step < 0.1)          # the 0.6 jump is gone
+True
+>>> detail = out[..., 0] - ndimage.uniform_filter(out[..., 0], 5)
+>>> truth = texture[..., 0] - ndimage.uniform_filter(texture[..., 0], 5)
+>>> bool(np.corrcoef(detail.ravel(), truth.ravel())[0, 1] > 0.95)
+True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import fft, ndimage  # noqa: F401  (ndimage: doctest)
+
+__all__ = ["coherent_edges", "copy_through", "seamless_copy"]
+
+
+def coherent_edges(source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where neighbouring pixels were copied from neighbouring exemplar pixels.
+
+    Parameters
+    ----------
+    source : ndarray of int, (H, W, 3)
+        Exemplar index, source y, source x per pixel (index < 0: no source).
+
+    Returns
+    -------
+    horizontal : ndarray of bool, (H, W - 1)
+        Pixel (y, x + 1) was copied from the right neighbour of the source of (y, x).
+    vertical : ndarray of bool, (H - 1, W)
+        Likewise downwards.
+    """
+    e, sy, sx = source[..., 0], source[..., 1], source[..., 2]
+    valid = e >= 0
+    horizontal = (
+        valid[:, :-1]
+        & (e[:, 1:] == e[:, :-1])
+        & (sy[:, 1:] == sy[:, :-1])
+        & (sx[:, 1:] == sx[:, :-1] + 1)
+    )
+    vertical = valid[:-1] & (e[1:] == e[:-1]) & (sy[1:] == sy[:-1] + 1) & (sx[1:] == sx[:-1])
+    return horizontal, vertical
+
+
+def copy_through(exemplars: list[np.ndarray], source: np.ndarray, dy: int = 0, dx: int = 0):
+    """Each pixel the exemplar value at its source pixel shifted by (dy, dx) (clipped);
+    0 where it has no source."""
+    e, sy, sx = source[..., 0], source[..., 1] + dy, source[..., 2] + dx
+    out = np.zeros(source.shape[:2] + exemplars[0].shape[2:], dtype=np.float64)
+    for k, exemplar in enumerate(exemplars):
+        here = e == k
+        h, w = exemplar.shape[:2]
+        out[here] = exemplar[np.clip(sy[here], 0, h - 1), np.clip(sx[here], 0, w - 1)]
+    return out
+
+
+def seamless_copy(
+    exemplars: list[np.ndarray],
+    source: np.ndarray,
+    reference: np.ndarray,
+    *,
+    scale: float = 8.0,
+) -> np.ndarray:
+    """Copy exemplar pixels through a source map, blending the seams in the gradient domain.
+
+    Solves, per channel, for the image O minimising
+
+        sum over neighbour pairs (O_q - O_p - g_pq)^2 + lam * sum_p (O_p - R_p)^2
+
+    with lam = 1 / scale^2 and R the reference. The target difference g_pq is
+    the mean of what the two pixels' own sources say about it: the difference
+    between p's source pixel and its neighbour in p's exemplar, and likewise for
+    q. Where p and q were copied coherently (neighbouring source pixels) both
+    equal the copy's own difference, so the copy's detail is kept exactly; across
+    a seam each side contributes its exemplar's gradient, so edges and stripes
+    continue and only the colour offset between the sources is spread out, over
+    about ``scale`` pixels, towards the reference's colour layout.
+
+    Parameters
+    ----------
+    exemplars : list of ndarray, (H_e, W_e, C)
+        The exemplars' bands (e.g. YCbCr images), indexed by ``source[..., 0]``.
+    source : ndarray of int, (H, W, 3)
+        Exemplar index, y, x of the pixel each output pixel copies (index < 0:
+        none; the reference is kept there).
+    reference : ndarray, (H, W, C)
+        A seamless estimate of the result (the voted map) holding the large scales.
+    scale : float
+        Pixels over which the copy may drift towards the reference.
+
+    Returns
+    -------
+    ndarray, (H, W, C) float32
+    """
+    reference = np.asarray(reference, dtype=np.float64)
+    if reference.ndim != 3 or source.shape[:2] != reference.shape[:2] or source.shape[2] != 3:
+        raise ValueError(f"reference {reference.shape} and source {source.shape} do not fit")
+    if scale <= 0:
+        raise ValueError(f"scale must be positive, got {scale}")
+    h, w, _ = reference.shape
+    has = (source[..., 0] >= 0)[..., None]
+    copy = np.where(has, copy_through(exemplars, source), reference)
+    right = np.where(has, copy_through(exemplars, source, 0, 1), reference)
+    left = np.where(has, copy_through(exemplars, source, 0, -1), reference)
+    down = np.where(has, copy_through(exemplars, source, 1, 0), reference)
+    up = np.where(has, copy_through(exemplars, source, -1, 0), reference)
+    # Each side's own exemplar gradient, averaged (equal where the copy is coherent).
+    gx = 0.5 * ((right[:, :-1] - copy[:, :-1]) + (copy[:, 1:] - left[:, 1:]))
+    gy = 0.5 * ((down[:-1] - copy[:-1]) + (copy[1:] - up[1:]))
+    none_x = ~(has[:, 1:] & has[:, :-1])[..., 0]
+    none_y = ~(has[1:] & has[:-1])[..., 0]
+    gx[none_x] = (reference[:, 1:] - reference[:, :-1])[none_x]
+    gy[none_y] = (reference[1:] - reference[:-1])[none_y]
+    lam = 1.0 / scale**2
+    # Normal equations: (lam - L) O = lam R + div g (L: Neumann graph Laplacian).
+    rhs = lam * reference
+    rhs[:, 1:] += gx
+    rhs[:, :-1] -= gx
+    rhs[1:] += gy
+    rhs[:-1] -= gy
+    # -L is diagonal in the DCT-II basis: eigenvalues (2 - 2cos(pi u / H)) + (2 - 2cos(pi v / W)).
+    eig_y = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
+    eig_x = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
+    denominator = (lam + eig_y[:, None] + eig_x[None, :])[..., None]
+    spectrum = fft.dctn(rhs, type=2, axes=(0, 1), norm="ortho")
+    return fft.idctn(spectrum / denominator, type=2, axes=(0, 1), norm="ortho").astype(np.float32)

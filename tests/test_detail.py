@@ -1,0 +1,160 @@
+"""Detail: blur ratio, small features, seamless copying, the mode vote, pyramid depth."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap.blend import coherent_edges, copy_through, seamless_copy
+from imagemap.colorization import PRESETS, level_patch_sizes, pyramid_levels
+from imagemap.metrics import blur_ratio, feature_components, features_drawn, macro_part_transfer
+
+
+def identity_source(shape, exemplar=0):
+    source = np.zeros(shape + (3,), np.int32)
+    source[..., 0] = exemplar
+    source[..., 1], source[..., 2] = np.mgrid[0 : shape[0], 0 : shape[1]]
+    return source
+
+
+def test_blur_ratio_is_one_for_a_copy_and_less_for_a_blurred_copy():
+    rng = np.random.default_rng(0)
+    copy = rng.random((40, 50, 3)).astype(np.float32)
+    mask = np.zeros((40, 50), bool)
+    mask[5:35, 5:45] = True
+    assert blur_ratio(copy, copy, mask) == pytest.approx(1.0)
+    blurred = ndimage.gaussian_filter(copy, (1.0, 1.0, 0))
+    assert blur_ratio(blurred, copy, mask) < 0.3
+    # A colour offset is not blur: the fine band is unchanged.
+    assert blur_ratio(np.clip(copy * 0.5 + 0.2, 0, 1), copy, mask) == pytest.approx(0.25, 1e-3)
+
+
+def test_features_are_the_small_parts_and_missing_ones_are_seen():
+    truth = np.full((60, 60, 3), 0.7, np.float32)
+    labels = np.ones((60, 60), np.int32)
+    for y, x in ((20, 20), (20, 40)):  # two eyes: two features of part 2
+        truth[y - 2 : y + 3, x - 2 : x + 3] = 0.05
+        labels[y - 2 : y + 3, x - 2 : x + 3] = 2
+    mask = np.ones((60, 60), bool)
+    assert [p for p, _ in feature_components(labels, mask)] == [2, 2]
+    assert features_drawn(truth, truth, labels, mask) == (2, 2)
+    # Shifted by two pixels: still drawn (tolerance); one eye erased: one missing.
+    assert features_drawn(np.roll(truth, 2, axis=1), truth, labels, mask) == (2, 2)
+    one_eye = truth.copy()
+    one_eye[15:26, 35:46] = 0.7
+    assert features_drawn(one_eye, truth, labels, mask) == (1, 2)
+    # Smeared (a wide blur): the pattern is too weak and wide to correlate.
+    assert features_drawn(ndimage.uniform_filter(truth, (15, 15, 1)), truth, labels, mask)[0] < 2
+
+
+def test_macro_part_transfer_weights_parts_equally():
+    labels = np.ones((10, 10), np.int32)
+    labels[0, 0] = 2
+    transferred = np.ones_like(labels)  # the one-pixel part 2 is wrong
+    mask = np.ones((10, 10), bool)
+    assert macro_part_transfer(transferred, labels, mask) == pytest.approx(0.5)
+    assert np.mean(transferred == labels) == pytest.approx(0.99)
+
+
+def test_seamless_copy_keeps_a_coherent_copy_and_hides_a_palette_seam():
+    rng = np.random.default_rng(1)
+    texture = ndimage.gaussian_filter(rng.standard_normal((48, 64, 1)), (1, 1, 0))
+    dark, bright = 0.3 + 0.1 * texture, 0.7 + 0.1 * texture
+    reference = np.full((48, 64, 1), 0.5)
+    # One source, coherent everywhere: the copy comes back up to a constant.
+    one = seamless_copy([dark], identity_source((48, 64)), reference, scale=1e4)
+    assert np.ptp(one - dark) < 0.02
+    # Two palettes meeting: no step at the seam, the texture kept on both sides.
+    source = identity_source((48, 64))
+    source[:, 32:, 0] = 1
+    out = seamless_copy([dark, bright], source, reference, scale=6.0)
+    horizontal, _ = coherent_edges(source)
+    assert not horizontal[:, 31].any() and horizontal[:, 30].all()
+    step = np.abs(out[:, 32] - out[:, 31]).mean()
+    assert step < 0.05 < np.abs(copy_through([dark, bright], source)[:, 32] - dark[:, 31]).mean()
+    fine = out[..., 0] - ndimage.gaussian_filter(out[..., 0], 3)
+    fine_truth = texture[..., 0] - ndimage.gaussian_filter(texture[..., 0], 3)
+    assert np.corrcoef(fine.ravel(), fine_truth.ravel())[0, 1] > 0.95
+    # Pixels without a source keep the reference.
+    none = seamless_copy([dark], identity_source((48, 64)) * 0 - 1, reference, scale=4.0)
+    np.testing.assert_allclose(none, reference, atol=1e-6)
+
+
+def test_pyramid_grows_with_large_objects():
+    def square(side, canvas=1200):
+        mask = np.zeros((canvas, canvas), bool)
+        mask[:side, :side] = True
+        return mask
+
+    sizes = (7, 11, 9)
+    assert pyramid_levels(square(80), sizes) == 3  # the paper's size: its 3 levels
+    assert pyramid_levels(square(160), sizes) == 4
+    assert pyramid_levels(square(640), sizes) == 6
+    assert level_patch_sizes(sizes, 5) == (7, 11, 9, 9, 9)
+    assert level_patch_sizes(sizes, 2) == (7, 11)
+
+
+def eye_object(shape=(64, 96), centre=(32, 48), radii=(20, 36), eye=(26, 26), palette=0):
+    """A flat-ish ellipsoid with stripes and an eye (a dark ring) that has no depth signature."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    u = ((yy - centre[0]) / radii[0]) ** 2 + ((xx - centre[1]) / radii[1]) ** 2
+    mask = u < 1
+    # A flat slab: inside the silhouette nothing in the depth says where the eye is.
+    depth = np.where(mask, 0.6, 0).astype(np.float32)
+    colours = [((0.85, 0.6, 0.2), (0.35, 0.2, 0.1)), ((0.3, 0.7, 0.8), (0.1, 0.25, 0.4))][palette]
+    x0 = centre[1] - radii[1]
+    stripes = ((xx - x0) / (2 * radii[1]) * 6).astype(int) % 2 == 1
+    image = np.where(stripes[..., None], colours[1], colours[0]).astype(np.float32)
+    labels = np.where(mask, 1, 0)
+    ring = np.hypot(yy - eye[0], xx - eye[1])
+    eye_mask = mask & (ring < 3)
+    image[eye_mask] = (0.95, 0.95, 0.9)
+    image[mask & (ring < 1.5)] = (0.02, 0.02, 0.02)
+    labels[eye_mask] = 2
+    image[~mask] = 0
+    return depth, image, labels
+
+
+def test_an_eye_without_depth_signature_is_drawn_deterministically():
+    """Two examples with an eye at the same relative place: the default map draws it."""
+    d1, i1, l1 = eye_object(centre=(30, 46), radii=(19, 35), eye=(24, 26), palette=0)
+    d2, i2, l2 = eye_object(centre=(33, 50), radii=(21, 37), eye=(27, 29), palette=1)
+    db = Database(
+        [Example.from_arrays("a", d1, i1, labels=l1), Example.from_arrays("b", d2, i2, labels=l2)]
+    )
+    depth, truth, labels = eye_object(centre=(32, 48), radii=(20, 36), eye=(26, 28))
+    params = replace(PRESETS["fish"], m=2)
+    first = colorize(depth, db, params, seed=0)
+    again = colorize(depth, db, params, seed=0)
+    assert first.image.tobytes() == again.image.tobytes()
+    assert features_drawn(first.image, truth, labels, depth > 0) == (1, 1)
+
+
+@pytest.mark.parametrize("vote", ["mean", "mode"])
+def test_target_never_increases_with_either_vote(blob_database, query_blob, vote):
+    depth, _ = query_blob
+    params = replace(PRESETS["busts"], vote=vote)
+    result = colorize(depth, blob_database, params, seed=3)
+    for values in result.objective:
+        assert np.all(np.diff(values) <= 1e-6 * np.abs(np.asarray(values[:-1])))
+
+
+def test_copy_finish_is_crisper_than_the_mean_vote(blob_database, query_blob):
+    depth, _ = query_blob
+    voted = colorize(depth, blob_database, replace(PRESETS["busts"], finish="vote"), seed=0)
+    copied = colorize(depth, blob_database, replace(PRESETS["busts"], finish="copy"), seed=0)
+    images = [e.image for e in blob_database.examples]
+    mask = depth > 0
+
+    def ratio(result):
+        names = [e.name for e in blob_database.examples]
+        order = [images[names.index(n)] for n in result.example_names]
+        return blur_ratio(result.image, copy_through(order, result.source), mask)
+
+    assert ratio(copied) > ratio(voted)
+    assert ColorizeParams().finish in ("vote", "copy")
