@@ -89,7 +89,7 @@ def crops_figure(count: int = 12) -> np.ndarray:
     for cls, name_boxes in (("fish", ("eye", "stripes")), ("busts", ("face",))):
         db, query = _database(cls, count)
         mask = query.mask
-        paper = colorize(query.depth, db, replace(PRESETS[cls], finish="vote"), seed=0)
+        paper = colorize(query.depth, db, replace(PRESETS[cls], vote="mean"), seed=0)
         default = colorize(query.depth, db, cls, seed=0)
         pasted, _, _ = _copy_nearest(query.depth, db)
         labels = query.labels

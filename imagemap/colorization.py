@@ -33,6 +33,7 @@ from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyr
 
 __all__ = [
     "PRESETS",
+    "VOTES",
     "ColorizeParams",
     "ColorizeResult",
     "colorize",
@@ -45,6 +46,9 @@ __all__ = [
 ]
 
 log = logging.getLogger("imagemap")
+
+#: How matched windows make the map (see :class:`ColorizeParams`).
+VOTES = ("copy", "mean", "mode")
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,23 @@ class ColorizeParams:
         Extra window cost per rank of an example in the selection (the nearest
         example costs nothing, the second this much...): fewer seams between
         examples of different colours.
+    vote : {"copy", "mean", "mode"}
+        How the matched windows make the map. ``"mean"``: the paper's M-step, every
+        pixel the Gaussian-weighted mean of its windows' estimates (smooth, and
+        blurred where they disagree). ``"copy"`` (default): the same hard EM, then
+        every pixel copied from the exemplar pixel most of its windows agree on,
+        with the seams between sources blended in the gradient domain
+        (:func:`imagemap.blend.seamless_copy`): crisp stripes, edges and eyes.
+        ``"mode"``: copying already inside the EM iterations (the engine's
+        ``vote="mode"``), then the same finish.
+    blend_scale : float
+        Pixels over which a copied map may drift towards the voted colours (seam
+        blending); larger keeps more of the copy.
+    detail_clip : float
+        The depth detail band is measured in units of its robust spread inside the
+        object and soft-clipped at this many units (0: raw band). Without it the
+        silhouette's jump sets the band's scale and interior relief (eye sockets,
+        lips, an eye's bulge) hardly counts.
     """
 
     m: int = 2
@@ -94,10 +115,13 @@ class ColorizeParams:
     tolerance: float = 2e-3
     use_pyramid: bool = True
     example_preference: float = 0.0
-    vote: str = "mean"
-    finish: str = "vote"
+    vote: str = "copy"
     blend_scale: float = 8.0
-    detail_clip: float = 0.0
+    detail_clip: float = 3.0
+
+    def __post_init__(self) -> None:
+        if self.vote not in VOTES:
+            raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
 
     @property
     def levels(self) -> int:
@@ -116,7 +140,7 @@ class ColorizeParams:
             max_iterations=self.max_iterations,
             tolerance=self.tolerance,
             guide_padding="constant",
-            vote=self.vote,
+            vote="mode" if self.vote == "mode" else "mean",
         )
 
 
@@ -416,6 +440,7 @@ def colorize(
     examples: list[str] | None = None,
     backend: str | None = None,
     example_preference: float | None = None,
+    vote: str | None = None,
     seed: int = 0,
     quiet: bool = True,
 ) -> ColorizeResult:
@@ -437,6 +462,8 @@ def colorize(
         Search backend (overrides the preset).
     example_preference : float, optional
         Extra cost per rank of a selected example (overrides the preset).
+    vote : {"copy", "mean", "mode"}, optional
+        How matches make the map (overrides the preset; ``"mean"`` is the paper's).
     seed : int
         The same seed gives the same bytes.
     quiet : bool
@@ -452,7 +479,9 @@ def colorize(
     >>> result.rgba.shape  # doctest: +SKIP
     (150, 200, 4)
     """
-    params = _resolve(preset, m=m, backend=backend, example_preference=example_preference)
+    params = _resolve(
+        preset, m=m, backend=backend, example_preference=example_preference, vote=vote
+    )
     depth = validate_depth(depth)
     if len(database) == 0:
         raise InputError("the database has no examples")
@@ -488,7 +517,7 @@ def colorize(
         ycbcr = result.appearance[0]
     mask = depth > 0
     source = result.source
-    if params.finish == "copy":
+    if params.vote in ("copy", "mode"):
         # Every pixel copied from the exemplar pixel its windows agree on, the seams
         # blended in the gradient domain into the voted result.
         source = result.copy_source

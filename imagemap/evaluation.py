@@ -15,7 +15,10 @@ part of the method is worth:
 ``one_pass``    one pass of depth-only matching and voting (Fig. 1 of the
                 paper): a single level at full resolution with the preset's
                 finest window width, no EM (``max_iterations=0``), no position
-                term
+                term, the paper's mean vote
+``mean_vote``   the full method with the paper's M-step (``vote="mean"``: each
+                pixel the weighted mean of its windows) instead of the seam-
+                blended copy
 ``no_position`` the full method with ``position_weight=0``
 ``no_pyramid``  the full method on plain YCbCr at every level instead of
                 Laplacian bands (``use_pyramid=False``)
@@ -99,7 +102,14 @@ __all__ = [
 log = logging.getLogger("imagemap")
 
 #: Method names, in report order.
-METHODS: tuple[str, ...] = ("full", "copy_nearest", "one_pass", "no_position", "no_pyramid")
+METHODS: tuple[str, ...] = (
+    "full",
+    "copy_nearest",
+    "one_pass",
+    "mean_vote",
+    "no_position",
+    "no_pyramid",
+)
 
 CSV_COLUMNS = (
     "object",
@@ -240,8 +250,14 @@ def method_params(method: str, params: ColorizeParams) -> ColorizeParams | None:
     if method == "one_pass":
         # Fig. 1: one scale, windows of the paper's k, depth only, one vote.
         return replace(
-            params, patch_sizes=params.patch_sizes[:1], max_iterations=0, position_weight=0.0
+            params,
+            patch_sizes=params.patch_sizes[:1],
+            max_iterations=0,
+            position_weight=0.0,
+            vote="mean",
         )
+    if method == "mean_vote":
+        return replace(params, vote="mean")
     if method == "no_position":
         return replace(params, position_weight=0.0)
     if method == "no_pyramid":

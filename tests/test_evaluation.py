@@ -153,7 +153,16 @@ def test_method_params_of_the_baselines():
     assert method_params("no_pyramid", fish).use_pyramid is False
     with pytest.raises(InputError, match="unknown method"):
         method_params("best", fish)
-    assert set(METHODS) == {"full", "copy_nearest", "one_pass", "no_position", "no_pyramid"}
+    assert method_params("mean_vote", fish).vote == "mean" and fish.vote == "copy"
+    assert one.vote == "mean"  # Fig. 1 of the paper votes by the mean
+    assert set(METHODS) == {
+        "full",
+        "copy_nearest",
+        "one_pass",
+        "mean_vote",
+        "no_position",
+        "no_pyramid",
+    }
 
 
 def test_cli_with_two_workers_matches_one(fish_dir, tmp_path, capsys):

@@ -80,6 +80,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "maps 25%% -> 8%%, but mean colour error up; default 0 as in the paper)",
     )
     p.add_argument(
+        "--vote",
+        choices=("copy", "mean", "mode"),
+        help="how matched windows make the map: copy (default; each pixel copied from the "
+        "example pixel its windows agree on, seams blended: crisp eyes and stripes), mean "
+        "(the paper: weighted mean of the windows, smooth but blurred), mode (copying "
+        "inside the EM iterations too)",
+    )
+    p.add_argument(
         "--background",
         default="transparent",
         help="'transparent' (RGBA, default) or a colour: white, black, '#rrggbb'",
@@ -199,6 +207,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
             examples=examples,
             backend=args.backend,
             example_preference=args.example_preference,
+            vote=args.vote,
             seed=args.seed,
             quiet=len(jobs) > 1 or not interactive,
         )
