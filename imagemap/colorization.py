@@ -25,7 +25,7 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap.blend import seamless_copy
+from imagemap.blend import place_seams, seamless_copy
 from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
 from imagemap.io import InputError, validate_depth
@@ -117,6 +117,7 @@ class ColorizeParams:
     example_preference: float = 0.0
     vote: str = "copy"
     blend_scale: float = 8.0
+    seam_smoothness: float = 1.0
     detail_clip: float = 3.0
 
     def __post_init__(self) -> None:
@@ -520,8 +521,10 @@ def colorize(
     if params.vote in ("copy", "mode"):
         # Every pixel copied from the exemplar pixel its windows agree on, the seams
         # blended in the gradient domain into the voted result.
-        source = result.copy_source
         exemplars = [_example_ycbcr(example) for example in chosen]
+        source = result.copy_source
+        if params.seam_smoothness > 0:
+            source = place_seams(exemplars, source, ycbcr, smoothness=params.seam_smoothness)
         ycbcr = seamless_copy(exemplars, source, ycbcr, scale=params.blend_scale)
     image = to_rgb(ycbcr)
     image[~mask] = 0.0

@@ -78,6 +78,7 @@ from imagemap.metrics import (
     ImageMetrics,
     blur_ratio,
     class_reference,
+    features_drawn,
     image_metrics,
     macro_part_transfer,
     paste_aligned,
@@ -283,12 +284,14 @@ def _copy_nearest(depth: np.ndarray, others: Database) -> tuple:
 def _detail_metrics(
     metrics: ImageMetrics,
     image: np.ndarray,
+    truth: np.ndarray,
     source: np.ndarray,
     mask: np.ndarray,
     labels: np.ndarray | None,
     examples: list[Example],
 ) -> ImageMetrics:
-    """Add the measures that need the source map: part transfer (micro and macro), blur."""
+    """Add the measures that need the source map: part transfer (micro and macro), blur,
+    and small features drawn judged by their sources too."""
     covered = mask & (source[..., 0] >= 0)
     copy = copy_through([e.image for e in examples], source).astype(np.float32)
     copy[~mask] = 0.0  # as the map's own background
@@ -296,8 +299,13 @@ def _detail_metrics(
     if labels is None or any(e.labels is None for e in examples):
         return replace(metrics, blur_ratio=blur)
     transferred = source_labels(source, [e.labels for e in examples], mask)
+    drawn, measured = features_drawn(
+        image, truth, labels, mask, source=source, example_labels=[e.labels for e in examples]
+    )
     return replace(
         metrics,
+        features_drawn=drawn,
+        features_measured=measured,
         part_transfer=float(np.mean(transferred[mask] == labels[mask])),
         part_transfer_macro=macro_part_transfer(transferred, labels, mask),
         blur_ratio=blur,
@@ -358,6 +366,7 @@ def evaluate_object(
         metrics = _detail_metrics(
             image_metrics(image, truth, mask, labels),
             image,
+            truth,
             source,
             mask,
             labels,

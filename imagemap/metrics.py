@@ -516,18 +516,62 @@ def feature_correlation(
     return best
 
 
+#: A feature's pixels count as copied from the same part of an example when their
+#: source lies within this many pixels of that part.
+FEATURE_TOLERANCE = 2
+
+
+def feature_transfer(
+    component: np.ndarray,
+    part: int,
+    source: np.ndarray,
+    example_labels: list[np.ndarray],
+    *,
+    tolerance: int = FEATURE_TOLERANCE,
+) -> float:
+    """Share of a feature's pixels copied from within ``tolerance`` px of the same part.
+
+    Parameters
+    ----------
+    component : ndarray of bool, (H, W)
+        The feature in the truth.
+    part : int
+        Its part id.
+    source : ndarray of int, (H, W, 3)
+        Exemplar index, y, x per pixel of the synthesized map.
+    example_labels : list of ndarray of int
+        Part labels of the exemplars, indexed by ``source[..., 0]``.
+    """
+    index, sy, sx = (a[component] for a in np.moveaxis(source, -1, 0))
+    near = np.zeros(len(index), dtype=bool)
+    for k, labels in enumerate(example_labels):
+        here = index == k
+        if not here.any() or not (labels == part).any():
+            continue
+        distance = ndimage.distance_transform_edt(labels != part)
+        near[here] = distance[sy[here], sx[here]] <= tolerance
+    return float(near.mean())
+
+
 def features_drawn(
     image: np.ndarray,
     truth: np.ndarray,
     labels: np.ndarray,
     mask: np.ndarray,
     *,
+    source: np.ndarray | None = None,
+    example_labels: list[np.ndarray] | None = None,
     max_fraction: float = FEATURE_FRACTION,
 ) -> tuple[int, int]:
     """(drawn, measurable) small features of an object (see :func:`feature_components`).
 
-    A feature is drawn when :func:`feature_correlation` reaches ``FEATURE_NCC``;
-    features whose truth shows no luminance pattern are not measurable.
+    A feature is drawn when its luminance pattern is there (:func:`feature_correlation`
+    reaches ``FEATURE_NCC``) or, given the map's source map and the exemplars'
+    labels, when at least half its pixels were copied from the same part of an
+    example, within ``FEATURE_TOLERANCE`` pixels (:func:`feature_transfer`): an
+    eye copied from an example's eye is drawn even when that example's iris
+    has another lightness than the truth's. Features the truth shows no
+    luminance pattern for count only through the source test.
 
     Example
     -------
@@ -538,12 +582,18 @@ def features_drawn(
     ((1, 1), (0, 1))
     """
     drawn = measurable = 0
-    for _, component in feature_components(labels, mask, max_fraction=max_fraction):
+    with_source = source is not None and example_labels is not None
+    for part, component in feature_components(labels, mask, max_fraction=max_fraction):
         ncc = feature_correlation(image, truth, component)
-        if math.isnan(ncc):
+        copied = (
+            feature_transfer(component, part, source, example_labels) >= 0.5
+            if with_source
+            else False
+        )
+        if math.isnan(ncc) and not with_source:
             continue
         measurable += 1
-        drawn += ncc >= FEATURE_NCC
+        drawn += bool(copied or (not math.isnan(ncc) and ncc >= FEATURE_NCC))
     return drawn, measurable
 
 
