@@ -140,6 +140,11 @@ def place_seams(
     return np.stack([label_e, label_y + yy, label_x + xx], axis=-1).astype(np.int32)
 
 
+def _stronger(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per pixel, whichever of two gradient vectors (last axis: channels) is larger."""
+    return np.where((np.square(a).sum(-1) >= np.square(b).sum(-1))[..., None], a, b)
+
+
 def seamless_copy(
     exemplars: list[np.ndarray],
     source: np.ndarray,
@@ -154,12 +159,12 @@ def seamless_copy(
         sum over neighbour pairs (O_q - O_p - g_pq)^2 + lam * sum_p (O_p - R_p)^2
 
     with lam = 1 / scale^2 and R the reference. The target difference g_pq is
-    the mean of what the two pixels' own sources say about it: the difference
-    between p's source pixel and its neighbour in p's exemplar, and likewise for
-    q. Where p and q were copied coherently (neighbouring source pixels) both
-    equal the copy's own difference, so the copy's detail is kept exactly; across
-    a seam each side contributes its exemplar's gradient, so edges and stripes
-    continue and only the colour offset between the sources is spread out, over
+    what the two pixels' own sources say about it: the difference between p's
+    source pixel and its neighbour in p's exemplar, and likewise for q. Where p
+    and q were copied coherently (neighbouring source pixels) both equal the
+    copy's own difference, so the copy's detail is kept exactly; across a seam
+    the stronger of the two is taken, so edges and stripes continue at full
+    contrast, and only the colour offset between the sources is spread out, over
     about ``scale`` pixels, towards the reference's colour layout.
 
     Parameters
@@ -190,9 +195,11 @@ def seamless_copy(
     left = np.where(has, copy_through(exemplars, source, 0, -1), reference)
     down = np.where(has, copy_through(exemplars, source, 1, 0), reference)
     up = np.where(has, copy_through(exemplars, source, -1, 0), reference)
-    # Each side's own exemplar gradient, averaged (equal where the copy is coherent).
-    gx = 0.5 * ((right[:, :-1] - copy[:, :-1]) + (copy[:, 1:] - left[:, 1:]))
-    gy = 0.5 * ((down[:-1] - copy[:-1]) + (copy[1:] - up[1:]))
+    # Each side's own exemplar gradient (equal where the copy is coherent); across a
+    # seam the stronger of the two, so an edge or stripe that meets the seam goes on
+    # at full contrast instead of an average of two unrelated textures.
+    gx = _stronger(right[:, :-1] - copy[:, :-1], copy[:, 1:] - left[:, 1:])
+    gy = _stronger(down[:-1] - copy[:-1], copy[1:] - up[1:])
     none_x = ~(has[:, 1:] & has[:, :-1])[..., 0]
     none_y = ~(has[1:] & has[:-1])[..., 0]
     gx[none_x] = (reference[:, 1:] - reference[:, :-1])[none_x]

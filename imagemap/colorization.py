@@ -95,6 +95,13 @@ class ColorizeParams:
     blend_scale : float
         Pixels over which a copied map may drift towards the voted colours (seam
         blending); larger keeps more of the copy.
+    seam_smoothness : float
+        Weight of the seam costs when the copy's sources are rearranged so that
+        seams fall where the sources agree (:func:`imagemap.blend.place_seams`; 0:
+        off).
+    grow_pyramid : bool
+        Add pyramid levels for large objects (see :func:`pyramid_levels`); False
+        keeps the preset's levels (dropping them still for small objects).
     detail_clip : float
         The depth detail band is measured in units of its robust spread inside the
         object and soft-clipped at this many units (0: raw band). Without it the
@@ -119,6 +126,7 @@ class ColorizeParams:
     blend_scale: float = 8.0
     seam_smoothness: float = 1.0
     detail_clip: float = 3.0
+    grow_pyramid: bool = True
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
@@ -231,7 +239,7 @@ MIN_WINDOWS_ACROSS = 1.25
 ADD_WINDOWS_ACROSS = 2.0
 
 
-def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...]) -> int:
+def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = True) -> int:
     """How many pyramid levels the object's size calls for.
 
     The object's size is the square root of its area. A preset's coarsest level
@@ -256,7 +264,7 @@ def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...]) -> int:
     levels = len(patch_sizes)
     while levels > 1 and size / 2 ** (levels - 1) < MIN_WINDOWS_ACROSS * patch_sizes[levels - 1]:
         levels -= 1
-    if levels == len(patch_sizes):
+    if grow and levels == len(patch_sizes):
         while size / 2**levels >= ADD_WINDOWS_ACROSS * patch_sizes[-1]:
             levels += 1
     return levels
@@ -274,11 +282,17 @@ def level_patch_sizes(patch_sizes: tuple[int, ...], levels: int) -> tuple[int, .
 DETAIL_CLIP = 3.0
 
 
+#: Percentile of |detail| inside the object taken as the detail band's unit: the
+#: relief that marks features (an eye's bulge, sockets, lips), not the body's flat
+#: stretches, whose tiny values a median would blow up into noise to match on.
+DETAIL_PERCENTILE = 95.0
+
+
 def _interior_scale(detail: np.ndarray, mask: np.ndarray) -> float:
-    """Robust spread (1.4826 x median absolute value) of a band inside the object."""
+    """The detail band's unit: its 95th percentile of magnitude inside the object."""
     inner = ndimage.binary_erosion(mask, iterations=2) if mask.any() else mask
     values = detail[inner] if inner.sum() >= 16 else detail[mask] if mask.any() else detail
-    scale = 1.4826 * float(np.median(np.abs(values))) if values.size else 0.0
+    scale = float(np.percentile(np.abs(values), DETAIL_PERCENTILE)) if values.size else 0.0
     return scale if scale > 0 else max(float(np.abs(detail).max()), 1e-12)
 
 
@@ -499,7 +513,7 @@ def colorize(
     selection_seconds = time.perf_counter() - start
 
     start = time.perf_counter()
-    levels = pyramid_levels(depth > 0, params.patch_sizes)
+    levels = pyramid_levels(depth > 0, params.patch_sizes, grow=params.grow_pyramid)
     if levels != params.levels:
         log.info("object size calls for %d pyramid levels (preset: %d)", levels, params.levels)
         params = replace(params, patch_sizes=level_patch_sizes(params.patch_sizes, levels))
