@@ -245,9 +245,19 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
 
 
 def guard_colorize(
-    depth: np.ndarray, database, preset=None, m=None, examples=None, what: str = "the query"
+    depth: np.ndarray,
+    database,
+    preset=None,
+    m=None,
+    examples=None,
+    what: str = "the query",
+    check: bool | None = None,
 ) -> Estimate | None:
     """Estimate a colorization; log it (``-v``) and refuse it if it cannot fit in memory.
+
+    ``check`` None follows :func:`memory_check` and ``IMAGEMAP_NO_MEMORY_CHECK``
+    (when they switch the guard off, nothing is estimated and None is returned);
+    True or False estimates and logs, and refuses only if True.
 
     Raises
     ------
@@ -255,6 +265,10 @@ def guard_colorize(
         The estimate exceeds :func:`available_memory`; the message gives the estimate
         and the way out (a smaller depth map, fewer examples, ``--no-memory-check``).
     """
+    if check is None:
+        if not _enabled():
+            return None
+        check = True
     depth = np.asarray(depth)
     if depth.ndim != 2 or len(database) == 0:
         return None  # the colorization's own checks say what is wrong
@@ -267,10 +281,8 @@ def guard_colorize(
         estimate.levels,
         estimate.describe(),
     )
-    if not _enabled():
-        return estimate
     available = available_memory()
-    if available is not None and estimate.bytes > available:
+    if check and available is not None and estimate.bytes > available:
         side = max(depth.shape)
         fit = max(1, int(side * (max(available - _OVERHEAD_BYTES, 0) / estimate.bytes) ** 0.5))
         raise MemoryBudgetError(
