@@ -56,6 +56,9 @@ _MEMORY_FACTOR = 0.75
 _SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
 _SECONDS_OVERHEAD = 0.3
 
+#: Runs estimated to take longer than this are announced with a warning (not refused).
+LONG_RUN_SECONDS = 300.0
+
 _CHECK = contextvars.ContextVar("imagemap_memory_check", default=True)
 
 
@@ -281,6 +284,14 @@ def guard_colorize(
         estimate.levels,
         estimate.describe(),
     )
+    if estimate.seconds > LONG_RUN_SECONDS:
+        log.warning(
+            "%s (%dx%d) will take %s (estimated); a smaller depth map is much faster",
+            what,
+            depth.shape[1],
+            depth.shape[0],
+            estimate.describe(),
+        )
     available = available_memory()
     if check and available is not None and estimate.bytes > available:
         side = max(depth.shape)

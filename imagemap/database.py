@@ -179,6 +179,15 @@ class Database:
     """
 
     def __init__(self, examples: list[Example], source: str = "") -> None:
+        if isinstance(examples, (str, Example)) or not hasattr(examples, "__iter__"):
+            raise InputError(f"Database: expected a list of Example, got {examples!r}")
+        examples = list(examples)
+        for example in examples:
+            if not isinstance(example, Example):
+                raise InputError(
+                    f"Database: expected Example objects (Example.from_arrays(...)), "
+                    f"got {type(example).__name__}"
+                )
         names = [e.name for e in examples]
         if len(set(names)) != len(names):
             raise InputError(f"{source or 'database'}: duplicate example names")
