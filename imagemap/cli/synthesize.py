@@ -389,12 +389,17 @@ def _json_writer(content):
 
 
 def _write_batch_report(args, reports, failures, interrupted: bool = False) -> None:
+    """The batch's report: one entry per query, in order; a failed one has an "error"."""
     from imagemap.outputs import write_all
 
     if not args.report:
         return
-    content = {"maps": reports, "failed": failures, "interrupted": interrupted}
-    write_all({Path(args.report): _json_writer(content)})
+    entries = reports + failures
+    order = {str(p): i for i, p in enumerate(args.depth)}
+    entries.sort(key=lambda entry: order.get(entry["query"], len(order)))
+    if interrupted:
+        entries.append({"interrupted": True})
+    write_all({Path(args.report): _json_writer(entries)})
 
 
 def _preview(depth, result, database):
