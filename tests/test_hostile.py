@@ -587,3 +587,29 @@ def test_same_seed_same_bytes_through_the_cli(world, capsys):
     assert cli(synth(world, "-o", str(a), "--seed", "3"), capsys)[0] == 0
     assert cli(synth(world, "-o", str(b), "--seed", "3"), capsys)[0] == 0
     assert a.read_bytes() == b.read_bytes()
+
+
+# -- no NaN or Inf reaches any output ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("class_name", ["fish", "busts", "humans"])
+def test_no_nan_or_inf_in_any_method_on_generated_classes(class_name):
+    import data_gen
+    from imagemap.evaluation import METHODS, evaluate_object
+
+    size = (80, 60) if class_name == "fish" else (60, 80)
+    instances = [data_gen.make_instance(class_name, i, seed=0, size=size) for i in range(3)]
+    database = Database(
+        [Example.from_arrays(i.name, i.depth, i.image, labels=i.labels) for i in instances]
+    )
+    obj = evaluate_object(database, instances[0].name, preset=class_name, methods=METHODS)
+    assert set(obj.results) == set(METHODS)
+    for method, result in obj.results.items():
+        assert np.all(np.isfinite(result.image)), method
+        assert result.image.min() >= 0 and result.image.max() <= 1, method
+        if result.provenance is not None:
+            assert np.all(np.isfinite(result.provenance)), method
+    full = imagemap.colorize(instances[1].depth, database.without(instances[1].name), class_name)
+    for array in (full.rgba, full.provenance, full.cost[np.isfinite(full.cost)]):
+        assert np.all(np.isfinite(array))
+    assert np.all(np.isfinite(full.cost[full.mask]))
