@@ -613,3 +613,86 @@ def test_no_nan_or_inf_in_any_method_on_generated_classes(class_name):
     for array in (full.rgba, full.provenance, full.cost[np.isfinite(full.cost)]):
         assert np.all(np.isfinite(array))
     assert np.all(np.isfinite(full.cost[full.mask]))
+
+
+# -- rows that already passed before issue 11: kept so -------------------------------------------
+
+
+def _write(path: Path, array) -> Path:
+    write_image(path, array)
+    return path
+
+
+PASSING_CASES = {
+    "missing query": (lambda w: [str(w["root"] / "nope_depth.png")], "nope_depth.png"),
+    "query without foreground": (
+        lambda w: [str(_write(w["root"] / "empty_depth.png", np.zeros((40, 40), np.uint16)))],
+        "no foreground",
+    ),
+    "query too small": (
+        lambda w: [str(_write(w["root"] / "tiny_depth.png", np.full((4, 4), 9, np.uint16)))],
+        "too small",
+    ),
+    "query of an unsupported format": (
+        lambda w: [str(_write_bytes(w["root"] / "q_depth.bmp", b"BM" + bytes(60)))],
+        "unsupported depth format",
+    ),
+    "database missing": (lambda w: ["--db", str(w["root"] / "nodb")], "nodb"),
+    "empty database": (lambda w: ["--db", str(_mkdir(w["root"] / "emptydb"))], "no examples"),
+    "unknown example": (lambda w: ["--examples", "zzz"], "zzz"),
+    "unknown excluded example": (lambda w: ["--exclude", "zzz"], "zzz"),
+    "unknown preset": (lambda w: ["--preset", "dogs"], "--preset"),
+    "unknown backend": (lambda w: ["--backend", "fast"], "--backend"),
+}
+
+
+def _write_bytes(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
+
+
+def _mkdir(path: Path) -> Path:
+    path.mkdir()
+    return path
+
+
+@pytest.mark.parametrize("case", sorted(PASSING_CASES))
+def test_rows_that_already_passed(world, capsys, case):
+    build, words = PASSING_CASES[case]
+    extra = build(world)
+    if extra[0].startswith("--"):
+        argv = synth(world, "-o", str(world["root"] / "m.png"), *extra)
+    else:
+        argv = ["synthesize", *extra, "--db", str(world["db"]), "-o", str(world["root"] / "m.png")]
+    before = snapshot(world["root"])
+    code, message = cli(argv, capsys)
+    assert code == 2 and words in message and "Traceback" not in message, message
+    assert_unchanged(world, before)
+
+
+def test_output_into_a_new_folder_is_made(world, capsys):
+    out = world["root"] / "new" / "deeper" / "m.png"
+    code, message = cli(
+        synth(world, "-o", str(out), "--provenance", str(out.with_name("p.png"))), capsys
+    )
+    assert code == 0, message
+    assert sorted(p.name for p in out.parent.iterdir()) == ["m.png", "p.png"]
+
+
+def test_nan_background_depth_is_accepted(world, capsys):
+    depth = np.where(world["depth"] > 0, world["depth"], np.nan).astype(np.float32)
+    path = world["root"] / "nan_depth.npy"
+    np.save(path, depth)
+    code, message = cli(
+        [
+            "synthesize",
+            str(path),
+            "--db",
+            str(world["db"]),
+            "-o",
+            str(world["root"] / "m.png"),
+            "-q",
+        ],
+        capsys,
+    )
+    assert code == 0, message
