@@ -22,6 +22,7 @@ import os
 
 import numpy as np
 
+from imagemap import budget  # also makes imagemap.budget available after "import imagemap"
 from imagemap.io import InputError
 
 __all__ = [
@@ -140,9 +141,7 @@ def check_colorize_arguments(
     if names:
         for name in names:
             database[name]  # an unknown name is an InputError listing the known ones
-    from imagemap.budget import guard_colorize
-
-    guard_colorize(depth, database, preset, m=m, examples=names)
+    budget.guard_colorize(depth, database, preset, m=m, examples=names)
     return names
 
 
