@@ -107,4 +107,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"evaluated {len(evaluation.objects)} objects x {len(methods)} methods in "
             f"{evaluation.seconds:.0f} s with {args.workers} worker(s); report {paths['html']}"
         )
-    return 0
+    # Objects that failed (reported by leave_one_out as (name, message) pairs once it
+    # goes on past a failing object): named here, and the exit code says so.
+    failed = list(getattr(evaluation, "failed", None) or [])
+    for name, message in failed:
+        print(f"imagemap: {name}: failed: {message}", file=sys.stderr)
+    if failed:
+        print(
+            f"imagemap: {len(evaluation.objects)} object(s) evaluated, {len(failed)} failed",
+            file=sys.stderr,
+        )
+    return 1 if failed else 0
