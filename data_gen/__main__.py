@@ -11,6 +11,7 @@ from data_gen import CLASSES
 from data_gen.dataset import write_class
 from data_gen.render import ray_backend
 from imagemap.io import InputError
+from imagemap.validate import non_negative_int
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -41,7 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="WIDTHxHEIGHT (default: fish 200x150, busts and humans 150x200)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
+    parser.add_argument(
+        "--seed", type=non_negative_int, default=0, help="run seed >= 0 (default 0)"
+    )
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument(
         "--holdout",
@@ -62,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     start = time.perf_counter()
     try:
+        from imagemap.outputs import check_output_directory
+
+        check_output_directory(args.out, "--out directory")
         instances = write_class(
             CLASSES[args.class_name],
             args.out,

@@ -30,6 +30,7 @@ from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
 from imagemap.io import InputError, validate_depth
 from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
+from imagemap.validate import check_colorize_arguments, check_int
 
 __all__ = [
     "PRESETS",
@@ -217,6 +218,7 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
     >>> select_examples(query_depth, db, m=2)  # doctest: +SKIP
     [3, 5]
     """
+    m = check_int("m", m, minimum=1)
     depth = validate_depth(depth)
     if m < 1:
         raise InputError(f"m must be at least 1, got {m}")
@@ -494,6 +496,7 @@ def colorize(
     >>> result.rgba.shape  # doctest: +SKIP
     (150, 200, 4)
     """
+    examples = check_colorize_arguments(**locals())  # InputError naming the argument; memory
     params = _resolve(
         preset, m=m, backend=backend, example_preference=example_preference, vote=vote
     )

@@ -18,7 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from imagemap.io import InputError, read_depth, read_image, validate_depth
+from imagemap.io import (
+    InputError,
+    _load_raw,
+    _to_unit_float,
+    read_depth,
+    read_image,
+    validate_depth,
+)
 
 __all__ = ["Database", "Example", "check_database"]
 
@@ -49,16 +56,39 @@ class Example:
         image: np.ndarray,
         labels: np.ndarray | None = None,
     ) -> Example:
-        """An example held in memory (depth (H, W), image (H, W, 3) in [0, 1])."""
+        """An example held in memory.
+
+        Parameters
+        ----------
+        name : str
+            The example's name.
+        depth : ndarray, (H, W)
+            Larger is nearer; 0 or NaN is background.
+        image : ndarray, (H, W, 3)
+            The image-map: float in [0, 1], or uint8 (divided by 255) or uint16
+            (divided by 65535). Other integer types, values outside [0, 1], NaN or
+            infinite values are refused (:class:`InputError` naming the example).
+        labels : ndarray of int, (H, W), optional
+            Part ids.
+        """
+        if not isinstance(name, str) or not name:
+            raise InputError(f"example name must be a non-empty string, got {name!r}")
         depth = validate_depth(depth, name=f"example {name!r}")
-        image = np.asarray(image, dtype=np.float32)
+        image = _image_from_array(np.asarray(image), f"example {name!r}")
         if image.ndim != 3 or image.shape[2] != 3 or image.shape[:2] != depth.shape:
             raise InputError(
-                f"example {name!r}: image {image.shape} does not match depth {depth.shape}"
+                f"example {name!r}: image {image.shape} does not match depth {depth.shape} "
+                "(expected (H, W, 3) of the depth's size)"
             )
         arrays = {"depth": depth, "image": image}
         if labels is not None:
-            arrays["labels"] = np.asarray(labels)
+            labels = np.asarray(labels)
+            if labels.shape != depth.shape or labels.dtype.kind not in "biu":
+                raise InputError(
+                    f"example {name!r}: labels must be integers of the depth's shape "
+                    f"{depth.shape}, got {labels.dtype} {labels.shape}"
+                )
+            arrays["labels"] = labels.astype(np.int32)
         return cls(name=name, _arrays=arrays)
 
     @cached_property
@@ -85,11 +115,13 @@ class Example:
             return self._arrays["labels"]
         if self.labels_path is None:
             return None
-        import imageio.v3 as iio
-
-        labels = iio.imread(self.labels_path)
+        labels = _load_raw(self.labels_path)
         if labels.ndim == 3:
             labels = labels[..., 0]
+        if labels.dtype.kind not in "biu":
+            raise InputError(
+                f"{self.labels_path}: part labels must be integers, got {labels.dtype}"
+            )
         if labels.shape != self.depth.shape:
             raise InputError(f"{self.labels_path}: labels {labels.shape} differ from the depth")
         return labels.astype(np.int32)
@@ -100,13 +132,40 @@ class Example:
         if self.json_path is None:
             return {}
         try:
-            return json.loads(self.json_path.read_text())
+            info = json.loads(self.json_path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"{self.json_path}: cannot be read as JSON ({exc})") from exc
+        if not isinstance(info, dict):
+            raise InputError(f"{self.json_path}: expected a JSON object, got {type(info).__name__}")
+        return info
 
     @property
     def mask(self) -> np.ndarray:
         return self.depth > 0
+
+
+def _image_from_array(image: np.ndarray, name: str) -> np.ndarray:
+    """An image-map array as float32 in [0, 1]: uint8 / 255, uint16 / 65535, floats checked."""
+    if image.dtype == bool or not (
+        np.issubdtype(image.dtype, np.integer) or np.issubdtype(image.dtype, np.floating)
+    ):
+        raise InputError(
+            f"{name}: image must be float in [0, 1], uint8 or uint16, got {image.dtype}"
+        )
+    if np.issubdtype(image.dtype, np.integer) and image.dtype not in (np.uint8, np.uint16):
+        raise InputError(
+            f"{name}: image of {image.dtype}: give float in [0, 1], uint8 (0-255) or uint16"
+        )
+    image = _to_unit_float(image, name)
+    if not np.all(np.isfinite(image)):
+        raise InputError(f"{name}: image has NaN or infinite values")
+    low, high = float(image.min(initial=0.0)), float(image.max(initial=0.0))
+    if low < 0.0 or high > 1.0:
+        raise InputError(
+            f"{name}: image values span [{low:g}, {high:g}]; expected [0, 1] "
+            "(divide 0-255 values by 255, or pass a uint8 array)"
+        )
+    return image
 
 
 class Database:
@@ -120,6 +179,15 @@ class Database:
     """
 
     def __init__(self, examples: list[Example], source: str = "") -> None:
+        if isinstance(examples, (str, Example)) or not hasattr(examples, "__iter__"):
+            raise InputError(f"Database: expected a list of Example, got {examples!r}")
+        examples = list(examples)
+        for example in examples:
+            if not isinstance(example, Example):
+                raise InputError(
+                    f"Database: expected Example objects (Example.from_arrays(...)), "
+                    f"got {type(example).__name__}"
+                )
         names = [e.name for e in examples]
         if len(set(names)) != len(names):
             raise InputError(f"{source or 'database'}: duplicate example names")
@@ -159,9 +227,37 @@ class Database:
     def names(self) -> list[str]:
         return [e.name for e in self.examples]
 
-    def without(self, *names: str) -> Database:
-        """The database less the named examples (for leave-one-out)."""
-        return Database([e for e in self.examples if e.name not in names], source=self.source)
+    def without(self, *names: str | list[str]) -> Database:
+        """The database less the named examples (for leave-one-out).
+
+        Accepts names as arguments, a list of names, or one name as a string;
+        an unknown name is an :class:`InputError`.
+
+        Examples
+        --------
+        >>> db.without("fish_000").names[:1]  # doctest: +SKIP
+        ['fish_001']
+        """
+        flat: list[str] = []
+        for item in names:
+            if isinstance(item, str):
+                flat.append(item)
+            elif isinstance(item, (list, tuple, set, frozenset)):
+                flat.extend(item)
+            else:
+                raise InputError(f"without: expected example names, got {item!r}")
+        for name in flat:
+            if not isinstance(name, str):
+                raise InputError(f"without: expected example names, got {name!r}")
+        unknown = sorted(set(flat) - set(self.names))
+        if unknown:
+            raise InputError(
+                f"{self.source or 'database'}: no example named "
+                f"{', '.join(repr(n) for n in unknown)} "
+                f"(have: {', '.join(self.names[:10])}{'...' if len(self) > 10 else ''})"
+            )
+        drop = set(flat)
+        return Database([e for e in self.examples if e.name not in drop], source=self.source)
 
 
 def _scan(root: Path) -> tuple[list[Example], list[str]]:
@@ -172,7 +268,11 @@ def _scan(root: Path) -> tuple[list[Example], list[str]]:
     depths: dict[str, Path] = {}
     images: dict[str, Path] = {}
     problems = []
-    for entry in sorted(root.iterdir()):
+    try:
+        entries = sorted(root.iterdir())
+    except OSError as exc:
+        raise InputError(f"{root}: cannot list the database ({exc.strerror or exc})") from None
+    for entry in entries:
         if not entry.is_file():
             continue
         if match := _DEPTH_RE.match(entry.name):
@@ -181,7 +281,12 @@ def _scan(root: Path) -> tuple[list[Example], list[str]]:
                 problems.append(f"{entry}: second depth file for {name!r} ({depths[name].name})")
             depths[name] = entry
         elif match := _IMAGE_RE.match(entry.name):
-            images[match["name"]] = entry
+            name = match["name"]
+            if name in images:
+                problems.append(
+                    f"{entry}: second image-map file for {name!r} ({images[name].name})"
+                )
+            images[name] = entry
     for name in sorted(set(depths) - set(images)):
         problems.append(f"{depths[name]}: no image-map {name}_image.png beside it")
     for name in sorted(set(images) - set(depths)):
@@ -219,6 +324,7 @@ def check_database(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
         try:
             depth, image = example.depth, example.image
             labels = example.labels
+            _ = example.info  # a corrupt sidecar is a problem too
         except InputError as exc:
             problems.append(str(exc))
             continue

@@ -77,25 +77,45 @@ def _to_unit_float(array: np.ndarray, path: Path) -> np.ndarray:
 
 
 def _load_raw(path: Path) -> np.ndarray:
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if not path.is_file():
-        raise InputError(f"{path}: not a file")
+    try:
+        if not path.exists():
+            raise InputError(f"{path}: file not found")
+        if not path.is_file():
+            raise InputError(f"{path}: not a file")
+    except OSError as exc:  # e.g. a folder on the way that cannot be searched
+        raise InputError(f"{path}: cannot be opened ({exc.strerror or exc})") from None
     suffix = path.suffix.lower()
     try:
         if suffix == ".npy":
-            return np.load(path, allow_pickle=False)
-        if suffix in (".tif", ".tiff"):
+            array = np.load(path, allow_pickle=False)
+        elif suffix in (".tif", ".tiff"):
             import tifffile
 
-            return tifffile.imread(path)
-        import imageio.v3 as iio
+            array = tifffile.imread(path)
+        else:
+            import imageio.v3 as iio
 
-        return iio.imread(path)
+            array = iio.imread(path)
     except InputError:
         raise
+    except PermissionError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror})") from None
+    except MemoryError:
+        raise InputError(f"{path}: too large to read into memory") from None
     except Exception as exc:  # any decoder failure is the file's fault here
-        raise InputError(f"{path}: cannot be read as an image ({exc})") from exc
+        raise InputError(f"{path}: not a readable image ({_reason(exc, suffix)})") from exc
+    array = np.asarray(array)
+    if array.dtype == object or array.dtype.kind not in "biuf":
+        raise InputError(f"{path}: not a readable image (pixel type {array.dtype})")
+    return array
+
+
+def _reason(exc: Exception, suffix: str) -> str:
+    """A short reason for a decoder's failure, without advice to install plugins."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    if "backend" in text or "plugin" in text or "pip install" in text:
+        return f"not a valid {suffix.lstrip('.').upper() or 'image'} file, or damaged"
+    return text[:200]
 
 
 def read_depth(path: str | os.PathLike) -> np.ndarray:
@@ -125,15 +145,34 @@ def read_depth(path: str | os.PathLike) -> np.ndarray:
             f"{path}: unsupported depth format {path.suffix!r} (use .png, .tif or .npy)"
         )
     raw = _load_raw(path)
-    if raw.ndim == 3 and raw.shape[2] in (2, 4):  # grey + alpha: alpha 0 is background
+    if raw.ndim == 3 and raw.shape[2] == 1:
+        raw = raw[..., 0]
+    if raw.ndim == 3 and raw.shape[2] in (2, 4):  # grey (+ alpha): alpha 0 is background
         alpha = raw[..., -1]
-        raw = np.where(alpha > 0, raw[..., 0], 0)
-    if raw.ndim == 3 and raw.shape[2] == 3 and np.array_equal(raw[..., 0], raw[..., 1]):
+        colour = raw[..., :-1]
+        if colour.shape[2] == 3 and not _grey(colour):
+            raise InputError(
+                f"{path}: a depth map must be grey, but its R, G and B channels differ "
+                "(save the depth as a one-channel 8/16-bit PNG, a float TIFF or .npy)"
+            )
+        raw = np.where(alpha > 0, colour[..., 0], 0)
+    if raw.ndim == 3 and raw.shape[2] == 3:
+        if not _grey(raw):
+            raise InputError(
+                f"{path}: a depth map must be grey, but its R, G and B channels differ "
+                "(save the depth as a one-channel 8/16-bit PNG, a float TIFF or .npy)"
+            )
         raw = raw[..., 0]
     if raw.ndim != 2:
         raise InputError(f"{path}: a depth map must have one channel, got shape {raw.shape}")
     depth = _to_unit_float(raw, path)
     return validate_depth(depth, name=str(path))
+
+
+def _grey(rgb: np.ndarray) -> bool:
+    return bool(
+        np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 0], rgb[..., 2])
+    )
 
 
 def validate_depth(depth: np.ndarray, name: str = "depth") -> np.ndarray:
@@ -193,6 +232,29 @@ def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Pa
     import imageio.v3 as iio
 
     path = Path(path)
+    array = _image_array(path, image, bits)
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, array, extension=path.suffix.lower() or ".png")
+    return path
+
+
+def image_writer(image: np.ndarray, bits: int = 8, extension: str = ".png"):
+    """A function writing ``image`` (as :func:`write_image` does) to the path it is given.
+
+    For :func:`imagemap.outputs.write_all`, which writes a set of outputs
+    all-or-nothing: the array is checked and converted here, before any file is made.
+    """
+    import imageio.v3 as iio
+
+    array = _image_array(Path(f"image{extension}"), image, bits)
+
+    def write(tmp: Path) -> None:
+        iio.imwrite(tmp, array, extension=extension)
+
+    return write
+
+
+def _image_array(path: Path, image: np.ndarray, bits: int) -> np.ndarray:
     array = np.asarray(image)
     if not (array.ndim == 2 or (array.ndim == 3 and array.shape[2] in (1, 3, 4))):
         raise ValueError(f"{path}: cannot write an image of shape {array.shape}")
@@ -205,9 +267,7 @@ def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Pa
         scale = 255 if bits == 8 else 65535
         dtype = np.uint8 if bits == 8 else np.uint16
         array = np.round(np.clip(np.nan_to_num(array), 0.0, 1.0) * scale).astype(dtype)
-    with atomic_path(path) as tmp:
-        iio.imwrite(tmp, array, extension=path.suffix or ".png")
-    return path
+    return array
 
 
 def read_npz(path: str | os.PathLike, what: str = ".npz") -> dict[str, np.ndarray]:

@@ -70,7 +70,12 @@ def add_common_options(parser: argparse.ArgumentParser) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        if exc.code == 2:  # argparse printed the error naming the option: exit code 2
+            return 2
+        raise  # --help, --version
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

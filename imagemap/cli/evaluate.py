@@ -33,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import add_common_options
     from imagemap.colorization import PRESETS
     from imagemap.evaluation import METHODS
+    from imagemap.validate import non_negative_int, positive_int
 
     p = subparsers.add_parser(
         "evaluate",
@@ -47,24 +48,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=sorted(PRESETS),
         help="class preset (default: the preset named like each object's class, else busts)",
     )
-    p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
+    p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
     p.add_argument(
         "--methods",
         default=",".join(METHODS),
         help=f"comma-separated methods (default all: {','.join(METHODS)})",
     )
-    p.add_argument("--limit", type=int, help="evaluate only the first N objects")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    p.add_argument("--limit", type=positive_int, help="evaluate only the first N objects")
+    p.add_argument(
+        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
+    )
     add_common_options(p)
     p.set_defaults(func=run_evaluate)
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
     from imagemap.database import Database
-    from imagemap.evaluation import check_report, leave_one_out, summarize, write_report
+    from imagemap.evaluation import METHODS, check_report, leave_one_out, summarize, write_report
+    from imagemap.io import InputError
+    from imagemap.outputs import check_output_directory, resolve
 
     database = Database.from_directory(args.db)
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or not methods:
+        raise InputError(
+            f"--methods: unknown method(s) {', '.join(unknown) or '(none given)'}; "
+            f"use some of {', '.join(METHODS)}"
+        )
+    if resolve(args.out) == resolve(args.db):
+        raise InputError(f"{args.out}: --out is the database {args.db}; give another directory")
+    check_output_directory(args.out, "--out report directory")
     evaluation = leave_one_out(
         database,
         preset=args.preset,
@@ -93,4 +107,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"evaluated {len(evaluation.objects)} objects x {len(methods)} methods in "
             f"{evaluation.seconds:.0f} s with {args.workers} worker(s); report {paths['html']}"
         )
-    return 0
+    # Objects that failed (reported by leave_one_out as (name, message) pairs once it
+    # goes on past a failing object): named here, and the exit code says so.
+    failed = list(getattr(evaluation, "failed", None) or [])
+    for name, message in failed:
+        print(f"imagemap: {name}: failed: {message}", file=sys.stderr)
+    if failed:
+        print(
+            f"imagemap: {len(evaluation.objects)} object(s) evaluated, {len(failed)} failed",
+            file=sys.stderr,
+        )
+    return 1 if failed else 0

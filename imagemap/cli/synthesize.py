@@ -8,6 +8,7 @@ import logging
 import sys
 import time
 import tracemalloc
+from pathlib import Path
 
 from imagemap.io import InputError
 
@@ -42,6 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import add_common_options
     from imagemap.colorization import PRESETS
     from imagemap.engine import BACKENDS
+    from imagemap.validate import non_negative_float, non_negative_int, positive_int
 
     p = subparsers.add_parser(
         "synthesize",
@@ -64,7 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="busts",
         help="class preset: weights, patch sizes and m after the paper's Table 1 (default busts)",
     )
-    p.add_argument("--m", type=int, help="number of examples to select automatically")
+    p.add_argument(
+        "--m", type=positive_int, help="number of examples to select automatically (>= 1)"
+    )
     p.add_argument("--examples", help="comma-separated example names to use instead")
     p.add_argument("--exclude", help="comma-separated example names to leave out of the database")
     p.add_argument(
@@ -74,7 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--example-preference",
-        type=float,
+        type=non_negative_float,
         help="extra cost per rank of a selected example (e.g. 0.3): one coherent source "
         "per region instead of seams between examples of different colours (busts: faulty "
         "maps 25%% -> 8%%, but mean colour error up; default 0 as in the paper)",
@@ -99,7 +103,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "example's map on the same depth",
     )
     p.add_argument("--report", help="also write a JSON report (examples, timings, memory, target)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    p.add_argument(
+        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="allow replacing files beside a query depth that look like its held-out truth "
+        "(NAME_image.png, NAME_labels.png, NAME.json); the query depths and the database are "
+        "never overwritten",
+    )
+    p.add_argument(
+        "--no-memory-check",
+        action="store_true",
+        help="run even when the estimated memory exceeds what is available (see -v for the "
+        "estimate)",
+    )
     add_common_options(p)
     p.set_defaults(func=run_synthesize)
 
@@ -141,20 +160,37 @@ def _name_of(depth_path) -> str:
 
 
 def _plan_outputs(args: argparse.Namespace) -> list[dict]:
-    """One job per query depth: its output paths, checked before any work."""
+    """One job per query depth with its output paths (suffixes and kinds checked here;
+    clashes and writability by :func:`_check_outputs` once the database is open)."""
     from pathlib import Path
 
     batch = len(args.depth) > 1
-    for path in [p for p in (args.output, args.provenance, args.preview) if p]:
+    options = [("-o", args.output), ("--provenance", args.provenance), ("--preview", args.preview)]
+    for option, path in options:
+        if not path:
+            continue
+        if not batch and Path(path).is_dir():
+            raise InputError(
+                f"{path}: {option} is a directory; give a file name such as "
+                f"{Path(path) / 'map.png'} (a directory is for several depth maps)"
+            )
         if not batch and Path(path).suffix.lower() != ".png":
-            raise InputError(f"{path}: output must be a .png")
-        if batch and Path(path).suffix:
+            raise InputError(
+                f"{path}: {option} is written as a .png file; give a name ending in .png"
+            )
+        if batch and Path(path).exists() and not Path(path).is_dir():
+            raise InputError(
+                f"{path}: with several depth maps {option} names a directory, "
+                "but this is an existing file"
+            )
+        if batch and Path(path).suffix and not Path(path).is_dir():
             raise InputError(f"{path}: with several depth maps, give a directory (no suffix)")
     if args.report and Path(args.report).suffix.lower() != ".json":
-        raise InputError(f"{args.report}: --report must be a .json")
+        raise InputError(f"{args.report}: --report is written as .json")
     names = [_name_of(p) for p in args.depth]
     if batch and len(set(names)) != len(names):
-        raise InputError("several query depth maps have the same name")
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"several query depth maps have the same name: {', '.join(duplicates)}")
     jobs = []
     for depth_path, name in zip(args.depth, names, strict=True):
 
@@ -175,10 +211,62 @@ def _plan_outputs(args: argparse.Namespace) -> list[dict]:
     return jobs
 
 
+#: Files beside a query depth that hold its truth (a held-out object of data_gen).
+_TRUTH_SUFFIXES = ("_image.png", "_image.jpg", "_image.jpeg", "_image.tif", "_labels.png", ".json")
+
+
+def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None:
+    """Every output against every input and every other output, and writable: before any work."""
+    from pathlib import Path
+
+    from imagemap.outputs import OutputPlan, check_output_directory
+
+    plan = OutputPlan()
+    for job in jobs:
+        depth = Path(job["depth"])
+        plan.add_input(depth, "query depth")
+        if not args.overwrite:
+            for suffix in _TRUTH_SUFFIXES:
+                truth = depth.parent / f"{job['name']}{suffix}"
+                if truth.exists():
+                    plan.add_input(
+                        truth, "held-out truth beside the query; --overwrite replaces it"
+                    )
+    plan.add_protected_dir(args.db, "the database")
+    for example in database:
+        for path in (
+            example.depth_path,
+            example.image_path,
+            example.labels_path,
+            example.json_path,
+        ):
+            if path is not None:
+                plan.add_input(path, "database file")
+    if len(jobs) > 1:
+        for option, folder in (
+            ("-o", args.output),
+            ("--provenance", args.provenance),
+            ("--preview", args.preview),
+        ):
+            if folder:
+                check_output_directory(folder, f"{option} directory")
+    for job in jobs:
+        for key, option in (
+            ("output", "-o"),
+            ("provenance", "--provenance"),
+            ("preview", "--preview"),
+        ):
+            if job[key]:
+                plan.add_output(job[key], option, suffixes=(".png",))
+    if args.report:
+        plan.add_output(args.report, "--report", suffixes=(".json",))
+    plan.check()
+
+
 def run_synthesize(args: argparse.Namespace) -> int:
-    from imagemap.colorization import colorize
+    from imagemap.budget import guard_colorize
     from imagemap.database import Database
-    from imagemap.io import atomic_path, read_depth, write_image
+    from imagemap.io import read_depth
     from imagemap.progress import progress
 
     background = parse_colour(args.background)
@@ -187,66 +275,140 @@ def run_synthesize(args: argparse.Namespace) -> int:
     depths = [read_depth(job["depth"]) for job in jobs]
     database = Database.from_directory(args.db)
     if args.exclude:
-        database = database.without(*[n.strip() for n in args.exclude.split(",")])
-    examples = [n.strip() for n in args.examples.split(",")] if args.examples else None
+        database = database.without([n.strip() for n in args.exclude.split(",") if n.strip()])
+    examples = [n.strip() for n in args.examples.split(",") if n.strip()] if args.examples else None
     if examples:
         for name in examples:
             database[name]  # unknown names fail here, before any work
-    interactive = not args.quiet and sys.stderr.isatty()
-    reports = []
-    for job, depth in progress(
-        list(zip(jobs, depths, strict=True)), desc="maps", quiet=len(jobs) == 1 or not interactive
-    ):
-        tracemalloc.start()
-        start = time.perf_counter()
-        result = colorize(
+    _check_outputs(args, jobs, database)
+    for job, depth in zip(jobs, depths, strict=True):
+        guard_colorize(
             depth,
             database,
-            preset=args.preset,
+            args.preset,
             m=args.m,
             examples=examples,
-            backend=args.backend,
-            example_preference=args.example_preference,
-            vote=args.vote,
-            seed=args.seed,
-            quiet=len(jobs) > 1 or not interactive,
+            what=str(job["depth"]),
+            check=not args.no_memory_check,
         )
-        seconds = time.perf_counter() - start
-        _, peak = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
-        # Every output of a map is made before any is written: a failure leaves none.
-        images = {
-            job["output"]: result.rgba if background is None else result.on_background(background)
-        }
-        if job["provenance"]:
-            images[job["provenance"]] = result.provenance
-        if job["preview"]:
-            images[job["preview"]] = _preview(depth, result, database)
-        for path, picture in images.items():
-            write_image(path, picture)
-        reports.append(
-            {
-                "query": str(job["depth"]),
-                "output": str(job["output"]),
-                "examples": result.example_names,
-                "seconds": seconds,
-                "peak_traced_memory_mb": peak / 2**20,
-                "timings": result.timings,
-                "objective": result.objective,
-                "preset": args.preset,
-                "seed": args.seed,
-            }
-        )
-        if not args.quiet:
+    interactive = not args.quiet and sys.stderr.isatty()
+    batch = len(jobs) > 1
+    reports, failures = [], []
+    try:
+        for job, depth in progress(
+            list(zip(jobs, depths, strict=True)), desc="maps", quiet=not batch or not interactive
+        ):
+            try:
+                report = _synthesize_one(args, job, depth, database, examples, background, batch)
+            except KeyboardInterrupt:
+                raise
+            except Exception as exc:
+                if not batch:
+                    raise
+                failures.append({"query": str(job["depth"]), "error": str(exc)})
+                print(f"imagemap: {job['depth']}: failed: {exc}", file=sys.stderr)
+                continue
+            reports.append(report)
+    except KeyboardInterrupt:
+        if batch:
             print(
-                f"wrote {job['output']} ({depth.shape[1]}x{depth.shape[0]}) from "
-                f"{', '.join(result.example_names)} in {seconds:.2f} s",
+                f"imagemap: interrupted: {len(reports)} of {len(jobs)} maps written "
+                f"({', '.join(r['output'] for r in reports) or 'none'}); no partial file left",
                 file=sys.stderr,
             )
-    if args.report:
-        with atomic_path(args.report) as tmp:
-            tmp.write_text(json.dumps(reports[0] if len(reports) == 1 else reports, indent=2))
-    return 0
+            _write_batch_report(args, reports, failures, interrupted=True)
+        raise
+    if batch:
+        _write_batch_report(args, reports, failures)
+        if not args.quiet or failures:
+            print(
+                f"imagemap: {len(reports)} of {len(jobs)} maps written to {args.output}"
+                + (f"; failed: {', '.join(f['query'] for f in failures)}" if failures else ""),
+                file=sys.stderr,
+            )
+    return 1 if failures else 0
+
+
+def _synthesize_one(args, job, depth, database, examples, background, batch) -> dict:
+    """One map: synthesize, build every output, write them all-or-nothing."""
+    from imagemap.budget import memory_check
+    from imagemap.colorization import colorize
+    from imagemap.io import image_writer
+    from imagemap.outputs import write_all
+
+    interactive = not args.quiet and sys.stderr.isatty()
+    tracemalloc.start()
+    start = time.perf_counter()
+    try:
+        with memory_check(False):  # checked before any work, for every map
+            result = colorize(
+                depth,
+                database,
+                preset=args.preset,
+                m=args.m,
+                examples=examples,
+                backend=args.backend,
+                example_preference=args.example_preference,
+                vote=args.vote,
+                seed=args.seed,
+                quiet=batch or not interactive,
+            )
+        seconds = time.perf_counter() - start
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # Every output of a map is made before any is written, and written as a set:
+    # a failure leaves none of them.
+    picture = result.rgba if background is None else result.on_background(background)
+    writers = {job["output"]: image_writer(picture)}
+    if job["provenance"]:
+        writers[job["provenance"]] = image_writer(result.provenance)
+    if job["preview"]:
+        writers[job["preview"]] = image_writer(_preview(depth, result, database))
+    report = {
+        "query": str(job["depth"]),
+        "output": str(job["output"]),
+        "examples": result.example_names,
+        "seconds": seconds,
+        "peak_traced_memory_mb": peak / 2**20,
+        "timings": result.timings,
+        "objective": result.objective,
+        "preset": args.preset,
+        "seed": args.seed,
+    }
+    if args.report and not batch:
+        writers[Path(args.report)] = _json_writer(report)
+    write_all(writers)
+    if not args.quiet:
+        print(
+            f"wrote {job['output']} ({depth.shape[1]}x{depth.shape[0]}) from "
+            f"{', '.join(result.example_names)} in {seconds:.2f} s",
+            file=sys.stderr,
+        )
+    return report
+
+
+def _json_writer(content):
+    text = json.dumps(content, indent=2)
+
+    def write(tmp) -> None:
+        Path(tmp).write_text(text)
+
+    return write
+
+
+def _write_batch_report(args, reports, failures, interrupted: bool = False) -> None:
+    """The batch's report: one entry per query, in order; a failed one has an "error"."""
+    from imagemap.outputs import write_all
+
+    if not args.report:
+        return
+    entries = reports + failures
+    order = {str(p): i for i, p in enumerate(args.depth)}
+    entries.sort(key=lambda entry: order.get(entry["query"], len(order)))
+    if interrupted:
+        entries.append({"interrupted": True})
+    write_all({Path(args.report): _json_writer(entries)})
 
 
 def _preview(depth, result, database):

@@ -1,0 +1,306 @@
+"""Memory and time of a colorization, estimated from the sizes before it starts.
+
+The engine's memory at a pyramid level is dominated by the PCA window features of
+every query window centre and every exemplar candidate (``4 * D`` bytes each, D
+the feature dimension: a fifth of the 2 k^2 guide and 3 k^2 appearance window
+values, plus position and exemplar cost), by the per-pixel arrays of the query
+(padded bands, lookup tables, vote buffers, the dense source map) and of the
+exemplars, and by the previous (coarser) level's solver, still alive while the
+next one is built. :func:`estimate_colorize` adds these up per level and scales
+them by factors measured against peak resident memory (``VmHWM``) of real runs
+(see ``CALIBRATION``); the time is proportional to window centres times feature
+dimension, also measured.
+
+:func:`guard_colorize` (called by :func:`imagemap.colorize` and ``imagemap
+synthesize``) refuses a run whose estimate exceeds the memory available now
+(``MemAvailable`` of ``/proc/meminfo``, or a cgroup limit), with the estimate and
+the way out. Switch it off with ``imagemap synthesize --no-memory-check``, with
+``with imagemap.budget.memory_check(False): ...`` in Python, or with the
+environment variable ``IMAGEMAP_NO_MEMORY_CHECK=1``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import logging
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from imagemap.io import InputError
+
+__all__ = [
+    "Estimate",
+    "MemoryBudgetError",
+    "available_memory",
+    "estimate_colorize",
+    "guard_colorize",
+    "memory_check",
+]
+
+log = logging.getLogger("imagemap")
+
+# Bytes per item beside the features (see the module docstring), and the measured
+# factors. CALIBRATION: fitted on fish runs (queries 150x200 to 2400x3200, examples
+# 150x200 and 360x480, m = 2, patchmatch) against VmHWM - VmRSS before the call.
+_QUERY_CENTRE_BYTES = 70  # coordinates, positions, matches, candidates, costs
+_CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
+_QUERY_PIXEL_BYTES = 150  # padded bands, lookup, vote buffers, dense source map temporaries
+_EXEMPLAR_PIXEL_BYTES = 110  # packed bands, lookups, the example's own pyramids
+_OVERHEAD_BYTES = 100 * 2**20  # numba kernels and lazily imported modules on first use
+_MEMORY_FACTOR = 0.75
+_SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
+_SECONDS_OVERHEAD = 0.3
+
+#: Runs estimated to take longer than this are announced with a warning (not refused).
+LONG_RUN_SECONDS = 300.0
+
+_CHECK = contextvars.ContextVar("imagemap_memory_check", default=True)
+
+
+class MemoryBudgetError(InputError):
+    """A run whose estimated memory exceeds what this machine has available."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Estimated peak memory (bytes added by the run) and time (seconds) of a colorization."""
+
+    bytes: int
+    seconds: float
+    levels: int
+    query_centres: int
+    candidates: int
+
+    def describe(self) -> str:
+        return f"about {_format_bytes(self.bytes)} and {_format_seconds(self.seconds)}"
+
+
+def _format_bytes(n: float) -> str:
+    if n >= 2**30:
+        return f"{n / 2**30:.1f} GB"
+    return f"{n / 2**20:.0f} MB"
+
+
+def _format_seconds(s: float) -> str:
+    if s >= 3600:
+        return f"{s / 3600:.1f} h"
+    if s >= 120:
+        return f"{s / 60:.0f} min"
+    return f"{s:.0f} s" if s >= 10 else f"{s:.1f} s"
+
+
+def _feature_dims(k: int, pca_fraction: float, guide_bands: int = 2, appearance_bands: int = 3):
+    guide = max(1, int(round(pca_fraction * guide_bands * k * k)))
+    appearance = max(1, int(round(pca_fraction * appearance_bands * k * k)))
+    return guide + appearance + 3
+
+
+def _boundary(mask: np.ndarray) -> int:
+    """Pixels on the mask's border (vertical plus horizontal transitions)."""
+    return int(
+        np.count_nonzero(mask[1:] != mask[:-1]) + np.count_nonzero(mask[:, 1:] != mask[:, :-1])
+    )
+
+
+def estimate_colorize(
+    shape: tuple[int, int],
+    foreground: int,
+    boundary: int,
+    exemplars: Sequence[tuple[tuple[int, int], int, int]],
+    patch_sizes: Sequence[int],
+    pca_fraction: float = 0.2,
+) -> Estimate:
+    """Estimate peak memory and time of a colorization from sizes alone.
+
+    Parameters
+    ----------
+    shape : (H, W)
+        The query depth's shape.
+    foreground, boundary : int
+        The query's object pixels and border pixels (see :func:`guard_colorize`).
+    exemplars : sequence of ((H, W), foreground, boundary)
+        The examples the run will use.
+    patch_sizes : sequence of int
+        Window width per level, fine to coarse (as many as the run's levels).
+    pca_fraction : float
+        Fraction of the PCA basis kept.
+    """
+    height, width = shape
+    n_ex = len(exemplars)
+    ex_h = max((e[0][0] for e in exemplars), default=0)
+    ex_w = max((e[0][1] for e in exemplars), default=0)
+    per_level = []
+    work = 0.0
+    persistent = 0.0
+    for level, k in enumerate(patch_sizes):
+        scale = 2**level
+        r = k // 2
+        dims = _feature_dims(k, pca_fraction)
+        pixels = (height / scale + 2 * r) * (width / scale + 2 * r)
+        centres = min(pixels, foreground / scale**2 + r * boundary / scale)
+        candidates = sum(f / scale**2 + r * b / scale for _, f, b in exemplars)
+        ex_pixels = n_ex * (ex_h / scale + 2 * r) * (ex_w / scale + 2 * r)
+        solver = (
+            centres * (4 * dims + _QUERY_CENTRE_BYTES)
+            + candidates * (4 * dims + _CANDIDATE_BYTES)
+            + pixels * _QUERY_PIXEL_BYTES
+            + ex_pixels * _EXEMPLAR_PIXEL_BYTES
+        )
+        per_level.append((solver, centres, candidates))
+        work += centres * dims
+        persistent += 40 * height * width / scale**2
+    # Building level l keeps level l + 1's solver alive.
+    peak = max(
+        per_level[i][0] + (per_level[i + 1][0] if i + 1 < len(per_level) else 0.0)
+        for i in range(len(per_level))
+    )
+    total = _OVERHEAD_BYTES + _MEMORY_FACTOR * (peak + persistent)
+    return Estimate(
+        bytes=int(total),
+        seconds=_SECONDS_OVERHEAD + _SECONDS_PER_FEATURE * work,
+        levels=len(patch_sizes),
+        query_centres=int(per_level[0][1]),
+        candidates=int(per_level[0][2]),
+    )
+
+
+def available_memory() -> int | None:
+    """Bytes this process can still use: MemAvailable or a smaller cgroup limit (None: unknown)."""
+    available = None
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                available = int(line.split()[1]) * 1024
+                break
+    with contextlib.suppress(OSError, ValueError):
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        current = int(Path("/sys/fs/cgroup/memory.current").read_text())
+        if limit != "max":
+            room = int(limit) - current
+            available = room if available is None else min(available, room)
+    return available
+
+
+@contextlib.contextmanager
+def memory_check(enabled: bool = True) -> Iterator[None]:
+    """Switch the memory guard on or off inside a ``with`` block.
+
+    Examples
+    --------
+    >>> with memory_check(False):  # doctest: +SKIP
+    ...     result = imagemap.colorize(huge_depth, db)
+    """
+    token = _CHECK.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _CHECK.reset(token)
+
+
+def _enabled() -> bool:
+    return _CHECK.get() and os.environ.get("IMAGEMAP_NO_MEMORY_CHECK", "") in ("", "0")
+
+
+def _resolve_params(preset, m):
+    from imagemap.colorization import PRESETS, ColorizeParams
+
+    if isinstance(preset, ColorizeParams):
+        params = preset
+    elif isinstance(preset, str) and preset in PRESETS:
+        params = PRESETS[preset]
+    else:
+        params = ColorizeParams()
+    n = m if m is not None else getattr(params, "m", 2)
+    return n, tuple(params.patch_sizes), float(getattr(params, "pca_fraction", 0.2))
+
+
+def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples=None) -> Estimate:
+    """The :func:`estimate_colorize` of ``imagemap.colorize(depth, database, preset, ...)``.
+
+    Without ``examples`` the ``m`` largest examples stand for the automatic selection
+    (an upper bound).
+    """
+    from imagemap.colorization import pyramid_levels
+
+    n, patch_sizes, pca_fraction = _resolve_params(preset, m)
+    mask = np.asarray(depth) > 0
+    levels = pyramid_levels(mask, patch_sizes)
+    if examples:
+        chosen = [database[name] for name in examples]
+    else:
+        sizes = [e.depth.size for e in database]
+        order = np.argsort(sizes, kind="stable")[::-1][: max(1, min(n, len(database)))]
+        chosen = [database[int(i)] for i in order]
+    exemplars = [(e.depth.shape, int(e.mask.sum()), _boundary(e.mask)) for e in chosen]
+    return estimate_colorize(
+        mask.shape,
+        int(mask.sum()),
+        _boundary(mask),
+        exemplars,
+        patch_sizes[:levels],
+        pca_fraction,
+    )
+
+
+def guard_colorize(
+    depth: np.ndarray,
+    database,
+    preset=None,
+    m=None,
+    examples=None,
+    what: str = "the query",
+    check: bool | None = None,
+) -> Estimate | None:
+    """Estimate a colorization; log it (``-v``) and refuse it if it cannot fit in memory.
+
+    ``check`` None follows :func:`memory_check` and ``IMAGEMAP_NO_MEMORY_CHECK``
+    (when they switch the guard off, nothing is estimated and None is returned);
+    True or False estimates and logs, and refuses only if True.
+
+    Raises
+    ------
+    MemoryBudgetError
+        The estimate exceeds :func:`available_memory`; the message gives the estimate
+        and the way out (a smaller depth map, fewer examples, ``--no-memory-check``).
+    """
+    if check is None:
+        if not _enabled():
+            return None
+        check = True
+    depth = np.asarray(depth)
+    if depth.ndim != 2 or len(database) == 0:
+        return None  # the colorization's own checks say what is wrong
+    estimate = colorize_estimate(depth, database, preset, m, examples)
+    log.info(
+        "estimate for %s (%dx%d, %d levels): %s",
+        what,
+        depth.shape[1],
+        depth.shape[0],
+        estimate.levels,
+        estimate.describe(),
+    )
+    if estimate.seconds > LONG_RUN_SECONDS:
+        log.warning(
+            "%s (%dx%d) will take %s (estimated); a smaller depth map is much faster",
+            what,
+            depth.shape[1],
+            depth.shape[0],
+            estimate.describe(),
+        )
+    available = available_memory()
+    if check and available is not None and estimate.bytes > available:
+        side = max(depth.shape)
+        fit = max(1, int(side * (max(available - _OVERHEAD_BYTES, 0) / estimate.bytes) ** 0.5))
+        raise MemoryBudgetError(
+            f"{what} ({depth.shape[1]}x{depth.shape[0]}) needs {estimate.describe()}, but only "
+            f"{_format_bytes(available)} of memory is available: use a smaller depth map "
+            f"(longest side about {fit} pixels or less would fit), fewer or smaller examples "
+            "(--m 1), or run anyway with --no-memory-check "
+            "(Python: with imagemap.budget.memory_check(False))"
+        )
+    return estimate

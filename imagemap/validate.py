@@ -1,0 +1,176 @@
+"""Argument checks at the door of the Python API and of the command line.
+
+Every check raises :class:`~imagemap.io.InputError` naming the argument (API) or
+the option (CLI, through argparse's own error: exit code 2 and the option's name).
+
+Examples
+--------
+>>> check_int("m", 2, minimum=1)
+2
+>>> check_int("m", 1.5, minimum=1)
+Traceback (most recent call last):
+...
+imagemap.io.InputError: m: expected an integer, got 1.5
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import numbers
+import os
+
+import numpy as np
+
+from imagemap import budget  # also makes imagemap.budget available after "import imagemap"
+from imagemap.io import InputError
+
+__all__ = [
+    "check_colorize_arguments",
+    "check_examples",
+    "check_float",
+    "check_int",
+    "check_seed",
+    "finite_float",
+    "non_negative_float",
+    "non_negative_int",
+    "positive_int",
+]
+
+
+def check_int(name: str, value, minimum: int | None = None, maximum: int | None = None) -> int:
+    """``value`` as an int, or :class:`InputError` naming ``name``.
+
+    Booleans, floats (even 2.0) and strings are refused: ``m="2"`` is a mistake
+    that would otherwise surface deep inside NumPy.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise InputError(f"{name}: expected an integer, got {value!r}")
+    value = int(value)
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name}: must be at least {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        raise InputError(f"{name}: must be at most {maximum}, got {value}")
+    return value
+
+
+def check_seed(value, name: str = "seed") -> int:
+    """A seed for :func:`numpy.random.default_rng`: an integer >= 0."""
+    return check_int(name, value, minimum=0)
+
+
+def check_float(
+    name: str, value, minimum: float | None = None, maximum: float | None = None
+) -> float:
+    """``value`` as a finite float in [minimum, maximum], or :class:`InputError`."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise InputError(f"{name}: expected a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise InputError(f"{name}: must be a finite number, got {value}")
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name}: must be at least {minimum:g}, got {value:g}")
+    if maximum is not None and value > maximum:
+        raise InputError(f"{name}: must be at most {maximum:g}, got {value:g}")
+    return value
+
+
+def check_examples(examples) -> list[str] | None:
+    """Example names: None, one name as a string, or a sequence of names."""
+    if examples is None:
+        return None
+    if isinstance(examples, str):
+        return [examples]
+    if isinstance(examples, (bytes, dict)) or not hasattr(examples, "__iter__"):
+        raise InputError(f"examples: expected a list of example names, got {examples!r}")
+    names = list(examples)
+    for name in names:
+        if not isinstance(name, str):
+            raise InputError(f"examples: expected example names (strings), got {name!r}")
+    if len(set(names)) != len(names):
+        raise InputError(f"examples: a name is given twice in {names}")
+    return names
+
+
+def check_colorize_arguments(
+    depth,
+    database,
+    preset=None,
+    *,
+    m=None,
+    examples=None,
+    backend=None,
+    example_preference=None,
+    seed=0,
+    **_others,
+) -> list[str] | None:
+    """Check the arguments of :func:`imagemap.colorize`; return ``examples`` as a list.
+
+    Called as ``check_colorize_arguments(**locals())`` on the first line of
+    ``colorize`` (arguments it does not check are ignored). Raises
+    :class:`InputError` naming the argument, then runs the memory guard
+    (:func:`imagemap.budget.guard_colorize`), so a run too large for this machine
+    is refused before it starts.
+    """
+    from imagemap.colorization import PRESETS, ColorizeParams
+    from imagemap.database import Database
+    from imagemap.engine import BACKENDS
+
+    if isinstance(depth, (str, os.PathLike)):
+        raise InputError(
+            f"depth: expected an array, got the path {os.fspath(depth)!r} "
+            "(read it with imagemap.read_depth)"
+        )
+    if not isinstance(database, Database):
+        raise InputError(
+            "database: expected an imagemap.Database (Database.from_directory(DIR), or "
+            f"Database([Example.from_arrays(...), ...])), got {type(database).__name__}"
+        )
+    if preset is not None and not isinstance(preset, (str, ColorizeParams)):
+        raise InputError(f"preset: expected a preset name or ColorizeParams, got {preset!r}")
+    if isinstance(preset, str) and preset not in PRESETS:
+        raise InputError(f"preset: unknown preset {preset!r}; use one of {sorted(PRESETS)}")
+    if m is not None:
+        check_int("m", m, minimum=1)
+    names = check_examples(examples)
+    if backend is not None and backend not in BACKENDS:
+        raise InputError(f"backend: unknown backend {backend!r}; use one of {list(BACKENDS)}")
+    if example_preference is not None:
+        check_float("example_preference", example_preference, minimum=0.0)
+    check_seed(seed)
+    if names:
+        for name in names:
+            database[name]  # an unknown name is an InputError listing the known ones
+    budget.guard_colorize(depth, database, preset, m=m, examples=names)
+    return names
+
+
+# -- argparse types: a bad value is argparse's error naming the option (exit 2) ----------
+
+
+def _argparse_type(check, description: str):
+    def parse(text: str):
+        try:
+            value = float(text) if "float" in description else int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {description}, got {text!r}") from None
+        try:
+            return check(value)
+        except InputError as exc:
+            message = str(exc).split(": ", 1)[-1]
+            raise argparse.ArgumentTypeError(f"{message} ({description})") from None
+
+    parse.__name__ = description
+    return parse
+
+
+#: argparse ``type=`` for options that take an integer >= 1 (``--m``, ``--workers``).
+positive_int = _argparse_type(lambda v: check_int("value", v, minimum=1), "an integer >= 1")
+#: argparse ``type=`` for integers >= 0 (``--seed``, ``--holdout``).
+non_negative_int = _argparse_type(lambda v: check_int("value", v, minimum=0), "an integer >= 0")
+#: argparse ``type=`` for a finite float >= 0 (``--example-preference``).
+non_negative_float = _argparse_type(
+    lambda v: check_float("value", v, minimum=0.0), "a finite float >= 0"
+)
+#: argparse ``type=`` for any finite float.
+finite_float = _argparse_type(lambda v: check_float("value", v), "a finite float")
