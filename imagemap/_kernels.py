@@ -216,12 +216,11 @@ def vote(
     cand_x,
     matches,
     out,
-    coverage,
 ):
     """M-step: every padded query pixel becomes the weighted mean of its window estimates.
 
     ``out`` (Hq + 2r, Wq + 2r, Ca) receives the mean where at least one window
-    covers a pixel and keeps its value elsewhere; ``coverage`` gets the weight sum.
+    covers a pixel and keeps its value elsewhere.
     """
     k = window_weights.shape[0]
     height = query_lookup.shape[0]
@@ -252,7 +251,6 @@ def vote(
                     for ch in range(channels):
                         acc[ch] += w * exemplar_appearance[e, sy, sx, ch]
                     wsum += w
-            coverage[py, px] = wsum
             if wsum > 0:
                 for ch in range(channels):
                     out[py, px, ch] = acc[ch] / wsum

@@ -267,10 +267,7 @@ def _positions(ys: np.ndarray, xs: np.ndarray, frame: np.ndarray) -> np.ndarray:
 
 
 def _pad(array: np.ndarray, r: int, mode: str) -> np.ndarray:
-    width = ((r, r), (r, r), (0, 0))
-    if mode == "constant":
-        return np.pad(array, width, mode="constant")
-    return np.pad(array, width, mode=mode)
+    return np.pad(array, ((r, r), (r, r), (0, 0)), mode=mode)
 
 
 def _fit_pca(
@@ -465,15 +462,12 @@ class _LevelSolver:
         index = (self.cand_e, self.cand_y, self.cand_x)
         # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
         self.n_init_dims = self.guide_projection.n_components + 3
-        self.candidate_features = self._features(
-            self.exemplar_view, index, self.cand_position, with_appearance=True
-        )
+        self.candidate_features = self._features(self.exemplar_view, index, self.cand_position)
         self.query_view = sliding_window_view(self.query_active, (k, k), axis=(0, 1))
         self.query_features = self._features(
             self.query_view,
             (self.query_y, self.query_x),
             self.query_position,
-            with_appearance=True,
         )
         ys = self.query_y
         n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
@@ -503,7 +497,7 @@ class _LevelSolver:
             return np.ones(shape, dtype=bool)
         return ndimage.binary_dilation(mask, iterations=max(r, 1))
 
-    def _features(self, view, index, position, with_appearance: bool) -> np.ndarray:
+    def _features(self, view, index, position) -> np.ndarray:
         parts = []
         if self.guide_projection.n_components:
             parts.append(self.guide_projection.project(view, index))
@@ -511,7 +505,7 @@ class _LevelSolver:
         # sqrt of the exemplar cost for candidates, 0 for the query: adds the cost.
         bias = np.sqrt(self.cand_bias) if view is self.exemplar_view else np.zeros(len(position))
         parts.append(bias.astype(np.float32)[:, None])
-        if with_appearance and self.appearance_projection.n_components:
+        if self.appearance_projection.n_components:
             parts.append(self.appearance_projection.project(view, index))
         return np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32)
 
@@ -578,7 +572,6 @@ class _LevelSolver:
             self.timer.add("vote", start)
             return appearance_padded
         start = time.perf_counter()
-        coverage = np.zeros(appearance_padded.shape[:2], dtype=np.float64)
         _kernels.vote(
             self.exemplar_appearance,
             self.window,
@@ -588,7 +581,6 @@ class _LevelSolver:
             self.cand_x,
             matches,
             appearance_padded,
-            coverage,
         )
         self.timer.add("vote", start)
         return appearance_padded
