@@ -644,23 +644,20 @@ def export_textured(mesh, path: str | os.PathLike) -> list[Path]:
     if suffix == ".obj":
         from trimesh.exchange.obj import export_obj
 
+        mesh = mesh.copy()
+        material = getattr(mesh.visual, "material", None)
+        if material is not None:
+            material.name = path.stem  # the texture is then STEM.png, not material_0.png
         text, files = export_obj(
             mesh, include_texture=True, return_texture=True, mtl_name=f"{path.stem}.mtl"
         )
         written = []
-        for name, data in sorted(files.items()):
-            if name.endswith(".mtl"):
-                continue
+        # Texture first, then the .mtl, then the .obj: the .obj's presence means complete.
+        for name, data in sorted(files.items(), key=lambda item: item[0].endswith(".mtl")):
             target = path.parent / name
             with atomic_path(target) as tmp:
                 tmp.write_bytes(data)
             written.append(target)
-        for name, data in files.items():
-            if name.endswith(".mtl"):
-                target = path.parent / name
-                with atomic_path(target) as tmp:
-                    tmp.write_bytes(data)
-                written.append(target)
         with atomic_path(path) as tmp:
             tmp.write_text(text)
         return [*written, path]
@@ -857,7 +854,9 @@ def colorize_mesh(
     Parameters
     ----------
     mesh : trimesh.Trimesh or path
-    database : Database
+    database : Database or dict
+        The examples; or, prepared for each view (:func:`prepare_database`), a dict
+        from View to Database.
     views : list of View or str, optional
         The front by default; e.g. ``"front,back,left,right"``.
     size : (int, int)
@@ -881,9 +880,13 @@ def colorize_mesh(
         render = render_mesh(mesh, view, size)
         if not render.mask.any():
             raise InputError(f"nothing of the mesh is visible from view {view}")
+        if isinstance(database, dict):
+            examples = database[view]
+        else:
+            examples = database_at_view(database, view, size)
         result = colorize(
             render.depth,
-            database_at_view(database, view, size),
+            examples,
             preset=preset,
             seed=seed,
             **colorize_options,

@@ -40,6 +40,7 @@ examples:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import add_common_options
+    from imagemap.cli.batch import add_mesh_options
     from imagemap.colorization import PRESETS
     from imagemap.engine import BACKENDS
 
@@ -92,6 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--report", help="also write a JSON report (examples, timings, memory, target)")
     p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    add_mesh_options(p)  # mesh input and .glb/.obj output: imagemap/cli/batch.py
     add_common_options(p)
     p.set_defaults(func=run_synthesize)
 
@@ -168,11 +170,14 @@ def _plan_outputs(args: argparse.Namespace) -> list[dict]:
 
 
 def run_synthesize(args: argparse.Namespace) -> int:
+    from imagemap.cli.batch import is_mesh_request, run_mesh_synthesize
     from imagemap.colorization import colorize
     from imagemap.database import Database
     from imagemap.io import atomic_path, read_depth, write_image
     from imagemap.progress import progress
 
+    if is_mesh_request(args):  # a mesh in, or a textured mesh out
+        return run_mesh_synthesize(args)
     background = parse_colour(args.background)
     jobs = _plan_outputs(args)
     # Bad input stops at the door, before any synthesis: every depth is read first.
