@@ -385,7 +385,7 @@ def _run(todo: list[Job], databases, options: BatchOptions, workers: int, schedu
 
 def _run_pool(todo, databases, options, workers, cores):
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     workers = min(workers, len(todo))
     executor = ProcessPoolExecutor(
@@ -394,9 +394,19 @@ def _run_pool(todo, databases, options, workers, cores):
         initializer=_init_pool_worker,
         initargs=(databases, max(1, cores // workers)),
     )
+    # At most one job per worker in flight: a stop (Ctrl-C) waits only for those,
+    # and a batch of thousands holds no queue of pickled jobs.
+    pending = iter(todo)
+    running = set()
     try:
-        futures = [executor.submit(_pool_task, job, options) for job in todo]
-        for future in as_completed(futures):
+        for job in pending:
+            running.add(executor.submit(_pool_task, job, options))
+            if len(running) < workers:
+                continue
+            finished, running = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                yield future.result()
+        for future in running:
             yield future.result()
     finally:
         executor.shutdown(wait=True, cancel_futures=True)
