@@ -29,6 +29,7 @@ import hashlib
 import json
 import logging
 import os
+import pickle
 import re
 import sys
 import time
@@ -193,15 +194,15 @@ def is_complete(job: Job, options: BatchOptions, digest: str | None = None) -> b
     return bool(manifest.get("outputs"))
 
 
-def prepare_databases(database: Database, options: BatchOptions) -> dict[View, Database]:
-    """The database with every example loaded (and mesh examples rendered) per view."""
+def prepare_databases(database: Database, options: BatchOptions) -> dict[str, Database]:
+    """The database with every example loaded (and mesh examples rendered), by view ("az,el")."""
     return {
-        view: prepare_database(database_at_view(database, view, options.size))
+        str(view): prepare_database(database_at_view(database, view, options.size))
         for view in options.views
     }
 
 
-def process_job(job: Job, databases: dict[View, Database], options: BatchOptions) -> dict:
+def process_job(job: Job, databases: dict[str, Database], options: BatchOptions) -> dict:
     """Synthesize one object and write its outputs, then its manifest (all atomically)."""
     from imagemap.colorization import colorize
     from imagemap.io import read_depth, write_image
@@ -213,7 +214,7 @@ def process_job(job: Job, databases: dict[View, Database], options: BatchOptions
         depth = read_depth(job.source)
         result = colorize(
             depth,
-            databases[options.views[0]],
+            databases[str(options.views[0])],
             preset=options.preset,
             seed=options.seed,
             **options.colorize_options(),
@@ -284,8 +285,10 @@ def _pool_task(job: Job, options: BatchOptions) -> dict:
     return _safe_process(job, _WORKER["databases"], options)
 
 
-def _dask_task(job: Job, databases, options: BatchOptions, threads: int) -> dict:
-    _set_threads(threads)
+def _dask_task(payload: bytes, databases, host_threads: dict[str, int]) -> dict:
+    # Job and options travel pickled: Dask's msgpack cannot carry them (and says so).
+    job, options = pickle.loads(payload)
+    _set_threads(_dask_threads(host_threads))
     return _safe_process(job, databases, options)
 
 
@@ -329,8 +332,6 @@ def run_batch(
     -------
     BatchSummary
     """
-    from imagemap.progress import progress
-
     options = options or BatchOptions()
     if workers < 1:
         raise InputError(f"--workers must be at least 1, got {workers}")
@@ -345,14 +346,29 @@ def run_batch(
             summary.records.append({"status": "skipped", "name": job.name})
         else:
             todo.append(job)
-    start = time.perf_counter()
-    databases = prepare_databases(database, options) if todo else {}
-    summary.prepare_seconds = time.perf_counter() - start
-    if todo:
-        log.info("database prepared in %.1f s", summary.prepare_seconds)
-    results = _run(todo, databases, options, workers, scheduler)
+    client, own_client = _connect(scheduler) if scheduler is not None and todo else (None, False)
     try:
-        for record in progress(results, total=len(todo), desc="objects", quiet=quiet):
+        start = time.perf_counter()
+        databases = prepare_databases(database, options) if todo else {}
+        summary.prepare_seconds = time.perf_counter() - start
+        if todo:
+            log.info("database prepared in %.1f s", summary.prepare_seconds)
+        results = _run(todo, databases, options, workers, client)
+        _collect(results, len(todo), summary, quiet, on_result)
+        summary.seconds = time.perf_counter() - start
+    finally:
+        if own_client:
+            client.close()
+    _write_report(Path(out_dir), summary, options)
+    return summary
+
+
+def _collect(results, total: int, summary: BatchSummary, quiet: bool, on_result) -> None:
+    """Count the records as they come, with a progress bar."""
+    from imagemap.progress import progress
+
+    try:
+        for record in progress(results, total=total, desc="objects", quiet=quiet):
             summary.records.append(record)
             if record["status"] == "done":
                 summary.done += 1
@@ -364,18 +380,15 @@ def run_batch(
                 on_result(record)
     finally:
         results.close()
-        summary.seconds = time.perf_counter() - start
-    _write_report(Path(out_dir), summary, options)
-    return summary
 
 
-def _run(todo: list[Job], databases, options: BatchOptions, workers: int, scheduler):
+def _run(todo: list[Job], databases, options: BatchOptions, workers: int, client):
     """A generator of records as objects complete (closing it stops the workers)."""
     if not todo:
         return
     cores = os.cpu_count() or 1
-    if scheduler is not None:
-        yield from _run_dask(todo, databases, options, scheduler, cores)
+    if client is not None:
+        yield from _run_dask(todo, databases, options, client)
     elif workers == 1:
         for job in todo:
             yield _safe_process(job, databases, options)
@@ -412,47 +425,58 @@ def _run_pool(todo, databases, options, workers, cores):
         executor.shutdown(wait=True, cancel_futures=True)
 
 
-def _run_dask(todo, databases, options, scheduler, cores):
+def _connect(scheduler):
+    """(client, whether we opened it) for an address or a ``dask.distributed.Client``."""
     try:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client
     except ImportError as exc:
         raise InputError(
             "--scheduler needs Dask: pip install 'imagemap[dask]' (dask[distributed])"
         ) from exc
-    own = not isinstance(scheduler, Client)
-    if own:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except OSError as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from exc
-    else:
-        client = scheduler
+    if isinstance(scheduler, Client):
+        return scheduler, False
     try:
-        info = client.scheduler_info()
-        threads = sum(w.get("nthreads", 1) for w in info.get("workers", {}).values()) or 1
-        per_task = max(1, cores // threads)
-        shipped = client.scatter(databases, broadcast=True, hash=False)
-        futures = [
-            client.submit(_dask_task, job, shipped, options, per_task, pure=False) for job in todo
-        ]
-        job_of = {future.key: job for future, job in zip(futures, todo, strict=True)}
-        try:
-            for future in as_completed(futures):
-                try:
-                    yield future.result()
-                except Exception as exc:  # a worker lost: report the object, go on
-                    job = job_of[future.key]
-                    yield {
-                        "status": "failed",
-                        "name": job.name,
-                        "source": str(job.source),
-                        "error": f"{type(exc).__name__}: {exc}",
-                    }
-        finally:
-            client.cancel(futures)
+        return Client(scheduler, timeout="20s"), True
+    except OSError as exc:
+        raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from exc
+
+
+def _dask_threads(host_threads: dict[str, int]) -> int:
+    """This worker's share of its machine's cores (all Dask threads on a host share it)."""
+    from distributed import get_worker
+
+    address = get_worker().address
+    host = address.split("://")[-1].rsplit(":", 1)[0]
+    return max(1, (os.cpu_count() or 1) // max(1, host_threads.get(host, 1)))
+
+
+def _run_dask(todo, databases, options, client):
+    from dask.distributed import as_completed
+
+    host_threads: dict[str, int] = {}
+    for worker in client.scheduler_info().get("workers", {}).values():
+        host = str(worker.get("host", ""))
+        host_threads[host] = host_threads.get(host, 0) + int(worker.get("nthreads", 1))
+    shipped = client.scatter(databases, broadcast=True, hash=False)
+    futures = [
+        client.submit(_dask_task, pickle.dumps((job, options)), shipped, host_threads, pure=False)
+        for job in todo
+    ]
+    job_of = {future.key: job for future, job in zip(futures, todo, strict=True)}
+    try:
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except Exception as exc:  # a worker lost: report the object, go on
+                job = job_of[future.key]
+                yield {
+                    "status": "failed",
+                    "name": job.name,
+                    "source": str(job.source),
+                    "error": f"{type(exc).__name__}: {exc}",
+                }
     finally:
-        if own:
-            client.close()
+        client.cancel(futures)
 
 
 def _write_report(out_dir: Path, summary: BatchSummary, options: BatchOptions) -> None:

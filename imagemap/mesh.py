@@ -856,7 +856,7 @@ def colorize_mesh(
     mesh : trimesh.Trimesh or path
     database : Database or dict
         The examples; or, prepared for each view (:func:`prepare_database`), a dict
-        from View to Database.
+        from ``str(view)`` (``"az,el"``) to Database.
     views : list of View or str, optional
         The front by default; e.g. ``"front,back,left,right"``.
     size : (int, int)
@@ -881,7 +881,7 @@ def colorize_mesh(
         if not render.mask.any():
             raise InputError(f"nothing of the mesh is visible from view {view}")
         if isinstance(database, dict):
-            examples = database[view]
+            examples = database[str(view)]
         else:
             examples = database_at_view(database, view, size)
         result = colorize(
