@@ -900,12 +900,19 @@ def colorize_mesh(
     return MeshResult(mesh=textured, renders=renders, results=results)
 
 
-def render_textured(mesh, view: View | str | None = None, size=DEFAULT_SIZE, background=1.0):
-    """A flat (unlit) picture of a textured mesh from ``view``: colour at every hit.
+def render_textured(
+    mesh, view: View | str | None = None, size=DEFAULT_SIZE, background=1.0, shaded=False
+):
+    """A picture of a textured mesh from ``view``: the texture at each pixel's hit UVs.
 
-    For looking at outputs: the texture sampled at each pixel's hit UVs.
+    For looking at outputs. Unlit by default; ``shaded`` multiplies by a headlight
+    Lambert term (0.45 + 0.55 cos) so the shape shows.
     """
     render = render_mesh(mesh, view, size)
     image = render_colours(mesh, render)
+    if shaded and render.mask.any():
+        normals = np.asarray(mesh.face_normals)[render.face[render.mask]]
+        cosine = np.abs(normals @ render.view.direction)
+        image[render.mask] *= (0.45 + 0.55 * cosine)[:, None].astype(np.float32)
     image[~render.mask] = background
     return image
