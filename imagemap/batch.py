@@ -194,6 +194,14 @@ def is_complete(job: Job, options: BatchOptions, digest: str | None = None) -> b
     return bool(manifest.get("outputs"))
 
 
+def _remove_stale_temporaries(job: Job) -> None:
+    """Delete what a killed run left of this job's atomic writes (``.STEM.xxxx.SUFFIX``)."""
+    for output in [*_outputs_of(job), job.manifest]:
+        for stale in output.parent.glob(f".{output.stem}.*{output.suffix}"):
+            if stale.name != output.name:
+                stale.unlink(missing_ok=True)
+
+
 def prepare_databases(database: Database, options: BatchOptions) -> dict[str, Database]:
     """The database with every example loaded (and mesh examples rendered), by view ("az,el")."""
     return {
@@ -346,6 +354,7 @@ def run_batch(
             summary.records.append({"status": "skipped", "name": job.name})
         else:
             todo.append(job)
+            _remove_stale_temporaries(job)
     client, own_client = _connect(scheduler) if scheduler is not None and todo else (None, False)
     try:
         start = time.perf_counter()

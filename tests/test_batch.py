@@ -95,7 +95,7 @@ def test_stop_mid_batch_then_resume(fish, tmp_path):
         run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS, workers=2, on_result=stop)
     finished = len(list((tmp_path / ".imagemap-done").glob("*.json")))
     assert 1 <= finished < 4
-    summary = run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS, workers=2)
+    summary = run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS)
     assert (summary.done, summary.skipped, summary.failed) == (4 - finished, finished, 0)
     assert_valid_outputs(tmp_path)
     # A damaged output is redone; complete ones are skipped.
@@ -110,6 +110,36 @@ def test_stop_mid_batch_then_resume(fish, tmp_path):
     from imagemap.batch import is_complete
 
     assert not any(is_complete(j, other) for j in plan_jobs(fish / "queries", tmp_path, other))
+
+
+def test_killed_batch_resumes_with_every_output_complete(fish, tmp_path):
+    """SIGKILL mid-batch (no clean-up at all), then the same command again."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "imagemap", "batch", str(fish / "queries")]
+    command += ["--db", str(fish / "db"), "-o", str(out), "--preset", "fish"]
+    command += ["--size", "60x45", "--texture-size", "64", "-q"]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    process = subprocess.Popen(command, env=env)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if len(list((out / ".imagemap-done").glob("*.json"))) >= 1:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    finished = len(list((out / ".imagemap-done").glob("*.json")))
+    assert 1 <= finished < 4, "the batch must be killed mid-way"
+    (out / ".fish_005.stale1234.glb").write_bytes(b"half a file")  # as a kill leaves it
+    again = subprocess.run(command, env=env, capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr
+    report = json.loads((out / "batch_report.json").read_text())
+    assert (report["skipped"], report["done"]) == (finished, 4 - finished)
+    assert_valid_outputs(out)
 
 
 def test_a_failing_object_is_reported_and_the_rest_go_on(fish, tmp_path, caplog):
