@@ -1,4 +1,4 @@
-"""``python -m data_gen CLASS --count N --size WxH --seed S --out DIR [--holdout K]``."""
+"""``python -m data_gen CLASS --count N --size WxH --seed S --out DIR [--holdout K] [--meshes]``."""
 
 from __future__ import annotations
 
@@ -52,6 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="write the last K instances to OUT/holdout/ (queries kept out of the database)",
     )
+    parser.add_argument(
+        "--meshes",
+        action="store_true",
+        help="also write each instance as a textured mesh OUT/meshes/NAME.glb "
+        "(holdout: OUT/holdout/meshes/), for imagemap's mesh input and batches",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no log")
     return parser
 
@@ -76,6 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             size=args.size,
             holdout=args.holdout,
             quiet=args.quiet,
+            meshes=args.meshes,
         )
     except InputError as exc:
         print(f"data_gen: error: {exc}", file=sys.stderr)

@@ -9,12 +9,21 @@ from pathlib import Path
 
 import numpy as np
 
-from data_gen.core import Instance, ObjectClass, make_instance
+from data_gen.core import (
+    Instance,
+    ObjectClass,
+    SurfaceHits,
+    _interpolate_canonical,
+    _sample_view,
+    _view_rotation,
+    instance_rng,
+    make_instance,
+)
 from data_gen.render import ray_backend
 from imagemap.io import InputError, atomic_path, write_image
 from imagemap.progress import progress
 
-__all__ = ["contact_sheet", "write_class", "write_instance"]
+__all__ = ["contact_sheet", "instance_mesh", "write_class", "write_instance"]
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +44,42 @@ def write_instance(instance: Instance, directory: str | os.PathLike) -> list[Pat
     with atomic_path(sidecar) as tmp:
         tmp.write_text(json.dumps(instance.params, indent=1, sort_keys=True) + "\n")
     return [*paths, sidecar]
+
+
+def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_size: int = 512):
+    """Instance ``index`` as a textured trimesh, posed as it is rendered (view jitter included).
+
+    The class's colouring is evaluated at every texel of a UV atlas (``xatlas``), so
+    the mesh rendered from the front shows the instance's image-map. Same seed, same
+    mesh and texture.
+    """
+    import trimesh
+
+    from imagemap.mesh import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
+
+    rng = instance_rng(object_class.name, index, seed)
+    params = object_class.sample_params(rng)
+    view = _sample_view(rng, object_class.max_jitter)
+    assembly = object_class.build(params)
+    pose = _view_rotation(view["yaw"], view["pitch"], view["roll"])
+    mesh = assembly.mesh.copy()
+    mesh.apply_transform(pose)
+    vertices, faces, uv, source = uv_atlas(mesh)
+    texel, face, bary = rasterize_uv(uv, faces, texture_size)
+    points = np.einsum("nk,nkc->nc", bary, vertices[faces[face]])
+    canonical = _interpolate_canonical(mesh, assembly.vertex_canonical, face, points)
+    surface = SurfaceHits(
+        component=assembly.face_component[face],
+        component_names=assembly.component_names,
+        canonical=canonical,
+        points=trimesh.transform_points(points, np.linalg.inv(pose)).astype(np.float32),
+    )
+    _, rgb = object_class.colorize(params, surface)
+    texture = np.zeros((texture_size, texture_size, 3), dtype=np.float32)
+    texture.reshape(-1, 3)[texel] = rgb
+    covered = np.zeros((texture_size, texture_size), dtype=bool)
+    covered.flat[texel] = True
+    return textured_mesh(vertices, faces, uv, fill_from_nearest(texture, covered))
 
 
 def contact_sheet(
@@ -80,6 +125,7 @@ def write_class(
     size: tuple[int, int] | None = None,
     holdout: int = 0,
     quiet: bool = False,
+    meshes: bool = False,
 ) -> list[Instance]:
     """Make and write instances 0..count-1 of a class into ``out``.
 
@@ -99,6 +145,9 @@ def write_class(
         queries that are not in the database.
     quiet : bool, optional
         No progress bar.
+    meshes : bool, optional
+        Also write each instance as a textured mesh ``meshes/NAME.glb`` (beside the
+        database, or in ``holdout/meshes/``), posed as rendered.
 
     Returns
     -------
@@ -127,6 +176,11 @@ def write_class(
         instance = make_instance(object_class, index, seed=seed, size=size)
         target = out / "holdout" if index >= count - holdout else out
         write_instance(instance, target)
+        if meshes:
+            from imagemap.mesh import export_textured
+
+            textured = instance_mesh(object_class, index, seed=seed)
+            export_textured(textured, target / "meshes" / f"{instance.name}.glb")
         instances.append(instance)
     write_image(out / "contact_sheet.png", contact_sheet(instances))
     return instances

@@ -195,14 +195,25 @@ class Database:
         self.source = source
 
     @classmethod
-    def from_directory(cls, path: str | os.PathLike, strict: bool = True) -> Database:
-        """Open a database directory; with ``strict``, unpaired files are an error."""
+    def from_directory(
+        cls, path: str | os.PathLike, strict: bool = True, view=None, size=None
+    ) -> Database:
+        """Open a database directory; with ``strict``, unpaired files are an error.
+
+        Textured meshes in it (``NAME.glb``, ``.obj``, ``.ply``...) are examples too,
+        rendered from ``view`` at ``size`` (W, H) on first use (see :mod:`imagemap.mesh`).
+        """
+        from imagemap.mesh import mesh_examples
+
         examples, problems = _scan(Path(path))
+        meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
+        examples, problems = examples + meshes, problems + mesh_problems
         if strict and problems:
             raise InputError("; ".join(problems))
         if not examples:
             raise InputError(
-                f"{path}: no examples found (expected NAME_depth.png beside NAME_image.png)"
+                f"{path}: no examples found (expected NAME_depth.png beside NAME_image.png, "
+                "or textured meshes)"
             )
         return cls(examples, source=str(path))
 

@@ -19,6 +19,7 @@ SUBCOMMAND_MODULES = [
     "imagemap.cli.btf",
     "imagemap.cli.evaluate",
     "imagemap.cli.bench",
+    "imagemap.cli.batch",
 ]
 
 EPILOG = """\

@@ -41,6 +41,7 @@ examples:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import add_common_options
+    from imagemap.cli.batch import add_mesh_options
     from imagemap.colorization import PRESETS
     from imagemap.engine import BACKENDS
     from imagemap.validate import non_negative_float, non_negative_int, positive_int
@@ -119,6 +120,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run even when the estimated memory exceeds what is available (see -v for the "
         "estimate)",
     )
+    add_mesh_options(p)  # mesh input and .glb/.obj output: imagemap/cli/batch.py
     add_common_options(p)
     p.set_defaults(func=run_synthesize)
 
@@ -265,10 +267,13 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
 
 def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.budget import guard_colorize
+    from imagemap.cli.batch import is_mesh_request, run_mesh_synthesize
     from imagemap.database import Database
     from imagemap.io import read_depth
     from imagemap.progress import progress
 
+    if is_mesh_request(args):  # a mesh in, or a textured mesh out
+        return run_mesh_synthesize(args)
     background = parse_colour(args.background)
     jobs = _plan_outputs(args)
     # Bad input stops at the door, before any synthesis: every depth is read first.

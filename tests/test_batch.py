@@ -1,0 +1,226 @@
+"""Batches on a local pool and a real Dask LocalCluster; resumption; the mesh CLI paths."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_gen import CLASSES
+from data_gen.__main__ import main as data_gen_main
+from data_gen.core import make_instance
+from data_gen.dataset import instance_mesh
+from imagemap.batch import BatchOptions, plan_jobs, run_batch
+from imagemap.cli import main
+from imagemap.io import InputError, read_image, write_image
+from imagemap.mesh import check_textured, export_textured, load_mesh, render_textured
+
+SIZE = (60, 45)
+OPTIONS = BatchOptions(preset="fish", size=SIZE, texture_size=64)
+
+
+@pytest.fixture(scope="module")
+def fish(tmp_path_factory):
+    """A database of 3 textured fish meshes; queries: 3 meshes and 1 depth map."""
+    root = tmp_path_factory.mktemp("fish")
+    previous = os.environ.get("IMAGEMAP_CACHE")
+    os.environ["IMAGEMAP_CACHE"] = str(root / "cache")
+    for index in range(6):
+        folder = root / ("db" if index < 3 else "queries")
+        mesh = instance_mesh(CLASSES["fish"], index, seed=0, texture_size=128)
+        export_textured(mesh, folder / f"fish_{index:03d}.glb")
+    depth = make_instance(CLASSES["fish"], 6, seed=0, size=SIZE).depth
+    write_image(root / "queries" / "fish_006_depth.png", depth, bits=16)
+    yield root
+    if previous is None:
+        os.environ.pop("IMAGEMAP_CACHE", None)
+    else:
+        os.environ["IMAGEMAP_CACHE"] = previous
+
+
+def assert_valid_outputs(out: Path) -> None:
+    for name in ("fish_003", "fish_004", "fish_005"):
+        assert check_textured(out / f"{name}.glb"), name
+    rgba = read_image(out / "fish_006_image.png")
+    assert rgba.shape == (45, 60, 3) and rgba.max() > 0.1
+    assert not [p for p in out.iterdir() if p.name.startswith(".fish")]  # no temporaries
+
+
+@pytest.fixture(scope="module")
+def pool_run(fish, tmp_path_factory):
+    out = tmp_path_factory.mktemp("pool")
+    summary = run_batch(fish / "queries", fish / "db", out, OPTIONS, workers=2)
+    return out, summary
+
+
+def test_local_pool_of_two_makes_every_object(pool_run):
+    out, summary = pool_run
+    assert (summary.done, summary.skipped, summary.failed) == (4, 0, 0)
+    assert summary.per_minute > 0
+    assert_valid_outputs(out)
+    report = json.loads((out / "batch_report.json").read_text())
+    assert report["done"] == 4 and report["objects_per_minute"] > 0
+    assert {r["name"] for r in report["objects"]} == {f"fish_00{i}" for i in (3, 4, 5, 6)}
+    # The mesh queries were synthesized from the database's meshes.
+    assert all(
+        set(r["examples"]) <= {"fish_000", "fish_001", "fish_002"} for r in report["objects"]
+    )
+
+
+def test_dask_local_cluster_of_two_workers_gives_the_same_bytes(fish, pool_run, tmp_path):
+    distributed = pytest.importorskip("distributed", reason="dask[distributed] not installed")
+    pool_out, _ = pool_run
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        assert len(cluster.workers) == 2
+        summary = run_batch(
+            fish / "queries", fish / "db", tmp_path, OPTIONS, scheduler=cluster.scheduler_address
+        )
+    assert (summary.done, summary.skipped, summary.failed) == (4, 0, 0)
+    assert_valid_outputs(tmp_path)
+    for name in ("fish_003.glb", "fish_004.glb", "fish_005.glb", "fish_006_image.png"):
+        assert (tmp_path / name).read_bytes() == (pool_out / name).read_bytes(), name
+
+
+def test_stop_mid_batch_then_resume(fish, tmp_path):
+    def stop(record):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS, workers=2, on_result=stop)
+    finished = len(list((tmp_path / ".imagemap-done").glob("*.json")))
+    assert 1 <= finished < 4
+    summary = run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS)
+    assert (summary.done, summary.skipped, summary.failed) == (4 - finished, finished, 0)
+    assert_valid_outputs(tmp_path)
+    # A damaged output is redone; complete ones are skipped.
+    damaged = tmp_path / "fish_004.glb"
+    damaged.write_bytes(damaged.read_bytes()[:100])
+    summary = run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS)
+    assert (summary.done, summary.skipped) == (1, 3)
+    assert_valid_outputs(tmp_path)
+    # Other options are other outputs: nothing is skipped.
+    other = BatchOptions(preset="fish", size=SIZE, texture_size=64, seed=1)
+    assert plan_jobs(fish / "queries", tmp_path, other)
+    from imagemap.batch import is_complete
+
+    assert not any(is_complete(j, other) for j in plan_jobs(fish / "queries", tmp_path, other))
+
+
+def test_killed_batch_resumes_with_every_output_complete(fish, tmp_path):
+    """SIGKILL mid-batch (no clean-up at all), then the same command again."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "imagemap", "batch", str(fish / "queries")]
+    command += ["--db", str(fish / "db"), "-o", str(out), "--preset", "fish"]
+    command += ["--size", "60x45", "--texture-size", "64", "-q"]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    process = subprocess.Popen(command, env=env)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if len(list((out / ".imagemap-done").glob("*.json"))) >= 1:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    finished = len(list((out / ".imagemap-done").glob("*.json")))
+    assert 1 <= finished < 4, "the batch must be killed mid-way"
+    (out / ".fish_005.stale1234.glb").write_bytes(b"half a file")  # as a kill leaves it
+    again = subprocess.run(command, env=env, capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr
+    report = json.loads((out / "batch_report.json").read_text())
+    assert (report["skipped"], report["done"]) == (finished, 4 - finished)
+    assert_valid_outputs(out)
+
+
+def test_a_failing_object_is_reported_and_the_rest_go_on(fish, tmp_path, caplog):
+    queries = tmp_path / "queries"
+    queries.mkdir()
+    shutil.copy(fish / "queries" / "fish_003.glb", queries)
+    (queries / "broken.glb").write_bytes(b"glTF but not really")
+    summary = run_batch(queries, fish / "db", tmp_path / "out", OPTIONS)
+    assert (summary.done, summary.failed) == (1, 1)
+    failed = [r for r in summary.records if r["status"] == "failed"]
+    assert "broken.glb" in failed[0]["error"]
+    assert check_textured(tmp_path / "out" / "fish_003.glb")
+    assert not (tmp_path / "out" / "broken.glb").exists()
+
+
+def test_bad_batch_input_stops_at_the_door(fish, tmp_path):
+    with pytest.raises(InputError, match="nowhere: input directory not found"):
+        run_batch(tmp_path / "nowhere", fish / "db", tmp_path / "out", OPTIONS)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="empty: no depth maps"):
+        run_batch(tmp_path / "empty", fish / "db", tmp_path / "out", OPTIONS)
+    with pytest.raises(InputError, match="workers"):
+        run_batch(fish / "queries", fish / "db", tmp_path / "out", OPTIONS, workers=0)
+    assert not (tmp_path / "out").exists()
+
+
+def test_batch_cli_summary_and_skip(fish, tmp_path, capsys):
+    queries = tmp_path / "queries"
+    queries.mkdir()
+    shutil.copy(fish / "queries" / "fish_005.glb", queries)
+    shutil.copy(fish / "queries" / "fish_006_depth.png", queries)
+    args = ["batch", str(queries), "--db", str(fish / "db"), "-o", str(tmp_path / "out")]
+    args += ["--preset", "fish", "--size", "60x45", "--format", "obj"]
+    assert main(args) == 0
+    assert "2 done, 0 skipped, 0 failed" in capsys.readouterr().err
+    assert check_textured(tmp_path / "out" / "fish_005.obj")
+    assert (tmp_path / "out" / "fish_005.png").is_file()
+    assert main(args) == 0
+    assert "0 done, 2 skipped, 0 failed" in capsys.readouterr().err
+
+
+def test_synthesize_cli_mesh_to_glb_obj_png(fish, tmp_path, capsys):
+    query = str(fish / "queries" / "fish_004.glb")
+    base = ["synthesize", query, "--db", str(fish / "db"), "--preset", "fish", "--size", "60x45"]
+    assert main([*base, "-o", str(tmp_path / "a.glb"), "-q"]) == 0
+    assert main([*base, "-o", str(tmp_path / "b.glb"), "-q"]) == 0
+    assert (tmp_path / "a.glb").read_bytes() == (tmp_path / "b.glb").read_bytes()  # same seed
+    loaded = load_mesh(tmp_path / "a.glb")
+    assert check_textured(tmp_path / "a.glb") and len(loaded.faces) == 10560
+    views = ["--views", "front,back", "--texture-size", "64"]
+    assert main([*base, *views, "-o", str(tmp_path / "c.obj"), "-q"]) == 0
+    assert check_textured(tmp_path / "c.obj")
+    assert main([*base, "--view", "front", "-o", str(tmp_path / "map.png"), "-q"]) == 0
+    assert read_image(tmp_path / "map.png").shape == (45, 60, 3)
+    depth = str(fish / "queries" / "fish_006_depth.png")
+    code = main(["synthesize", depth, "--db", str(fish / "db"), "-o", str(tmp_path / "d.glb")])
+    assert code == 2 and "needs a mesh input" in capsys.readouterr().err
+    missing = ["synthesize", str(tmp_path / "missing.glb"), *base[2:], "-o", "e.glb"]
+    code = main(missing)
+    assert code == 2 and "missing.glb: mesh file not found" in capsys.readouterr().err
+
+
+def test_data_gen_meshes_look_like_their_image_maps(tmp_path):
+    from skimage.transform import resize
+
+    out = tmp_path / "fish"
+    args = ["fish", "--count", "2", "--holdout", "1", "--size", "80x60", "--meshes"]
+    assert data_gen_main([*args, "--out", str(out), "-q"]) == 0
+    assert check_textured(out / "meshes" / "fish_000.glb")
+    assert check_textured(out / "holdout" / "meshes" / "fish_001.glb")
+    truth = read_image(out / "fish_000_image.png")
+    mesh = load_mesh(out / "meshes" / "fish_000.glb")
+    seen = render_textured(mesh, "front", size=(80, 60), background=0.0)
+
+    def crop(image):
+        ys, xs = np.nonzero(image.sum(axis=2) > 0)
+        return resize(image[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1], (40, 80))
+
+    assert np.abs(crop(seen) - crop(truth)).mean() < 0.06
+    # Same seed, same mesh file.
+    again = tmp_path / "again"
+    assert data_gen_main([*args, "--out", str(again), "-q"]) == 0
+    first = (out / "meshes" / "fish_000.glb").read_bytes()
+    assert first == (again / "meshes" / "fish_000.glb").read_bytes()
