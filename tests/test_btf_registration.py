@@ -43,11 +43,13 @@ def cloth():
     return _constraint_images("cloth")
 
 
-def test_turns_rotations_and_shifts_of_shuffled_scans_are_undone(cloth):
+@pytest.mark.parametrize("material", ["cloth", "leather"])
+def test_turns_rotations_and_shifts_of_shuffled_scans_are_undone(material, cloth):
+    images = cloth if material == "cloth" else _constraint_images(material)
     order = [2, 0, 3, 1]  # the reference (first scan) is lit from azimuth 180
     angles = [0.0, 3.0, -2.5, 1.5]
     shifts = [(0.0, 0.0), (-2.5, 4.0), (3.0, -1.5), (1.0, 3.5)]
-    reg = register_scans(_scans(cloth, order, angles, shifts), max_rotation=5.0)
+    reg = register_scans(_scans(images, order, angles, shifts), max_rotation=5.0)
     # Azimuths relative to the reference's: (a - a_ref) mod 360.
     assert reg.azimuths == tuple(float((a - order[0]) % 4 * 90) for a in order)
     # skimage's rotate turns counter-clockwise; the correction turns clockwise.
@@ -55,7 +57,7 @@ def test_turns_rotations_and_shifts_of_shuffled_scans_are_undone(cloth):
     top, left, height, width = reg.crop
     c = (SIZE - CROP) // 2
     for azimuth_step, got in enumerate(reg.images):
-        want = np.rot90(cloth[(order[0] + azimuth_step) % 4], order[0])
+        want = np.rot90(images[(order[0] + azimuth_step) % 4], order[0])
         want = 0.9 * want[c : c + CROP, c : c + CROP][top : top + height, left : left + width]
         assert got.shape == want.shape
         residual, _, _ = phase_cross_correlation(want.mean(2), got.mean(2), upsample_factor=20)

@@ -165,10 +165,11 @@ def _extrapolate(args: argparse.Namespace) -> int:
 
     sample = load_btf(args.sample, finite=True)
     scans = [read_image(path) for path in args.scans]
+    response = None if args.linear_scans else _response(args.chart)
     if args.register:
         from imagemap.btf.registration import register_scans
 
-        registration = register_scans(scans, max_rotation=args.max_rotation)
+        registration = register_scans(scans, max_rotation=args.max_rotation, response=response)
         scans = registration.images
         log.info(
             "registered: azimuths %s, quarter turns %s, angles %s, shifts %s",
@@ -182,7 +183,6 @@ def _extrapolate(args: argparse.Namespace) -> int:
             f"--scans: the four scans differ in size {[s.shape for s in scans]} "
             "(--register aligns turned and shifted scans)"
         )
-    response = None if args.linear_scans else _response(args.chart)
     result = extrapolate(sample, scans, params, response=response, quiet=args.quiet)
     result.save(args.output)
     if not args.quiet:
