@@ -117,23 +117,30 @@ def test_register_undoes_turned_shuffled_scans(files, tmp_path):
 
     folder = files["folder"]
     turned = []
-    for azimuth in (0, 2, 3, 1):  # the 0-degree scan first, the rest in any order
+    for azimuth in (0, 2, 3, 1):  # the 0-degree scan first, the others in any order
         image = read_image(files["scans"][azimuth])
         turned.append(tmp_path / f"turned{azimuth}.png")
-        write_image(turned[-1], np.rot90(image, azimuth))
-    out = tmp_path / "big.npz"
+        write_image(turned[-1], np.rot90(image, azimuth))  # the lamp stays, the sample turns
     argv = ["btf", "extrapolate", str(folder / "sample.npz"), "--scans", *map(str, turned)]
-    assert main([*argv, "-o", str(out), "--register", "--max-rotation", "0", "-q"]) == 0
+    argv += ["--chart", str(folder / "chart.png"), "-q"]
+    out = tmp_path / "big.npz"
+    assert main([*argv, "-o", str(out), "--register", "--max-rotation", "0"]) == 0
     big = load_btf(out)
     margin = (SIZE - big.shape[0]) // 2
     assert big.shape[0] == big.shape[1] and margin <= 3
     truth = files["reference"].crop(margin, margin, *big.shape)
-    assert relative_error(truth, big) < relative_error(truth, tile(files["sample"], big.shape))
+    error = relative_error(truth, big)
+    assert error < relative_error(truth, tile(files["sample"], big.shape))
     # Without --register the turned scans are taken as they are: a worse result.
     plain = tmp_path / "plain.npz"
-    assert main([*argv, "-o", str(plain), "-q"]) == 0
+    assert main([*argv, "-o", str(plain)]) == 0
     unregistered = load_btf(plain).crop(margin, margin, *big.shape)
-    assert relative_error(truth, big) < relative_error(truth, unregistered)
+    assert error < 0.9 * relative_error(truth, unregistered), error
+    # --find-order runs (which frame it picks on this small, weakly anisotropic sample
+    # is not asserted here: see test_btf_registration for the orientation itself).
+    found = tmp_path / "found.npz"
+    assert main([*argv, "-o", str(found), "--register", "--find-order"]) == 0
+    assert load_btf(found).shape[0] == load_btf(found).shape[1]
 
 
 def test_moving_average_commands_refuse_clashes(files, tmp_path, capsys):

@@ -80,7 +80,14 @@ def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubP
         "--register",
         action="store_true",
         help="find the scans' quarter turns, small rotations and shifts and undo them "
-        "(the result covers the area the four scans share, a square)",
+        "(the result covers the square the four scans share)",
+    )
+    p.add_argument(
+        "--find-order",
+        action="store_true",
+        help="with --register: let the sample BTF decide which scan was lit from which "
+        "azimuth and turn the scans to its frame (for anisotropic materials; default: the "
+        "first scan is lit from azimuth 0, the others follow from their turns)",
     )
     p.add_argument(
         "--max-rotation",
@@ -171,6 +178,14 @@ def _extrapolate(args: argparse.Namespace) -> int:
 
         registration = register_scans(scans, max_rotation=args.max_rotation, response=response)
         scans = registration.images
+        if args.find_order:
+            from imagemap.btf.extrapolate import constraint_images, prepare_scans
+            from imagemap.btf.registration import apply_orientation, orient_to_sample
+
+            sample_images = constraint_images(sample)
+            prepared = prepare_scans(scans, sample_images, response=response)
+            _, hypothesis, _ = orient_to_sample(prepared, sample_images, seed=args.seed)
+            scans = apply_orientation(scans, hypothesis)
         log.info(
             "registered: azimuths %s, quarter turns %s, angles %s, shifts %s",
             registration.azimuths,
