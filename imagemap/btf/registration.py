@@ -505,13 +505,13 @@ def orient_to_sample(
     height, width = np.asarray(target_images[0]).shape[:2]
     rng = np.random.default_rng(seed)
     picks = rng.choice(height * width, size=min(n_texels, height * width), replace=False)
+    ys, xs = np.unravel_index(picks, (height, width))
     costs = {}
     for q in range(4 if height == width else 1):
         turned = [np.ascontiguousarray(np.rot90(image, q)) for image in target_images]
         for start, mirrored in LABELLINGS:
-            images = _relabel(turned, start, mirrored)
-            target_c = stack_neighbourhood(constraint_bands(images, ws=ws, wc=wc), radius=radius)
-            _, distances = index.query(target_c.reshape(-1, target_c.shape[2])[picks])
+            bands = constraint_bands(_relabel(turned, start, mirrored), ws=ws, wc=wc)
+            _, distances = index.query(_neighbourhoods_at(bands, ys, xs, radius))
             costs[(q, start, mirrored)] = float(np.mean(np.sqrt(distances)))
     q, start, mirrored = min(costs, key=costs.get)
     ranked = sorted(costs.values())
@@ -525,6 +525,15 @@ def orient_to_sample(
         ranked[1],
     )
     return apply_orientation(target_images, (q, start, mirrored)), (q, start, mirrored), costs
+
+
+def _neighbourhoods_at(bands: np.ndarray, ys, xs, radius: int) -> np.ndarray:
+    """Rows of :func:`~imagemap.btf.constraints.stack_neighbourhood` at texels (ys, xs) only."""
+    padded = np.pad(bands, ((radius, radius), (radius, radius), (0, 0)), mode="reflect")
+    offsets = range(2 * radius + 1)
+    return np.concatenate(
+        [padded[ys + dy, xs + dx] for dy in offsets for dx in offsets], axis=1
+    ).astype(np.float32)
 
 
 def apply_orientation(
