@@ -156,3 +156,19 @@ def test_moving_average_commands_refuse_clashes(files, tmp_path, capsys):
     assert "--exposure" in capsys.readouterr().err and not out.exists()
     assert main([*base, "-o", str(model)]) == 2
     assert main([*base, "-o", str(out)]) == 0 and out.exists()
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--radius", "-1"], "--radius"),
+        (["--ws", "nan"], "--ws"),
+        (["--find-order"], "--register"),
+        (["--register", "--max-rotation", "nan"], "--max-rotation"),
+        (["--seed", "-2"], "--seed"),
+    ],
+)
+def test_extrapolate_refuses_bad_options(files, tmp_path, capsys, extra, message):
+    out = tmp_path / "big.npz"
+    assert main(_extrapolate(files, "-o", str(out), "-q", *extra)) == 2
+    assert message in capsys.readouterr().err and not out.exists()

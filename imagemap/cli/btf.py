@@ -141,6 +141,14 @@ def _extrapolate(args: argparse.Namespace) -> int:
         {"sample": args.sample, "--scans": args.scans, "--chart": args.chart},
         {"-o": (".npz",)},
     )
+    if args.radius is not None and args.radius < 0:
+        raise InputError(f"--radius: must be >= 0, got {args.radius}")
+    if args.seed < 0:
+        raise InputError(f"--seed: must be >= 0, got {args.seed}")
+    if not 0 <= args.max_rotation <= 20:  # NaN fails too
+        raise InputError(f"--max-rotation: between 0 and 20 degrees, got {args.max_rotation}")
+    if args.find_order and not args.register:
+        raise InputError("--find-order: works on registered scans; add --register")
     backend = args.backend
     if args.search is not None:
         log.warning("--search is deprecated; use --backend (approximate = pca_kdtree)")
@@ -163,12 +171,6 @@ def _extrapolate(args: argparse.Namespace) -> int:
             wc=defaults.wc if args.wc is None else _weight(args.wc, "--wc"),
             seed=args.seed,
         )
-    if args.radius is not None and args.radius < 0:
-        raise InputError(f"--radius: must be >= 0, got {args.radius}")
-    if args.seed < 0:
-        raise InputError(f"--seed: must be >= 0, got {args.seed}")
-    if not 0 <= args.max_rotation <= 20:  # NaN fails too
-        raise InputError(f"--max-rotation: between 0 and 20 degrees, got {args.max_rotation}")
 
     sample = load_btf(args.sample, finite=True)
     scans = [read_image(path) for path in args.scans]
