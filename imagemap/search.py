@@ -2,14 +2,22 @@
 
 One interface, interchangeable implementations (as trimesh's ray module):
 
-- :class:`ExactIndex` — brute force with chunked float32 matrix products; the
-  reference, for tests and small inputs.
-- :class:`PynndescentIndex` — pynndescent's approximate NN-descent graph. It
-  compiles with numba on first use in a process (tens of seconds, cached on
-  disk afterwards) and is seeded for reproducibility.
+- ``"exact"`` :class:`ExactIndex` — brute force with chunked float32 matrix
+  products; the reference, for tests and small inputs.
+- ``"kdtree"`` :class:`KDTreeIndex` — exact too: scipy's k-d tree up to
+  :data:`KDTREE_MAX_DIMS` dimensions, where it is far faster, brute force beyond.
+- ``"pca_kdtree"`` :class:`PCAKDTreeIndex` — approximate: the data (and every
+  query) projected on their leading principal components (fit on the data) to
+  :data:`KDTREE_MAX_DIMS` dimensions, then an exact k-d tree there. No compile step.
+- ``"pynndescent"`` :class:`PynndescentIndex` — pynndescent's approximate
+  NN-descent graph. It compiles with numba on first use in a process (tens of
+  seconds, cached on disk afterwards) and is seeded for reproducibility.
 
-The engine's default, PatchMatch, is not an index: it searches the exemplar
-image domain warm-started from the previous matches (see ``imagemap._kernels``).
+:func:`make_index` builds any of them by name; the engine (``EngineParams.backend``)
+and the BTF pixel-wise method (``PixelwiseParams.backend``) both name their search
+with these words. The engine's default, ``"patchmatch"``, is not an index: it
+searches the exemplar image domain warm-started from the previous matches (see
+``imagemap._kernels``).
 """
 
 from __future__ import annotations
@@ -19,12 +27,24 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["ExactIndex", "NearestNeighborIndex", "PynndescentIndex", "make_index"]
+__all__ = [
+    "INDEX_BACKENDS",
+    "KDTREE_MAX_DIMS",
+    "ExactIndex",
+    "KDTreeIndex",
+    "NearestNeighborIndex",
+    "PCAKDTreeIndex",
+    "PynndescentIndex",
+    "make_index",
+]
 
 log = logging.getLogger("imagemap")
 
 #: Floats per block of the brute-force distance matrix (~128 MB in float32).
 _BLOCK_FLOATS = 32_000_000
+
+#: Beyond this many dimensions a k-d tree is no faster than brute force.
+KDTREE_MAX_DIMS = 16
 
 
 class NearestNeighborIndex(Protocol):
@@ -115,11 +135,85 @@ class PynndescentIndex:
         return indices[:, 0].astype(np.int64), (distances[:, 0] ** 2).astype(np.float32)
 
 
-_BACKENDS = {"exact": ExactIndex, "pynndescent": PynndescentIndex}
+class KDTreeIndex:
+    """Exact nearest neighbours: scipy's k-d tree, or brute force beyond 16 dimensions.
+
+    Examples
+    --------
+    >>> KDTreeIndex(np.eye(3, dtype=np.float32)).query(np.array([[0.1, 0.9, 0.0]]))[0]
+    array([1])
+    """
+
+    name = "kdtree"
+
+    def __init__(self, data: np.ndarray, seed: int = 0) -> None:
+        self.data = np.ascontiguousarray(data, dtype=np.float32)
+        if self.data.shape[1] > KDTREE_MAX_DIMS:
+            self.tree, self.exact = None, ExactIndex(self.data)
+        else:
+            from scipy.spatial import cKDTree
+
+            self.tree, self.exact = cKDTree(self.data), None
+
+    def query(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        queries = np.ascontiguousarray(queries, dtype=np.float32)
+        if self.tree is None:
+            return self.exact.query(queries)
+        distances, indices = self.tree.query(queries, k=1, workers=-1)
+        return indices.astype(np.int64), (distances**2).astype(np.float32)
+
+
+class PCAKDTreeIndex:
+    """Approximate nearest neighbours: PCA (fit on the data) to ``dims``, then a k-d tree.
+
+    Neighbourhood vectors are highly redundant, so a few principal components keep
+    nearly all their spread; with at most ``dims`` dimensions nothing is projected and
+    the search is exact. Distances are those in the projected space.
+
+    Parameters
+    ----------
+    data : ndarray, shape (N, D)
+    seed : int
+        Unused (the index is deterministic); accepted like the other indexes'.
+    dims : int
+        Principal components kept.
+    """
+
+    name = "pca_kdtree"
+
+    def __init__(self, data: np.ndarray, seed: int = 0, dims: int = KDTREE_MAX_DIMS) -> None:
+        data = np.ascontiguousarray(data, dtype=np.float32)
+        self.mean, self.basis = None, None
+        if data.shape[1] > dims:
+            self.mean = data.mean(axis=0)
+            # Principal directions from the D x D covariance (eigh): for N >> D several
+            # times faster than an SVD of the N x D data, the same subspace.
+            centred = (data - self.mean).astype(np.float64)
+            _, vectors = np.linalg.eigh(centred.T @ centred)
+            self.basis = np.ascontiguousarray(vectors[:, ::-1][:, :dims], dtype=np.float32)
+            data = (data - self.mean) @ self.basis
+        self.tree = KDTreeIndex(data)
+
+    def query(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        queries = np.asarray(queries, dtype=np.float32)
+        if self.basis is not None:
+            queries = (queries - self.mean) @ self.basis
+        return self.tree.query(queries)
+
+
+#: The index names :func:`make_index` knows.
+INDEX_BACKENDS = ("exact", "kdtree", "pca_kdtree", "pynndescent")
+
+_BACKENDS = {
+    "exact": ExactIndex,
+    "kdtree": KDTreeIndex,
+    "pca_kdtree": PCAKDTreeIndex,
+    "pynndescent": PynndescentIndex,
+}
 
 
 def make_index(backend: str, data: np.ndarray, seed: int = 0) -> NearestNeighborIndex:
-    """Build the index of the named backend (``"exact"`` or ``"pynndescent"``) over ``data``."""
+    """Build the index named ``backend`` (one of :data:`INDEX_BACKENDS`) over ``data``."""
     try:
         cls = _BACKENDS[backend]
     except KeyError:

@@ -18,7 +18,7 @@ from imagemap.btf.constraints import (
     surface_descriptors,
 )
 from imagemap.btf.extrapolate import (
-    ExtrapolationParams,
+    PixelwiseParams,
     TextureOptimizationParams,
     constraint_images,
     pixelwise,
@@ -189,7 +189,7 @@ def test_pixelwise_with_own_constraints_reproduces_the_sample(tiny_experiment):
     _, sample = tiny_experiment
     images = constraint_images(sample)
     for radius in (0, 1):
-        params = ExtrapolationParams(radius=radius, ws=1.0, wc=10.0, search="exact")
+        params = PixelwiseParams(radius=radius, ws=1.0, wc=10.0, backend="kdtree")
         result, source = pixelwise(sample, images, images, params)
         np.testing.assert_array_equal(result.eigentextures, sample.eigentextures)
         assert relative_error(sample, result) == pytest.approx(0.0, abs=1e-3)
@@ -209,7 +209,7 @@ def test_both_methods_beat_tiling_on_a_procedural_material(tiny_experiment):
     targets = prepare_scans(scans, sample_images)
     tiling_error = relative_error(reference, tile(sample, reference.shape))
     pw, _ = pixelwise(
-        sample, sample_images, targets, ExtrapolationParams(radius=0, ws=0, wc=1, search="exact")
+        sample, sample_images, targets, PixelwiseParams(radius=0, ws=0, wc=1, backend="kdtree")
     )
     to_params = TextureOptimizationParams(radius=3, levels=2, stride=2, max_iterations=3)
     to, _ = texture_optimization(sample, sample_images, targets, to_params)
@@ -280,7 +280,7 @@ def test_cli_extrapolate_and_render(tmp_path, tiny_experiment):
         write_image(scan_paths[-1], scanner_response(image, seed=i))  # 8-bit PNG
     out = tmp_path / "big.npz"
     argv = ["btf", "extrapolate", str(tmp_path / "sample.npz"), "--scans", *scan_paths]
-    assert main([*argv, "-o", str(out), "--search", "exact", "-q"]) == 0
+    assert main([*argv, "-o", str(out), "--backend", "kdtree", "-q"]) == 0
     big = BTF.load(out)
     assert big.shape == (64, 64)
     assert relative_error(reference, big) < relative_error(reference, tile(sample, (64, 64)))

@@ -3,9 +3,13 @@
 The compressed BTF object and its error measure live in :mod:`imagemap.btf.core`;
 the scanner constraints in :mod:`imagemap.btf.constraints`; the two synthesis
 methods in :mod:`imagemap.btf.extrapolate`; the Bonn UBO2014 reader in
-:mod:`imagemap.btf.ubo2014`; the paper's Table 2 in :mod:`imagemap.btf.experiment`.
+:mod:`imagemap.btf.ubo2014` (:func:`load_btf` reads either format); the scanner's
+response from a colour chart in :mod:`imagemap.btf.response`; registration of the
+four scans in :mod:`imagemap.btf.registration`; the paper's Table 2 in
+:mod:`imagemap.btf.experiment`.
 """
 
 from imagemap.btf.core import BTF, compress, directions_to_vectors, relative_error
+from imagemap.btf.files import load_btf
 
-__all__ = ["BTF", "compress", "directions_to_vectors", "relative_error"]
+__all__ = ["BTF", "compress", "directions_to_vectors", "load_btf", "relative_error"]

@@ -141,8 +141,10 @@ def color_correct(scan: np.ndarray, *, response: ScannerResponse = TABLE1_RESPON
 
     Example
     -------
-    >>> color_correct(np.full((1, 1, 3), 0.51, np.float32))[0, 0, 0]  # 1.18 * 0.5**1.71
-    0.3603...
+    >>> round(float(color_correct(np.full((1, 1, 3), 0.51, np.float32))[0, 0, 0]), 4)
+    0.3607
+    >>> round(1.18 * 0.5**1.71, 4)  # red: m = 1.18, o = 0.01, gamma = 1.71
+    0.3607
     """
     scan = _image(scan, "scan")
     o, m, g = _response_arrays(response)

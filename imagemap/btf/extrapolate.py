@@ -7,8 +7,8 @@ theta 22 deg at azimuths 0, 90, 180, 270 (scans, or rows of a reference BTF).
 
 Example
 -------
->>> from imagemap.btf.extrapolate import extrapolate, ExtrapolationParams
->>> params = ExtrapolationParams(radius=0, ws=0.0, wc=1.0)
+>>> from imagemap.btf.extrapolate import extrapolate, PixelwiseParams
+>>> params = PixelwiseParams(radius=0, ws=0.0, wc=1.0)
 >>> big = extrapolate(sample, scans, params)  # doctest: +SKIP
 """
 
@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from imagemap.io import InputError
 __all__ = [
     "CONSTRAINT_AZIMUTHS",
     "CONSTRAINT_THETA",
+    "PixelwiseParams",
     "ExtrapolationParams",
     "TextureOptimizationParams",
     "constraint_images",
@@ -52,12 +54,15 @@ log = logging.getLogger("imagemap")
 CONSTRAINT_THETA = 22.0
 CONSTRAINT_AZIMUTHS = (0.0, 90.0, 180.0, 270.0)
 
-#: Beyond this many dimensions a k-d tree is no faster than brute force.
-_KDTREE_MAX_DIMS = 16
+#: The pixel-wise method's searches (:data:`imagemap.search.INDEX_BACKENDS`).
+PIXELWISE_BACKENDS = ("pca_kdtree", "kdtree", "exact", "pynndescent")
+
+#: Former names of the pixel-wise search (``search=``) -> the index that ran them.
+_OLD_SEARCH_NAMES = {"approximate": "pca_kdtree", "exact": "kdtree", "pynndescent": "pynndescent"}
 
 
 @dataclass(frozen=True)
-class ExtrapolationParams:
+class PixelwiseParams:
     """Parameters of the pixel-wise method (Eqs. 5-6).
 
     Parameters
@@ -66,11 +71,13 @@ class ExtrapolationParams:
         Neighbourhood radius R of the extended constraint vectors.
     ws, wc : float
         Weights of the surface descriptors and the colours.
-    search : {"approximate", "exact", "pynndescent"}
-        "approximate": vectors of more than 16 dimensions are reduced by PCA (fit on
-        the sample) to 16, then searched exactly with a k-d tree. "exact": a k-d tree
-        (scipy) for at most 16 dimensions, chunked brute force (BLAS) beyond.
-        "pynndescent": pynndescent's graph (seeded; compiles on first use).
+    backend : {"pca_kdtree", "kdtree", "exact", "pynndescent"}
+        The nearest-neighbour index (:func:`imagemap.search.make_index`).
+        "pca_kdtree": vectors of more than 16 dimensions are reduced by PCA (fit on
+        the sample) to 16, then searched exactly with a k-d tree. "kdtree": exact, a
+        k-d tree up to 16 dimensions, chunked brute force (BLAS) beyond. "exact":
+        brute force always. "pynndescent": pynndescent's graph (seeded; compiles on
+        first use).
     seed : int
         Seed of the approximate search.
     """
@@ -78,8 +85,43 @@ class ExtrapolationParams:
     radius: int = 0
     ws: float = 0.0
     wc: float = 1.0
-    search: str = "approximate"
+    backend: str = "pca_kdtree"
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.backend not in PIXELWISE_BACKENDS:
+            raise InputError(f"backend: {self.backend!r} is not one of {PIXELWISE_BACKENDS}")
+        if isinstance(self.radius, bool) or not isinstance(self.radius, int | np.integer):
+            raise InputError(f"radius: an integer >= 0, got {self.radius!r}")
+        if self.radius < 0:
+            raise InputError(f"radius: an integer >= 0, got {self.radius}")
+        for name in ("ws", "wc"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise InputError(f"{name}: a finite weight >= 0, got {value}")
+
+
+def ExtrapolationParams(  # noqa: N802 - the deprecated class name
+    radius: int = 0,
+    ws: float = 0.0,
+    wc: float = 1.0,
+    search: str = "approximate",
+    seed: int = 0,
+) -> PixelwiseParams:
+    """Deprecated: :class:`PixelwiseParams` under its former name and vocabulary.
+
+    ``search`` "approximate" is now ``backend="pca_kdtree"`` and "exact"
+    ``backend="kdtree"`` (the same searches as before).
+    """
+    warnings.warn(
+        "ExtrapolationParams is deprecated; use PixelwiseParams (search= is now backend=: "
+        "'approximate' -> 'pca_kdtree', 'exact' -> 'kdtree')",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    if search not in _OLD_SEARCH_NAMES:
+        raise InputError(f"search: {search!r} is not 'approximate', 'exact' or 'pynndescent'")
+    return PixelwiseParams(radius, ws, wc, backend=_OLD_SEARCH_NAMES[search], seed=seed)
 
 
 @dataclass(frozen=True)
@@ -122,7 +164,6 @@ class TextureOptimizationParams:
     pca_max_components: int = 24
     backend: str = "patchmatch"
     seed: int = 0
-    extra: dict = field(default_factory=dict)
 
 
 def constraint_images(
@@ -171,41 +212,21 @@ def prepare_scans(
     return align_histograms(corrected, factors)
 
 
-def _search(sample: np.ndarray, target: np.ndarray, params: ExtrapolationParams) -> np.ndarray:
+def _search(sample: np.ndarray, target: np.ndarray, params: PixelwiseParams) -> np.ndarray:
     """Index of the nearest sample row for every target row (Eq. 6)."""
-    from imagemap.search import ExactIndex, PynndescentIndex
+    from imagemap.search import make_index
 
     # Bands with weight 0 are 0 everywhere: they cost time and change nothing.
     used = np.any(sample != 0, axis=0) | np.any(target != 0, axis=0)
     sample, target = sample[:, used], target[:, used]
-    if params.search == "exact":
-        if sample.shape[1] <= _KDTREE_MAX_DIMS:
-            from scipy.spatial import cKDTree
-
-            return cKDTree(sample).query(target, k=1, workers=-1)[1].astype(np.int64)
-        return ExactIndex(sample).query(target)[0]
-    if params.search == "approximate":
-        if sample.shape[1] > _KDTREE_MAX_DIMS:
-            # Neighbourhood vectors are highly redundant: PCA (fit on the sample) to the
-            # k-d tree's comfortable size, then an exact search there. No compile step,
-            # unlike pynndescent (about 90 s in every new process on a 2-core machine).
-            mean = sample.mean(axis=0)
-            _, _, vt = np.linalg.svd(sample - mean, full_matrices=False)
-            basis = vt[:_KDTREE_MAX_DIMS].T
-            sample, target = (sample - mean) @ basis, (target - mean) @ basis
-        from scipy.spatial import cKDTree
-
-        return cKDTree(sample).query(target, k=1, workers=-1)[1].astype(np.int64)
-    if params.search == "pynndescent":
-        return PynndescentIndex(sample, seed=params.seed).query(target)[0]
-    raise InputError(f"search: {params.search!r} is not 'approximate', 'exact' or 'pynndescent'")
+    return make_index(params.backend, sample, seed=params.seed).query(target)[0]
 
 
 def pixelwise(
     sample: BTF,
     sample_images: Sequence[np.ndarray],
     target_images: Sequence[np.ndarray],
-    params: ExtrapolationParams = ExtrapolationParams(),
+    params: PixelwiseParams = PixelwiseParams(),
 ) -> tuple[BTF, np.ndarray]:
     """Pixel-wise extrapolation (Eq. 6): copy the V Sigma row of the nearest constraint vector.
 
@@ -216,7 +237,7 @@ def pixelwise(
     sample_images : four (h, w, 3) constraint images of the sample.
     target_images : four (H, W, 3) constraint images of the large sample (prepared
         scans: colour-corrected and histogram-aligned).
-    params : ExtrapolationParams
+    params : PixelwiseParams
 
     Returns
     -------
@@ -301,7 +322,6 @@ def texture_optimization(
         normalize_bands=False,
         guide_padding="reflect",
         stride=params.stride,
-        **params.extra,
     )
     query = [Mapping(guide=g) for g in gaussian_pyramid(target_guide, levels=params.levels)]
     exemplar = [
@@ -319,7 +339,7 @@ def texture_optimization(
 def extrapolate(
     sample: BTF,
     scans: Sequence[np.ndarray],
-    params: ExtrapolationParams | TextureOptimizationParams = ExtrapolationParams(),
+    params: PixelwiseParams | TextureOptimizationParams = PixelwiseParams(),
     *,
     response: ScannerResponse | None = TABLE1_RESPONSE,
     quiet: bool = True,

@@ -136,7 +136,7 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
     width, height = f.scalars("I"), f.scalars("I")
     if signature.endswith(b"R"):
         f.array(np.float32, 9 * f.scalars("I"))  # local frame rotations: unused
-    f.scalars("I")  # total components
+    f.scalars("I")  # total components (btflib: the largest channel's k); unused
     code = f.scalars("i")
     color_mean = np.array(f.scalars("f", 3), np.float32)
     color_matrix = f.array(np.float32, 9).reshape(3, 3)
@@ -154,10 +154,15 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
         sigma = f.array(dtype, k).astype(np.float32)
         u = f.array(dtype, n_rows * k).reshape(n_rows, k).astype(np.float32)
         sxv = f.array(dtype, n_cols * k).reshape(n_cols, k).astype(np.float32)
-        if (n_rows, n_cols) == (n_texels, n_pairs):
+        # The normal layout first (as btflib's get_fmf_eigen_abrdfs): when the texel
+        # count equals views x lights the two layouts have the same sizes, and files
+        # written by btflib and by write_ubo2014 are normal.
+        if (n_rows, n_cols) == (n_pairs, n_texels):
+            pass
+        elif (n_rows, n_cols) == (n_texels, n_pairs):
             # Images stacked column-wise instead: the roles of the factors swap.
             u, sxv = sxv / np.where(sigma > 0, sigma, 1), u * sigma
-        elif (n_rows, n_cols) != (n_pairs, n_texels):
+        else:
             raise InputError(
                 f"{path}: channel {channel}: factor sizes {n_rows}x{n_cols} do not match "
                 f"{n_views} views x {n_lights} lights and {width}x{height} texels"
@@ -202,8 +207,11 @@ def write_ubo2014(
     color_matrix: np.ndarray | None = None,
     channels: Sequence[str] = ("R", "G", "B"),
     scalar_size: int = 4,
+    layout: str = "abrdfs",
 ) -> Path:
     """Write per-channel factors in the DFMF layout (version-4 meta block), atomically.
+
+    Every shape is checked before anything is written.
 
     Parameters
     ----------
@@ -215,6 +223,15 @@ def write_ubo2014(
         A value of :data:`COLOR_MODEL_CODES`.
     scalar_size : {2, 4, 8}
         float16, float32 or float64.
+    layout : {"abrdfs", "images"}
+        "abrdfs" (btflib's files): U holds the ABRDFs' factor, SxV the texels'.
+        "images": the transposed matrix (U rows are texels, SxV rows direction
+        pairs), which some Bonn files use; the reader accepts both.
+
+    Raises
+    ------
+    InputError
+        Inconsistent shapes or options (nothing is written).
 
     Example
     -------
@@ -224,10 +241,27 @@ def write_ubo2014(
     codes = {name: code for code, name in COLOR_MODEL_CODES.items()}
     if color_model not in codes:
         raise InputError(f"color_model: {color_model!r} not one of {sorted(codes)}")
+    if scalar_size not in _SCALAR_TYPES:
+        raise InputError(f"scalar_size: {scalar_size!r} not one of {sorted(_SCALAR_TYPES)}")
+    if layout not in ("abrdfs", "images"):
+        raise InputError(f"layout: {layout!r} not 'abrdfs' or 'images'")
+    light_dirs = _check_directions(light_dirs, "light_dirs")
+    view_dirs = _check_directions(view_dirs, "view_dirs")
+    n_pairs = len(light_dirs) * len(view_dirs)
+    us, sigmas, sxvs = _check_factors(
+        eigen_abrdfs, singular_values, eigentextures, channels, n_pairs
+    )
+    mean = np.asarray(color_mean, dtype=np.float64)
+    matrix = np.eye(3) if color_matrix is None else np.asarray(color_matrix, dtype=np.float64)
+    if mean.shape != (3,) or matrix.shape != (3, 3):
+        raise InputError(
+            f"color_mean, color_matrix: expected (3,) and (3, 3), got {mean.shape}, {matrix.shape}"
+        )
+
     dtype = np.dtype(_SCALAR_TYPES[scalar_size]).newbyteorder("<")
-    height, width = np.asarray(eigentextures[0]).shape[:2]
-    lights = np.deg2rad(np.asarray(light_dirs, np.float32)).astype("<f4")
-    views = np.deg2rad(np.asarray(view_dirs, np.float32)).astype("<f4")
+    height, width = sxvs[0].shape[:2]
+    lights = np.deg2rad(light_dirs).astype("<f4")
+    views = np.deg2rad(view_dirs).astype("<f4")
     meta = struct.pack("<I", 4) + b"\0" * 240 + struct.pack("<4f", 1.0, 1.0, 1.0, 1.0)
     meta += struct.pack("<II", 0, 0)  # cosine flag, XML length
     meta += struct.pack("<I", len(channels))
@@ -237,18 +271,70 @@ def write_ubo2014(
     for view in views:
         parts += [view.tobytes(), struct.pack("<I", len(lights)), lights.tobytes()]
     parts += [struct.pack("<II", width, height), struct.pack("<I", 0)]  # no rotations
-    matrix = np.eye(3) if color_matrix is None else np.asarray(color_matrix)
+    # The total-components field holds the largest channel's k, as btflib writes it.
     parts += [
-        struct.pack("<Ii", sum(np.asarray(s).size for s in singular_values), codes[color_model]),
-        np.asarray(color_mean, "<f4").tobytes(),
+        struct.pack("<Ii", max(s.size for s in sigmas), codes[color_model]),
+        mean.astype("<f4").tobytes(),
         matrix.astype("<f4").tobytes(),
     ]
-    for u, s, w in zip(eigen_abrdfs, singular_values, eigentextures, strict=True):
-        u, s = np.asarray(u), np.asarray(s)
-        w = np.asarray(w).reshape(height * width, -1)
+    for u, s, w in zip(us, sigmas, sxvs, strict=True):
+        w = w.reshape(height * width, -1)
+        if layout == "images":
+            u, w = w / np.where(s > 0, s, 1), u * s
         parts += [struct.pack("<BIII", scalar_size, s.size, u.shape[0], w.shape[0])]
         parts += [s.astype(dtype).tobytes(), u.astype(dtype).tobytes(), w.astype(dtype).tobytes()]
     path = Path(path)
     with atomic_path(path) as tmp:
         tmp.write_bytes(b"".join(parts))
     return path
+
+
+def _check_directions(value, name: str) -> np.ndarray:
+    array = np.asarray(value, dtype=np.float32)
+    if array.ndim != 2 or array.shape[1] != 2 or len(array) < 1:
+        raise InputError(f"{name}: expected (n, 2) (theta, phi) in degrees, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise InputError(f"{name}: has NaN or infinite values")
+    return array
+
+
+def _check_factors(eigen_abrdfs, singular_values, eigentextures, channels, n_pairs: int):
+    """The per-channel factors as float64 arrays, or InputError naming what disagrees."""
+    counts = {
+        "channels": len(channels),
+        "eigen_abrdfs": len(eigen_abrdfs),
+        "singular_values": len(singular_values),
+        "eigentextures": len(eigentextures),
+    }
+    if len(set(counts.values())) != 1 or counts["channels"] < 1:
+        raise InputError(f"one factor per channel needed; got {counts}")
+    us, sigmas, sxvs = [], [], []
+    for c, name in enumerate(channels):
+        u = np.asarray(eigen_abrdfs[c], dtype=np.float64)
+        s = np.asarray(singular_values[c], dtype=np.float64)
+        w = np.asarray(eigentextures[c], dtype=np.float64)
+        where = f"channel {name!r}"
+        if s.ndim != 1 or s.size < 1:
+            raise InputError(f"singular_values[{c}] ({where}): expected (k,), got {s.shape}")
+        k = s.size
+        if u.shape != (n_pairs, k):
+            raise InputError(
+                f"eigen_abrdfs[{c}] ({where}): expected ({n_pairs}, {k}) for the direction "
+                f"pairs (views x lights) and k = {k} singular values, got {u.shape}"
+            )
+        if w.ndim != 3 or w.shape[2] != k:
+            raise InputError(
+                f"eigentextures[{c}] ({where}): expected (height, width, {k}), got {w.shape}"
+            )
+        if sxvs and w.shape[:2] != sxvs[0].shape[:2]:
+            raise InputError(
+                f"eigentextures[{c}] ({where}): {w.shape[0]}x{w.shape[1]} texels, channel "
+                f"{channels[0]!r} has {sxvs[0].shape[0]}x{sxvs[0].shape[1]}"
+            )
+        for array, label in ((u, "eigen_abrdfs"), (s, "singular_values"), (w, "eigentextures")):
+            if not np.all(np.isfinite(array)):
+                raise InputError(f"{label}[{c}] ({where}): has NaN or infinite values")
+        us.append(u)
+        sigmas.append(s)
+        sxvs.append(w)
+    return us, sigmas, sxvs

@@ -2,7 +2,9 @@
 
 Each topic registers its subcommands from its own module (listed in
 ``SUBCOMMAND_MODULES``): a module exposes ``register(subparsers)`` and sets
-``func`` on each parser it adds; ``func(args)`` returns the exit code.
+``func`` on each parser it adds; ``func(args)`` returns the exit code. A module
+that makes a command group (``imagemap btf``) returns ``{group: subparsers}``;
+the modules of ``GROUP_MODULES`` add their subcommands to that group.
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ SUBCOMMAND_MODULES = [
     "imagemap.cli.bench",
     "imagemap.cli.batch",
 ]
+
+#: Modules adding subcommands to a group made by a module above: group -> modules.
+GROUP_MODULES = {"btf": ["imagemap.cli.btf_ma"]}
 
 EPILOG = """\
 examples:
@@ -47,8 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=_version())
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    groups: dict[str, argparse._SubParsersAction] = {}
     for name in SUBCOMMAND_MODULES:
-        importlib.import_module(name).register(subparsers)
+        groups.update(importlib.import_module(name).register(subparsers) or {})
+    for group, names in GROUP_MODULES.items():
+        for name in names:
+            importlib.import_module(name).register(groups[group])
     return parser
 
 

@@ -7,27 +7,19 @@ import logging
 import sys
 from pathlib import Path
 
+from imagemap.btf import load_btf
+from imagemap.btf.extrapolate import PIXELWISE_BACKENDS
+from imagemap.cli.paths import check_paths
 from imagemap.io import InputError
 
 log = logging.getLogger("imagemap")
 
 METHODS = ("pixelwise", "texture_optimization")
+BTF_INPUT = "sample BTF (.npz written by imagemap, or UBO2014 .btf)"
 
 
-def load_btf(path: str | Path):
-    """A BTF from our ``.npz`` or a Bonn UBO2014 DFMF ``.btf`` file."""
-    from imagemap.btf import BTF
-    from imagemap.btf.ubo2014 import read_ubo2014
-
-    path = Path(path)
-    if path.suffix.lower() == ".btf":
-        return read_ubo2014(path)
-    if path.suffix.lower() == ".npz":
-        return BTF.load(path)
-    raise InputError(f"{path}: unsupported BTF format {path.suffix!r} (use .npz or .btf)")
-
-
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubParsersAction]:
+    """Add ``imagemap btf`` and its subcommands; returns the group for other modules."""
     from imagemap.cli import add_common_options
 
     parser = subparsers.add_parser(
@@ -46,13 +38,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="sample BTF + four scans -> large BTF (.npz)",
         description="Synthesize the eigentextures of the large sample; U is the sample's.",
     )
-    p.add_argument("sample", help="sample BTF (.npz written by imagemap, or UBO2014 .btf)")
+    p.add_argument("sample", help=BTF_INPUT)
     p.add_argument(
         "--scans",
         nargs=4,
         required=True,
         metavar=("SCAN0", "SCAN90", "SCAN180", "SCAN270"),
-        help="four scans of the large sample, light azimuths 0, 90, 180, 270",
+        help="four scans of the large sample, light azimuths 0, 90, 180, 270 (with "
+        "--register: the 0 degree scan first, the others in any order)",
     )
     p.add_argument("-o", "--output", required=True, help="output BTF (.npz)")
     p.add_argument("--method", choices=METHODS, default="pixelwise")
@@ -60,12 +53,47 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--ws", type=float, default=None, help="surface weight (pixelwise 0)")
     p.add_argument("--wc", type=float, default=None, help="colour weight (pixelwise 1)")
     p.add_argument(
-        "--search", choices=("approximate", "exact", "pynndescent"), default="approximate"
+        "--backend",
+        choices=PIXELWISE_BACKENDS,
+        default=None,
+        help="pixel-wise nearest-neighbour search (default pca_kdtree; kdtree and exact are exact)",
     )
     p.add_argument(
+        "--search",
+        choices=("approximate", "exact", "pynndescent"),
+        default=None,
+        help=argparse.SUPPRESS,  # deprecated: --backend (approximate = pca_kdtree)
+    )
+    response = p.add_mutually_exclusive_group()
+    response.add_argument(
         "--linear-scans",
         action="store_true",
         help="scans are already linear (skip the Table 1 colour correction)",
+    )
+    response.add_argument(
+        "--chart",
+        metavar="PNG",
+        help="a scan of an X-Rite ColorChecker (cropped to the chart) from the same "
+        "scanner: its fitted response replaces the paper's Table 1 constants",
+    )
+    p.add_argument(
+        "--register",
+        action="store_true",
+        help="find the scans' quarter turns, small rotations and shifts and undo them "
+        "(the result covers the square the four scans share)",
+    )
+    p.add_argument(
+        "--find-order",
+        action="store_true",
+        help="with --register: let the sample BTF decide which scan was lit from which "
+        "azimuth and turn the scans to its frame (for anisotropic materials; default: the "
+        "first scan is lit from azimuth 0, the others follow from their turns)",
+    )
+    p.add_argument(
+        "--max-rotation",
+        type=float,
+        default=5.0,
+        help="with --register: largest rotation searched besides quarter turns (degrees)",
     )
     p.add_argument("--seed", type=int, default=0)
     add_common_options(p)
@@ -77,7 +105,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Decompress the image nearest to a light and view direction.",
     )
     p.add_argument("btf", help="BTF (.npz or UBO2014 .btf)")
-    p.add_argument("-o", "--output", required=True, help="output PNG")
+    p.add_argument("-o", "--output", required=True, help="output image (.png)")
     p.add_argument("--light", nargs=2, type=float, default=(45.0, 0.0), metavar=("THETA", "PHI"))
     p.add_argument("--view", nargs=2, type=float, default=(0.0, 0.0), metavar=("THETA", "PHI"))
     p.add_argument("--exposure", type=float, default=1.0, help="multiply radiance before gamma")
@@ -101,40 +129,77 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_common_options(p)
     p.set_defaults(func=_experiment)
 
-    try:  # issue 6's moving-average subcommands hang off the same `btf` group
-        from imagemap.cli import btf_ma
-    except ImportError:
-        btf_ma = None
-    if btf_ma is not None:
-        btf_ma.register(btf_subparsers)
+    return {"btf": btf_subparsers}
 
 
 def _extrapolate(args: argparse.Namespace) -> int:
-    from imagemap.btf.extrapolate import ExtrapolationParams, TextureOptimizationParams, extrapolate
+    from imagemap.btf.extrapolate import PixelwiseParams, TextureOptimizationParams, extrapolate
     from imagemap.io import read_image
 
-    sample = load_btf(args.sample)
-    scans = [read_image(path) for path in args.scans]
-    if any(s.shape != scans[0].shape for s in scans):
-        raise InputError(f"--scans: the four scans differ in size {[s.shape for s in scans]}")
+    check_paths(
+        {"-o": args.output},
+        {"sample": args.sample, "--scans": args.scans, "--chart": args.chart},
+        {"-o": (".npz",)},
+    )
+    if args.radius is not None and args.radius < 0:
+        raise InputError(f"--radius: must be >= 0, got {args.radius}")
+    if args.seed < 0:
+        raise InputError(f"--seed: must be >= 0, got {args.seed}")
+    if not 0 <= args.max_rotation <= 20:  # NaN fails too
+        raise InputError(f"--max-rotation: between 0 and 20 degrees, got {args.max_rotation}")
+    if args.find_order and not args.register:
+        raise InputError("--find-order: works on registered scans; add --register")
+    backend = args.backend
+    if args.search is not None:
+        log.warning("--search is deprecated; use --backend (approximate = pca_kdtree)")
+        if backend is None:
+            backend = {"approximate": "pca_kdtree", "exact": "kdtree"}.get(args.search, args.search)
     if args.method == "pixelwise":
-        defaults = ExtrapolationParams()
-        params = ExtrapolationParams(
+        defaults = PixelwiseParams()
+        params = PixelwiseParams(
             radius=defaults.radius if args.radius is None else args.radius,
-            ws=defaults.ws if args.ws is None else args.ws,
-            wc=defaults.wc if args.wc is None else args.wc,
-            search=args.search,
+            ws=defaults.ws if args.ws is None else _weight(args.ws, "--ws"),
+            wc=defaults.wc if args.wc is None else _weight(args.wc, "--wc"),
+            backend=backend or defaults.backend,
             seed=args.seed,
         )
     else:
         defaults = TextureOptimizationParams()
         params = TextureOptimizationParams(
             radius=defaults.radius if args.radius is None else args.radius,
-            ws=defaults.ws if args.ws is None else args.ws,
-            wc=defaults.wc if args.wc is None else args.wc,
+            ws=defaults.ws if args.ws is None else _weight(args.ws, "--ws"),
+            wc=defaults.wc if args.wc is None else _weight(args.wc, "--wc"),
             seed=args.seed,
         )
-    response = None if args.linear_scans else _table1()
+
+    sample = load_btf(args.sample, finite=True)
+    scans = [read_image(path) for path in args.scans]
+    response = None if args.linear_scans else _response(args.chart)
+    if args.register:
+        from imagemap.btf.registration import register_scans
+
+        registration = register_scans(scans, max_rotation=args.max_rotation, response=response)
+        scans = registration.images
+        if args.find_order:
+            from imagemap.btf.extrapolate import constraint_images, prepare_scans
+            from imagemap.btf.registration import apply_orientation, orient_to_sample
+
+            sample_images = constraint_images(sample)
+            prepared = prepare_scans(scans, sample_images, response=response)
+            _, hypothesis, _ = orient_to_sample(prepared, sample_images, seed=args.seed)
+            scans = apply_orientation(scans, hypothesis)
+        log.info(
+            "registered: azimuths %s, quarter turns %s, angles %s, shifts %s",
+            registration.azimuths,
+            registration.turns,
+            [round(a, 2) for a in registration.angles],
+            [tuple(round(v, 2) for v in s) for s in registration.shifts],
+        )
+    elif any(s.shape != scans[0].shape for s in scans):
+        raise InputError(
+            f"--scans: the four scans differ in size {[s.shape for s in scans]} "
+            "(--register aligns turned and shifted scans)"
+        )
     result = extrapolate(sample, scans, params, response=response, quiet=args.quiet)
     result.save(args.output)
     if not args.quiet:
@@ -146,10 +211,35 @@ def _extrapolate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _table1():
+def _weight(value: float, name: str) -> float:
+    if not value >= 0 or value == float("inf"):  # NaN fails the first test
+        raise InputError(f"{name}: a finite weight >= 0, got {value}")
+    return value
+
+
+def _response(chart: str | None):
+    """The scanner response: fitted from a chart scan, or the paper's Table 1."""
     from imagemap.btf.constraints import TABLE1_RESPONSE
 
-    return TABLE1_RESPONSE
+    if chart is None:
+        return TABLE1_RESPONSE
+    from imagemap.btf.response import fit_chart_response
+    from imagemap.io import read_image
+
+    try:
+        fit = fit_chart_response(read_image(chart))
+    except InputError as exc:
+        raise InputError(f"--chart {chart}: {exc}") from exc
+    r = fit.response
+    log.info(
+        "scanner response from %s: offsets %s, multipliers %s, gammas %s (RMS %s)",
+        chart,
+        [round(v, 4) for v in r.offsets],
+        [round(v, 3) for v in r.multipliers],
+        [round(v, 3) for v in r.gammas],
+        [round(v, 4) for v in fit.rms_scan_error],
+    )
+    return r
 
 
 def _render(args: argparse.Namespace) -> int:
@@ -157,7 +247,13 @@ def _render(args: argparse.Namespace) -> int:
 
     from imagemap.io import write_image
 
-    btf = load_btf(args.btf)
+    check_paths({"-o": args.output}, {"btf": args.btf}, {"-o": (".png",)})
+    for name, (theta, phi) in (("--light", args.light), ("--view", args.view)):
+        if not (np.isfinite(theta) and np.isfinite(phi) and 0 <= theta <= 90):
+            raise InputError(f"{name}: THETA in 0..90 and a finite PHI, got {theta} {phi}")
+    if not (np.isfinite(args.exposure) and args.exposure > 0):
+        raise InputError(f"--exposure: a finite number > 0, got {args.exposure}")
+    btf = load_btf(args.btf, finite=True)
     light = btf.nearest_light(*args.light)
     view = btf.nearest_view(*args.view)
     image = np.clip(btf.image(light, view) * args.exposure, 0.0, 1.0)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from imagemap.btf import load_btf
+from imagemap.cli.paths import check_paths
 from imagemap.io import InputError
 
 
@@ -67,11 +69,13 @@ def _fit(args: argparse.Namespace) -> int:
         fit_moving_average_btf,
         parameter_count,
     )
-    from imagemap.cli.btf import load_btf
     from imagemap.io import write_image
 
-    if Path(args.output).suffix.lower() != ".npz":
-        raise InputError(f"{args.output}: the model is written as .npz")
+    check_paths(
+        {"-o": args.output, "--range-map": args.range_map},
+        {"sample": args.sample},
+        {"-o": (".npz",), "--range-map": (".png",)},
+    )
     params = MAParams(
         levels=args.levels,
         support=args.support,
@@ -112,13 +116,21 @@ def _synthesize(args: argparse.Namespace) -> int:
     height, width = args.size
     if height < 1 or width < 1:
         raise InputError(f"--size: must be positive, got {height} {width}")
+    check_paths(
+        {"-o": args.output},
+        {"model": args.model, "--sample": args.sample},
+        {"-o": (".npz", ".png")},
+    )
+    for name, (theta, phi) in (("--light", args.light), ("--view", args.view)):
+        if not (np.isfinite(theta) and np.isfinite(phi) and 0 <= theta <= 90):
+            raise InputError(f"{name}: THETA in 0..90 and a finite PHI, got {theta} {phi}")
+    if not (np.isfinite(args.exposure) and args.exposure > 0):
+        raise InputError(f"--exposure: a finite number > 0, got {args.exposure}")
     model = MovingAverageModel.load(args.model)
     suffix = Path(args.output).suffix.lower()
     if suffix == ".npz":
         if not args.sample:
             raise InputError("--sample: required for a BTF (.npz) output (its U is shared)")
-        from imagemap.cli.btf import load_btf
-
         result = synthesize_btf(model, load_btf(args.sample), (height, width), seed=args.seed)
         result.save(args.output)
     elif suffix == ".png":
