@@ -403,7 +403,7 @@ def run_btf(
 ) -> list[dict]:
     from imagemap.btf.experiment import PIXELWISE_SETTINGS
     from imagemap.btf.extrapolate import (
-        ExtrapolationParams,
+        PixelwiseParams,
         TextureOptimizationParams,
         constraint_images,
         pixelwise,
@@ -422,13 +422,13 @@ def run_btf(
     rows = []
     # The pixel-wise method's searches: PCA + k-d tree ("approximate", the default),
     # pynndescent, or exact.
-    pixel_searches = [("pca+kdtree", "approximate")] if "patchmatch" in backends else []
+    pixel_searches = [("pca+kdtree", "pca_kdtree")] if "patchmatch" in backends else []
     pixel_searches += [("pynndescent", "pynndescent")] if "pynndescent" in backends else []
-    pixel_searches += [("exact", "exact")] if "exact" in backends else []
+    pixel_searches += [("exact", "kdtree")] if "exact" in backends else []
     for radius in settings.radii:
         ws, wc = by_radius[radius]
         for backend, search in pixel_searches:
-            params = ExtrapolationParams(radius=radius, ws=ws, wc=wc, search=search, seed=0)
+            params = PixelwiseParams(radius=radius, ws=ws, wc=wc, backend=search, seed=0)
 
             def call(params=params):
                 targets = prepare_scans(data.scans, sample_images)
