@@ -113,7 +113,7 @@ class ColorizeParams:
     m: int = 2
     patch_sizes: tuple[int, ...] = (7, 11, 9)
     depth_weight: float = 1.0
-    depth_detail_weight: float = 0.75
+    depth_detail_weight: float = 2.0
     luma_weight: float = 1.0
     chroma_weight: float = 0.5
     position_weight: float = 1.0
