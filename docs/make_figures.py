@@ -106,7 +106,7 @@ def crops_figure(count: int = 12) -> np.ndarray:
             box = (max(cy - half, 0), cy + half, max(cx - half, 0), cx + half)
             tiles = [
                 _caption(_crop(_on_backdrop(query.image, mask), box), f"{cls} {what}: truth"),
-                _caption(_crop(_on_backdrop(paper.image, mask), box), "paper (mean vote)"),
+                _caption(_crop(_on_backdrop(paper.image, mask), box), "mean vote (paper)"),
                 _caption(_crop(_on_backdrop(default.image, mask), box), "default"),
                 _caption(_crop(_on_backdrop(pasted, mask), box), "nearest pasted"),
             ]
