@@ -256,6 +256,7 @@ def method_params(method: str, params: ColorizeParams) -> ColorizeParams | None:
             max_iterations=0,
             position_weight=0.0,
             vote="mean",
+            grow_pyramid=False,  # one level: Fig. 1 has no pyramid
         )
     if method == "mean_vote":
         return replace(params, vote="mean")

@@ -154,7 +154,7 @@ def test_method_params_of_the_baselines():
     with pytest.raises(InputError, match="unknown method"):
         method_params("best", fish)
     assert method_params("mean_vote", fish).vote == "mean" and fish.vote == "copy"
-    assert one.vote == "mean"  # Fig. 1 of the paper votes by the mean
+    assert one.vote == "mean" and not one.grow_pyramid  # Fig. 1: one level, mean vote
     assert set(METHODS) == {
         "full",
         "copy_nearest",
