@@ -6,7 +6,6 @@ import csv
 import math
 import shutil
 
-import numpy as np
 import pytest
 
 from data_gen.dataset import write_class
