@@ -108,7 +108,12 @@ class TextureOptimizationParams:
         Window features kept after PCA.
     backend : str
         The engine's nearest-neighbour backend.
+    final_copy : bool
+        After the engine, give each texel the V Sigma row of its own match in the
+        final source map (no averaging in eigen-space) instead of the vote's mean.
     seed : int
+    extra : dict
+        Further :class:`imagemap.engine.EngineParams` fields (e.g. ``window_sigma``).
     """
 
     radius: int = 8
@@ -121,6 +126,7 @@ class TextureOptimizationParams:
     max_iterations: int = 4
     pca_max_components: int = 24
     backend: str = "patchmatch"
+    final_copy: bool = False
     seed: int = 0
     extra: dict = field(default_factory=dict)
 
@@ -313,6 +319,10 @@ def texture_optimization(
         )
     ]
     result = synthesize(query, [exemplar], engine_params, seed=params.seed, quiet=quiet)
+    if params.final_copy:
+        # One exemplar: source (H, W, 3) is (0, y, x) of each texel's match.
+        copied = sample.eigentextures[result.source[..., 1], result.source[..., 2]]
+        return sample.with_eigentextures(np.ascontiguousarray(copied)), result
     return sample.with_eigentextures(result.appearance[0]), result
 
 
