@@ -380,6 +380,12 @@ def comparison_picture(
     return canvas
 
 
+def _detail_crop(params: ExperimentParams) -> tuple[int, int, int]:
+    """A square near the top-left corner, clear of the centred cut-out (full resolution)."""
+    side = max(8, min(160, params.size * 5 // 16))
+    return params.size // 16, params.size // 16, side
+
+
 def _label(canvas: np.ndarray, names: Sequence[tuple[str, int]]) -> np.ndarray:
     try:
         from PIL import Image, ImageDraw
@@ -407,8 +413,9 @@ def run_experiment(
     """Run :func:`run_material` for each material; write table2.csv, table2.md, PNGs.
 
     Writes ``out/table2.csv`` (material, method, rel_error_pct, seconds),
-    ``out/table2.md`` and ``out/<material>_comparison.png`` (reference, then each
-    method, one row per comparison light, top view). Materials are looked up in
+    ``out/table2.md``, ``out/<material>_comparison.png`` (reference, then each
+    method, one row per comparison light, top view) and ``out/<material>_detail.png``
+    (the same for a square away from the cut-out, at full resolution). Materials are looked up in
     ``sources``, then in :data:`MATERIAL_SOURCES`.
 
     Returns
@@ -436,6 +443,9 @@ def run_experiment(
         )
         rows += material_rows
         write_image(out / f"{name}_comparison.png", comparison_picture(renders))
+        write_image(
+            out / f"{name}_detail.png", comparison_picture(renders, crop=_detail_crop(params))
+        )
         _write_csv(out / "table2.csv", rows)
     seconds = time.perf_counter() - total
     order = " | ".join(["reference", *[r["method"] for r in rows if r["material"] == materials[0]]])
@@ -448,7 +458,8 @@ def run_experiment(
         f"and seconds per method. Whole run: {seconds:.0f} s.\n\n"
         f"{format_table(rows)}\n\n"
         f"Comparison images (`<material>_comparison.png`), columns left to right: "
-        f"{order}; rows: light {lights}; top view.\n"
+        f"{order}; rows: light {lights}; top view. `<material>_detail.png`: the "
+        f"square {_detail_crop(params)} (top, left, side), away from the cut-out.\n"
     )
     with atomic_path(out / "table2.md") as tmp:
         tmp.write_text(text)
