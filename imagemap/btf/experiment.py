@@ -11,8 +11,11 @@ with a lamp colour and noise); then time each method and measure its relative
 error against S' from the factors alone.
 
 Methods: ``tiling`` (the sample repeated), the paper's four pixel-wise settings,
-``texture_optimization`` (the engine), and any method plugged in through
-``extra_methods`` (``moving_average`` by default: see :func:`default_extra_methods`).
+``texture_optimization`` (the engine, the paper's R = 8), two probes that are not in
+the paper (:data:`TUNED_TEXTURE`, texture optimization with small windows, and
+:data:`PIXELWISE_MEAN_SETTINGS`, the mean of the 16 nearest texels), and any method
+plugged in through ``extra_methods`` (``moving_average`` by default: see
+:func:`default_extra_methods`).
 
 Material sources: a source is a callable ``(size, seed) -> (S, light_dirs,
 view_dirs)`` giving the ground-truth BTF matrix (rows light x view x RGB, columns
@@ -30,6 +33,7 @@ Example
 from __future__ import annotations
 
 import csv
+import dataclasses
 import logging
 import os
 import time
@@ -55,7 +59,9 @@ from imagemap.btf.extrapolate import (
 from imagemap.io import InputError, atomic_path, write_image
 
 __all__ = [
+    "PIXELWISE_MEAN_SETTINGS",
     "PIXELWISE_SETTINGS",
+    "TUNED_TEXTURE",
     "MATERIAL_SOURCES",
     "ExperimentParams",
     "GroundTruth",
@@ -79,6 +85,14 @@ PIXELWISE_SETTINGS = {
     "pixelwise_R1_ws1_wc10": (1, 1.0, 10.0),
     "pixelwise_R2_ws1_wc10": (2, 1.0, 10.0),
 }
+
+#: Not in the paper: R = 1 pixel-wise with the mean of the 16 nearest texels' rows, a
+#: probe of how much of a method's score comes from averaging candidates.
+PIXELWISE_MEAN_SETTINGS = {"pixelwise_R1_ws1_wc10_mean16": (1, 1.0, 10.0, 16)}
+
+#: Not in the paper: texture optimization with the settings that did best in our
+#: study (small windows, every window matched; README, BTF section).
+TUNED_TEXTURE = {"texture_optimization_R2_stride1": {"radius": 2, "stride": 1}}
 
 #: A method hook: (sample BTF, output shape (H, W), seed) -> BTF sharing the sample's U.
 ExtraMethod = Callable[[BTF, tuple[int, int], int], BTF]
@@ -271,7 +285,14 @@ def run_methods(
         method (and "reference") -> one (H, W, 3) linear image per comparison light.
     """
     extra_methods = dict(extra_methods or {})
-    all_methods = ["tiling", *PIXELWISE_SETTINGS, "texture_optimization", *extra_methods]
+    all_methods = [
+        "tiling",
+        *PIXELWISE_SETTINGS,
+        "texture_optimization",
+        *TUNED_TEXTURE,
+        *PIXELWISE_MEAN_SETTINGS,
+        *extra_methods,
+    ]
     methods = list(methods) if methods else all_methods
     unknown = [m for m in methods if m not in all_methods]
     if unknown:
@@ -290,10 +311,19 @@ def run_methods(
             target_images = prepare_scans(truth.scans, sample_images)
             pw = ExtrapolationParams(radius, ws, wc, search=params.search, seed=params.seed)
             result, _ = pixelwise(sample, sample_images, target_images, pw)
-        elif method == "texture_optimization":
+        elif method in PIXELWISE_MEAN_SETTINGS:
+            radius, ws, wc, k = PIXELWISE_MEAN_SETTINGS[method]
             target_images = prepare_scans(truth.scans, sample_images)
+            search = params.search if params.search != "pynndescent" else "approximate"
+            pw = ExtrapolationParams(radius, ws, wc, search=search, seed=params.seed, neighbours=k)
+            result, _ = pixelwise(sample, sample_images, target_images, pw)
+        elif method == "texture_optimization" or method in TUNED_TEXTURE:
+            target_images = prepare_scans(truth.scans, sample_images)
+            texture = params.texture
+            if method in TUNED_TEXTURE:
+                texture = dataclasses.replace(texture, **TUNED_TEXTURE[method])
             result, _ = texture_optimization(
-                sample, sample_images, target_images, params.texture, quiet=quiet
+                sample, sample_images, target_images, texture, quiet=quiet
             )
         else:
             result = extra_methods[method](sample, shape, params.seed)
