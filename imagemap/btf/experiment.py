@@ -149,7 +149,10 @@ class ExperimentParams:
         Cut-out side for some materials (the paper used 256 for its cloth).
     texture : TextureOptimizationParams
     comparison_lights : sequence of (theta, phi)
-        Lights of the rendered comparison images (top view), one row each.
+        Lights of the rendered comparison images, one row each.
+    comparison_view : (theta, phi)
+        View of the comparison images (the top view by default; an oblique view
+        shows what the scans cannot see: parallax, varnish, fibres).
     seed : int
     """
 
@@ -163,6 +166,7 @@ class ExperimentParams:
     sample_sizes: Mapping[str, int] = field(default_factory=lambda: {"cloth": 256, "velvet": 256})
     texture: TextureOptimizationParams = field(default_factory=TextureOptimizationParams)
     comparison_lights: tuple[tuple[float, float], ...] = ((60.0, 45.0), (22.0, 180.0))
+    comparison_view: tuple[float, float] = (0.0, 0.0)
     seed: int = 0
 
     def sample_side(self, name: str) -> int:
@@ -263,7 +267,7 @@ def prepare_material(
 
 
 def _renders(btf: BTF, params: ExperimentParams) -> list[np.ndarray]:
-    view = btf.nearest_view(0.0, 0.0)
+    view = btf.nearest_view(*params.comparison_view)
     return [btf.image(btf.nearest_light(*light), view) for light in params.comparison_lights]
 
 
@@ -488,7 +492,8 @@ def run_experiment(
         f"and seconds per method. Whole run: {seconds:.0f} s.\n\n"
         f"{format_table(rows)}\n\n"
         f"Comparison images (`<material>_comparison.png`), columns left to right: "
-        f"{order}; rows: light {lights}; top view. `<material>_detail.png`: the "
+        f"{order}; rows: light {lights}; view theta {params.comparison_view[0]:g}, phi "
+        f"{params.comparison_view[1]:g}. `<material>_detail.png`: the "
         f"square {_detail_crop(params)} (top, left, side), away from the cut-out.\n"
     )
     with atomic_path(out / "table2.md") as tmp:
