@@ -78,12 +78,16 @@ __all__ = [
 
 log = logging.getLogger("imagemap")
 
-#: The paper's four pixel-wise trials (Table 2): name -> (R, ws, wc).
+#: The paper's four pixel-wise trials (Table 2), then R = 1 and 2 on colour only (not in
+#: the paper: separates the neighbourhood's effect from the descriptors'):
+#: name -> (R, ws, wc).
 PIXELWISE_SETTINGS = {
     "pixelwise_R0_ws0_wc1": (0, 0.0, 1.0),
     "pixelwise_R0_ws1_wc0": (0, 1.0, 0.0),
     "pixelwise_R1_ws1_wc10": (1, 1.0, 10.0),
     "pixelwise_R2_ws1_wc10": (2, 1.0, 10.0),
+    "pixelwise_R1_ws0_wc1": (1, 0.0, 1.0),
+    "pixelwise_R2_ws0_wc1": (2, 0.0, 1.0),
 }
 
 #: Not in the paper: R = 1 pixel-wise with the mean of the 16 nearest texels' rows, a
