@@ -2,7 +2,10 @@
 
 Each material is a height field (in pixel units) with an albedo (linear RGB), a
 glossy strength and a Blinn-Phong exponent per texel. :func:`render_btf_matrix`
-renders it under every (light, view) pair of a hemisphere sampling with
+renders it under every (light, view) pair of a hemisphere sampling.
+
+**Easy materials** (cloth, leather, wallpaper, wood; the control set) are shaded
+in place:
 
     radiance = albedo * (ambient * occlusion + cos(n, l) * shadow)
                + gloss * shadow * cos(n, h) ** shininess * (cos(n, l) > 0)
@@ -10,10 +13,24 @@ renders it under every (light, view) pair of a hemisphere sampling with
 where ``shadow`` is the cast shadow of the height field along the light (found
 by marching towards the light and comparing shifted heights, one whole image
 per step) and ``occlusion`` a local ambient occlusion (how far a texel lies
-below its blurred surroundings): the non-local shading that makes a BTF's
-apparent BRDFs differ from a plain SVBRDF. Views change the glossy term only:
-the texels stay registered on the reference plane (no parallax), as in a
-rectified BTF.
+below its blurred surroundings). Views change the glossy term only: the texels
+stay registered on the reference plane (no parallax). On these, each texel's
+whole BTF follows from its albedo, normal and gloss, which the four flatbed
+scans nearly reveal.
+
+**Hard materials** (:data:`HARD_MATERIALS`: velvet, lacquered_leather, cobbles)
+add what the scans cannot see (see :func:`render_btf_matrix`):
+
+* parallax and self-occlusion: for every view, the ray through each texel of
+  the reference plane (z = 0, the mean height) is marched down the height
+  field, and the texel shows the surface point it hits first;
+* cast shadows per light, looked up at that hit point;
+* spatially varying roughness, with the glossy strength set so that the
+  highlight at the scans' half vector (11 deg from the normal) does not depend
+  on it: rough and polished texels scan alike and differ elsewhere;
+* a second layer: a clear varnish with its own sharp lobe on a levelled
+  surface (invisible where the half vector is 11 deg off), or fibres standing
+  over the base, seen edge-on only from oblique views (none from the top).
 
 Sampling (:func:`default_sampling`), directions as (theta, phi) in degrees,
 theta the polar angle from the normal (the paper's theta_i):
@@ -38,6 +55,7 @@ Example
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from scipy import ndimage
@@ -47,10 +65,15 @@ from imagemap.procedural import color_ramp, fbm, stripes, worley
 from imagemap.procedural import wood as wood_rings
 
 __all__ = [
+    "EASY_MATERIALS",
+    "HARD_MATERIALS",
     "MATERIALS",
     "Material",
+    "scan_configuration",
+    "view_hits",
     "default_sampling",
     "make_material",
+    "ground_truth",
     "render_btf_matrix",
     "shadow_mask",
 ]
@@ -71,6 +94,20 @@ class Material:
     gloss : (H, W) float32 glossy strength.
     shininess : (H, W) float32 Blinn-Phong exponent.
     name : str
+    margin : int
+        Texels of extra surface on every side of the rendered region (hard
+        materials: rays of oblique views and shadows reach beyond the region).
+        All fields have the padded shape; the render is (H - 2 margin)^2.
+    parallax : bool
+        Render by ray marching each view (parallax, self-occlusion), not in place.
+    varnish : (H, W) float32 or None
+        Strength of a clear coat with a sharp lobe (exponent
+        :data:`VARNISH_SHININESS`) on a levelled surface (tilt at most
+        :data:`VARNISH_MAX_TILT` degrees).
+    fibres : (H, W) float32 or None
+        Density of fibres standing over the base, seen edge-on from oblique views
+        only: coverage 1 - exp(-FIBRE_COVER * density * tan(theta_view)).
+    fibre_albedo : (H, W, 3) float32 or None
     """
 
     height: np.ndarray
@@ -78,6 +115,18 @@ class Material:
     gloss: np.ndarray
     shininess: np.ndarray
     name: str = ""
+    margin: int = 0
+    parallax: bool = False
+    varnish: np.ndarray | None = None
+    fibres: np.ndarray | None = None
+    fibre_albedo: np.ndarray | None = None
+
+    @property
+    def hard(self) -> bool:
+        """True when :func:`render_btf_matrix` uses the layered, ray-marched renderer."""
+        return bool(
+            self.parallax or self.margin or self.varnish is not None or self.fibres is not None
+        )
 
 
 def default_sampling() -> tuple[np.ndarray, np.ndarray]:
@@ -198,11 +247,195 @@ def _wood(size: int, rng: np.random.Generator) -> Material:
     return Material(height, albedo, gloss, shininess, "wood")
 
 
-MATERIALS = {"cloth": _cloth, "leather": _leather, "wallpaper": _wallpaper, "wood": _wood}
+#: The control set: each texel's BTF follows from what the scans show.
+EASY_MATERIALS = {"cloth": _cloth, "leather": _leather, "wallpaper": _wallpaper, "wood": _wood}
+
+
+# ------------------------------------------------------------------ hard materials
+#: Padding of the hard materials (texels each side): rays of the 60 deg views travel
+#: |height| * tan(60 deg) across the reference plane, shadows further.
+HARD_MARGIN = 32
+#: Blinn-Phong exponent of the varnish lobe and the largest tilt of its levelled
+#: surface: at the scans' half vector (11 deg off the normal) cos(10 deg)^400 < 0.003.
+VARNISH_SHININESS = 400.0
+VARNISH_MAX_TILT = 1.0
+#: Fibre coverage per density per tan(theta_view).
+FIBRE_COVER = 1.5
+
+
+def scan_configuration() -> tuple[tuple[float, float], list[tuple[float, float]]]:
+    """The flatbed scans' view (theta, phi) and four lights: top view, theta 22 deg."""
+    return (0.0, 0.0), [(22.0, phi) for phi in (0.0, 90.0, 180.0, 270.0)]
+
+
+def _scan_balanced_gloss(strength: np.ndarray, shininess: np.ndarray) -> np.ndarray:
+    """Glossy strength whose highlight at the scans' half vector is ``strength``.
+
+    Top view, light at theta 22: the half vector is 11 deg off a flat texel's
+    normal, so gloss * cos(11 deg)^shininess is what a scan sees. Dividing by
+    cos(11 deg)^shininess makes rough and polished texels scan alike; they differ
+    at every other half vector.
+    """
+    return (strength / np.cos(np.deg2rad(11.0)) ** shininess).astype(np.float32)
+
+
+def _cells(
+    points: np.ndarray, rng: np.random.Generator, frequency: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Jittered-grid Voronoi cells: distances F1, F2 (cell units) and the nearest cell's id."""
+    table = 4096
+    jitter = rng.random((table, 2)).astype(np.float32)
+    flat = points.reshape(-1, 2) * np.float32(frequency)
+    base = np.floor(flat).astype(np.int64)
+    f1 = np.full(len(flat), np.inf, np.float32)
+    f2 = np.full(len(flat), np.inf, np.float32)
+    ident = np.zeros(len(flat), np.int64)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            cell = base + np.array([dx, dy])
+            key = (cell[:, 0] * 73856093 ^ cell[:, 1] * 19349663) % table
+            distance = np.linalg.norm(flat - (cell + jitter[key]), axis=1).astype(np.float32)
+            closer = distance < f1
+            f2 = np.where(closer, f1, np.minimum(f2, distance))
+            ident = np.where(closer, key, ident)
+            f1 = np.where(closer, distance, f1)
+    shape = points.shape[:-1]
+    return f1.reshape(shape), f2.reshape(shape), ident.reshape(shape)
+
+
+def _velvet(size: int, rng: np.random.Generator) -> Material:
+    """Crushed velvet: a woven base with a pile of fibres whose density the scans cannot see.
+
+    From the top the pile is seen end-on (no coverage), so the four scans show the
+    dyed base only; from 30 and 60 deg the fibres (lighter, with a forward sheen)
+    cover the base by the local density, an fbm of its own (crushed patches).
+    """
+    full = size + 2 * HARD_MARGIN
+    points = _grid(full)
+    period = 6
+    yy, xx = np.mgrid[0:full, 0:full]
+    column, row = xx // period, yy // period
+    u = (xx % period + 0.5) / period * 2 - 1
+    v = (yy % period + 0.5) / period * 2 - 1
+    warp_over = (column + row) % 2 == 0
+    profile = np.where(
+        warp_over, np.sqrt(np.clip(1 - u**2, 0, 1)), np.sqrt(np.clip(1 - v**2, 0, 1))
+    )
+    height = ndimage.gaussian_filter(
+        2.5 * profile + 0.4 * fbm(points, seed=rng, frequency=20.0), 0.7
+    )
+    motif = stripes(points, direction=(1.0, 0.4), frequency=2.0, sharpness=4.0)
+    base = color_ramp(motif, [(0.30, 0.03, 0.06), (0.55, 0.10, 0.12)])
+    dye = 1.0 + 0.2 * fbm(points, octaves=3, seed=rng, frequency=3.0)
+    albedo = base * dye[..., None] * np.where(warp_over, 1.0, 0.85)[..., None]
+    shininess = np.full((full, full), 15.0, np.float32)
+    gloss = _scan_balanced_gloss(np.full((full, full), 0.05, np.float32), shininess)
+    crushed = fbm(points, octaves=4, seed=rng, frequency=2.5)
+    fibres = np.clip(0.55 + 1.2 * crushed, 0.0, 1.0).astype(np.float32)
+    fibre_albedo = np.clip(0.55 * albedo + np.array([0.28, 0.12, 0.16], np.float32), 0, 1)
+    return Material(
+        height,
+        albedo,
+        gloss,
+        shininess,
+        "velvet",
+        margin=HARD_MARGIN,
+        parallax=True,
+        fibres=fibres,
+        fibre_albedo=fibre_albedo.astype(np.float32),
+    )
+
+
+def _lacquered_leather(size: int, rng: np.random.Generator) -> Material:
+    """Deep-grained leather, polished in patches, with a varnish that the scans miss.
+
+    Relief about 9 texels (parallax of up to 8 texels at 60 deg, cast shadows);
+    roughness varies on its own (an fbm independent of the dye) with the glossy
+    strength balanced so that the scans' highlight does not show it; a clear
+    varnish (sharp lobe, levelled surface) lies in patches of its own.
+    """
+    full = size + 2 * HARD_MARGIN
+    points = _grid(full)
+    cells = worley(points, seed=rng, frequency=5.0)
+    fine = worley(points, seed=rng, frequency=18.0)
+    height = 7.0 * (1.0 - np.clip(cells, 0, 1)) ** 1.5 + 1.2 * (1.0 - np.clip(fine, 0, 1))
+    height = ndimage.gaussian_filter(height + 0.4 * fbm(points, seed=rng, frequency=12.0), 0.8)
+    blotch = fbm(points, octaves=4, seed=rng, frequency=1.5)
+    base = color_ramp(0.5 + blotch, [(0.10, 0.05, 0.03), (0.30, 0.16, 0.08), (0.50, 0.30, 0.16)])
+    crease = np.clip(cells * 1.6 - 0.4, 0, 1)
+    albedo = base * (1.0 - 0.5 * crease[..., None])
+    rough = np.clip(0.5 + 1.1 * fbm(points, octaves=3, seed=rng, frequency=2.0), 0, 1)
+    shininess = (8.0 * 2.0 ** (3.5 * rough)).astype(np.float32)  # 8 .. 90
+    gloss = _scan_balanced_gloss((0.12 * (1.0 - 0.6 * crease)).astype(np.float32), shininess)
+    polish = fbm(points, octaves=3, seed=rng, frequency=1.8)
+    varnish = (0.6 * np.clip((polish + 0.05) / 0.15, 0, 1)).astype(np.float32)
+    return Material(
+        height,
+        albedo,
+        gloss,
+        shininess,
+        "lacquered_leather",
+        margin=HARD_MARGIN,
+        parallax=True,
+        varnish=varnish,
+    )
+
+
+def _cobbles(size: int, rng: np.random.Generator) -> Material:
+    """Rounded stones of several colours set in grout: tall relief, long shadows.
+
+    Stones stand 6-12 texels above the grout (parallax up to ~10 texels at 60 deg,
+    whole stones hiding grout); each stone is polished or matte independently of
+    its colour, balanced so the scans' highlight is the same; a wet film (varnish)
+    lies in patches.
+    """
+    full = size + 2 * HARD_MARGIN
+    points = _grid(full)
+    f1, f2, ident = _cells(points, rng, frequency=6.0)
+    table = 4096
+    stone_height = rng.uniform(6.0, 12.0, table).astype(np.float32)
+    palette = np.array(
+        [[0.35, 0.34, 0.32], [0.45, 0.33, 0.20], [0.30, 0.16, 0.10], [0.20, 0.22, 0.26]],
+        np.float32,
+    )
+    stone_colour = palette[rng.integers(0, len(palette), table)] * rng.uniform(0.8, 1.2, (table, 1))
+    stone_shininess = np.where(rng.random(table) < 0.5, 10.0, 120.0).astype(np.float32)
+    edge = np.clip((f2 - f1) / 0.45, 0, 1)  # 0 at the joints, 1 inside a stone
+    dome = np.sqrt(1.0 - (1.0 - edge) ** 2)
+    speckle = fbm(points, octaves=4, seed=rng, frequency=30.0)
+    height = stone_height[ident] * dome + 0.5 * speckle
+    height = ndimage.gaussian_filter(height, 0.8)
+    stone = (edge > 0.08)[..., None]
+    grout = np.array([0.50, 0.48, 0.44], np.float32) * (1 + 0.1 * speckle[..., None])
+    albedo = np.where(stone, stone_colour[ident] * (1 + 0.15 * speckle[..., None]), grout)
+    shininess = np.where(stone[..., 0], stone_shininess[ident], 5.0).astype(np.float32)
+    gloss = _scan_balanced_gloss(np.where(stone[..., 0], 0.10, 0.02).astype(np.float32), shininess)
+    wet = fbm(points, octaves=3, seed=rng, frequency=1.5)
+    varnish = (0.5 * np.clip((wet - 0.1) / 0.15, 0, 1)).astype(np.float32)
+    return Material(
+        height,
+        albedo,
+        gloss,
+        shininess,
+        "cobbles",
+        margin=HARD_MARGIN,
+        parallax=True,
+        varnish=varnish,
+    )
+
+
+#: Materials whose scans are ambiguous by construction (hidden layer, balanced
+#: roughness) and whose views show parallax, self-occlusion and cast shadows.
+HARD_MATERIALS = {"velvet": _velvet, "lacquered_leather": _lacquered_leather, "cobbles": _cobbles}
+MATERIALS = {**EASY_MATERIALS, **HARD_MATERIALS}
 
 
 def make_material(name: str, *, size: int = 512, seed: int = 0) -> Material:
-    """Build one of :data:`MATERIALS` ("cloth", "leather", "wallpaper", "wood").
+    """Build one of :data:`MATERIALS`: the easy "cloth", "leather", "wallpaper", "wood"
+    or the hard "velvet", "lacquered_leather", "cobbles".
+
+    Hard materials carry a margin of :data:`HARD_MARGIN` texels on every side
+    (their fields are (size + 2 margin)^2); the render is size x size.
 
     Parameters
     ----------
@@ -225,6 +458,10 @@ def make_material(name: str, *, size: int = 512, seed: int = 0) -> Material:
     material.albedo = np.clip(np.asarray(material.albedo, np.float32), 0.0, 1.0)
     material.gloss = np.asarray(material.gloss, np.float32)
     material.shininess = np.asarray(material.shininess, np.float32)
+    if material.hard:
+        # Heights relative to the reference plane z = 0 at the mean height: the
+        # plane the BTF's texels are registered on.
+        material.height = material.height - np.float32(material.height.mean())
     return material
 
 
@@ -304,12 +541,14 @@ def render_btf_matrix(
     light_dirs = np.asarray(light_dirs, np.float32).reshape(-1, 2)
     view_dirs = np.asarray(view_dirs, np.float32).reshape(-1, 2)
     height = material.height
-    size_h, size_w = height.shape
+    size_h, size_w = (n - 2 * material.margin for n in height.shape)
     n_rows = len(light_dirs) * len(view_dirs) * 3
     if out is None:
         out = np.empty((n_rows, size_h * size_w), np.float32)
     elif out.shape != (n_rows, size_h * size_w) or out.dtype != np.float32:
         raise InputError(f"out: expected float32 {(n_rows, size_h * size_w)}, got {out.shape}")
+    if material.hard:
+        return _render_layered(material, light_dirs, view_dirs, ambient, intensity, out)
     grad_y, grad_x = np.gradient(height.astype(np.float32))
     normals = np.stack([-grad_x, -grad_y, np.ones_like(grad_x)], axis=-1)
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
@@ -330,3 +569,193 @@ def render_btf_matrix(
             radiance = material.albedo * diffuse[..., None] + specular[..., None]
             stack[li, vi] = np.moveaxis(radiance, 2, 0)
     return out
+
+
+def view_hits(height: np.ndarray, theta: float, phi: float, margin: int, *, step: float = 0.5):
+    """Where each texel's view ray meets the height field: (y, x) in ``height``'s grid.
+
+    The texels are the points p of the reference plane z = 0 in the inner region
+    (``margin`` cut off each side). The ray from p towards a viewer at (theta, phi)
+    is at p + z tan(theta) (cos phi, sin phi) at height z; marching z down from
+    the highest point in steps of ``step`` texels across, the first z with
+    h(ray(z)) >= z is the visible surface point (refined linearly between the
+    last two steps). Whatever lies above the ray before it is hidden: parallax
+    and self-occlusion. A top view (theta 0) sees every texel in place.
+
+    Returns
+    -------
+    y, x : (h, w) float32 each, coordinates into ``height``.
+
+    Example
+    -------
+    >>> h = np.zeros((40, 40), np.float32); h[10:30, 10:30] = 4.0
+    >>> y, x = view_hits(h, 45.0, 0.0, margin=10)
+    >>> float(x[5, 15]) - (15 + 10)  # a plateau texel 4 high is seen 4 texels on
+    4.0
+    """
+    height = np.asarray(height, np.float32)
+    full_h, full_w = height.shape
+    ys, xs = np.mgrid[margin : full_h - margin, margin : full_w - margin].astype(np.float32)
+    if theta <= 0.0:
+        return ys, xs
+    across = np.tan(np.deg2rad(theta))
+    dx = np.float32(across * np.cos(np.deg2rad(phi)))
+    dy = np.float32(across * np.sin(np.deg2rad(phi)))
+    top, bottom = float(height.max()), float(height.min())
+    n_steps = max(int(np.ceil((top - bottom) * across / step)), 1) + 1
+    hit = np.full(ys.shape, np.nan, np.float32)
+    previous_z, previous_f = None, None
+    for z in np.linspace(top, bottom, n_steps, dtype=np.float32):
+        ahead = ndimage.map_coordinates(height, [ys + z * dy, xs + z * dx], order=1, mode="nearest")
+        f = ahead - z
+        new = (f >= 0) & np.isnan(hit)
+        if new.any():
+            if previous_f is None:
+                hit[new] = z
+            else:
+                # f crosses 0 between the previous z (f < 0) and this one (f >= 0).
+                t = previous_f[new] / (previous_f[new] - f[new])
+                hit[new] = previous_z + t * (z - previous_z)
+        previous_z, previous_f = z, f
+    hit = np.where(np.isnan(hit), np.float32(bottom), hit)
+    return ys + hit * dy, xs + hit * dx
+
+
+def _normals(height: np.ndarray) -> np.ndarray:
+    grad_y, grad_x = np.gradient(height.astype(np.float32))
+    normals = np.stack([-grad_x, -grad_y, np.ones_like(grad_x)], axis=0)
+    return normals / np.linalg.norm(normals, axis=0, keepdims=True)
+
+
+def _varnish_normals(height: np.ndarray) -> np.ndarray:
+    """The varnish's own surface: the height field levelled (blurred), tilt clipped."""
+    levelled = ndimage.gaussian_filter(height.astype(np.float32), 8.0)
+    grad_y, grad_x = np.gradient(levelled)
+    slope = np.hypot(grad_x, grad_y)
+    limit = np.float32(np.tan(np.deg2rad(VARNISH_MAX_TILT)))
+    scale = np.minimum(1.0, limit / np.maximum(slope, 1e-12)).astype(np.float32)
+    normals = np.stack([-grad_x * scale, -grad_y * scale, np.ones_like(grad_x)], axis=0)
+    return normals / np.linalg.norm(normals, axis=0, keepdims=True)
+
+
+def _render_layered(material, light_dirs, view_dirs, ambient, intensity, out) -> np.ndarray:
+    """Hard materials: ray-marched views, cast shadows at the hit, varnish, fibres.
+
+    Per view, every surface field is looked up where the texel's view ray hits
+    the height field (:func:`view_hits`); per light, the cast shadow is computed
+    on the whole padded surface (:func:`shadow_mask`) and looked up there too.
+    Shading at the hit point:
+
+        base = albedo * (ambient * occlusion + cos(n, l) * shadow)
+               + gloss * shadow * cos(n, h) ** shininess
+        varnish: + strength * shadow * cos(n_v, h) ** VARNISH_SHININESS
+        fibres:  (1 - a) * base + a * fibre_albedo * (ambient + 0.8 sin(theta_l) shadow)
+                 + a * 0.15 * forward sheen,   a = 1 - exp(-FIBRE_COVER rho tan theta_v)
+    """
+    height = material.height
+    margin = material.margin
+    size_h, size_w = height.shape[0] - 2 * margin, height.shape[1] - 2 * margin
+    n_rows = len(light_dirs) * len(view_dirs) * 3
+    if out is None:
+        out = np.empty((n_rows, size_h * size_w), np.float32)
+    elif out.shape != (n_rows, size_h * size_w) or out.dtype != np.float32:
+        raise InputError(f"out: expected float32 {(n_rows, size_h * size_w)}, got {out.shape}")
+    cavity = ndimage.gaussian_filter(height, 4.0) - height
+    occlusion = np.clip(1.0 - 0.25 * cavity, 0.2, 1.0).astype(np.float32)
+    fields = {
+        "normal": _normals(height),
+        "albedo": np.moveaxis(material.albedo, 2, 0),
+        "gloss": material.gloss[None],
+        "shininess": material.shininess[None],
+        "occlusion": occlusion[None],
+    }
+    if material.varnish is not None:
+        fields["varnish"] = material.varnish[None]
+        fields["varnish_normal"] = _varnish_normals(height)
+    if material.fibres is not None:
+        fields["fibres"] = material.fibres[None]
+        fields["fibre_albedo"] = np.moveaxis(material.fibre_albedo, 2, 0)
+    # Per view: the hit points and every field looked up there.
+    views = []
+    for vt, vp in view_dirs:
+        ys, xs = view_hits(height, float(vt), float(vp), margin)
+        if float(vt) <= 0.0:
+            inner = (slice(None), slice(margin, margin + size_h), slice(margin, margin + size_w))
+            looked = {k: np.ascontiguousarray(f[inner]) for k, f in fields.items()}
+        else:
+            looked = {
+                k: np.stack(
+                    [ndimage.map_coordinates(c, [ys, xs], order=1, mode="nearest") for c in f]
+                )
+                for k, f in fields.items()
+            }
+        looked["normal"] /= np.linalg.norm(looked["normal"], axis=0, keepdims=True)
+        views.append((ys, xs, looked))
+    stack = out.reshape(len(light_dirs), len(view_dirs), 3, size_h, size_w)
+    for li, (lt, lp) in enumerate(light_dirs):
+        light = _unit(float(lt), float(lp))
+        shadow = shadow_mask(height, float(lt), float(lp))
+        for vi, (vt, vp) in enumerate(view_dirs):
+            ys, xs, f = views[vi]
+            if float(vt) <= 0.0:
+                lit = shadow[margin : margin + size_h, margin : margin + size_w]
+            else:
+                lit = ndimage.map_coordinates(shadow, [ys, xs], order=1, mode="nearest")
+            view = _unit(float(vt), float(vp))
+            halfway = light + view
+            halfway /= np.linalg.norm(halfway)
+            cos_light = np.einsum("c,chw->hw", light, f["normal"])
+            lit_here = lit * (cos_light > 0)
+            diffuse = (
+                ambient * f["occlusion"][0] + intensity * np.clip(cos_light, 0, None) * lit_here
+            )
+            cos_half = np.clip(np.einsum("c,chw->hw", halfway, f["normal"]), 0, None)
+            specular = intensity * f["gloss"][0] * lit_here * cos_half ** f["shininess"][0]
+            if "varnish" in f:
+                cos_varnish = np.clip(np.einsum("c,chw->hw", halfway, f["varnish_normal"]), 0, None)
+                specular = (
+                    specular + intensity * f["varnish"][0] * lit * cos_varnish**VARNISH_SHININESS
+                )
+            radiance = f["albedo"] * diffuse + specular
+            if "fibres" in f and float(vt) > 0.0:
+                cover = 1.0 - np.exp(-FIBRE_COVER * f["fibres"][0] * np.tan(np.deg2rad(float(vt))))
+                side = (
+                    light[:2]
+                    @ view[:2]
+                    / max(float(np.linalg.norm(light[:2]) * np.linalg.norm(view[:2])), 1e-6)
+                )
+                sheen = 0.15 * intensity * max(-side, 0.0) ** 4 * float(np.sin(np.deg2rad(lt)))
+                fibre = (
+                    f["fibre_albedo"]
+                    * (ambient + 0.8 * intensity * float(np.sin(np.deg2rad(lt))) * lit)
+                    + sheen * lit
+                )
+                radiance = (1.0 - cover) * radiance + cover * fibre
+            stack[li, vi] = radiance
+    return out
+
+
+def ground_truth(name: str, size: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Material ``name`` rendered under :func:`default_sampling`: (S, light_dirs, view_dirs).
+
+    The material source of :mod:`imagemap.btf.experiment`; importing this module
+    registers one for every name in :data:`MATERIALS`.
+    """
+    lights, views = default_sampling()
+    return (
+        render_btf_matrix(make_material(name, size=size, seed=seed), lights, views),
+        lights,
+        views,
+    )
+
+
+def _register() -> None:
+    # data_gen depends on imagemap, never the reverse: the experiment learns our
+    # materials from this registration.
+    from imagemap.btf.experiment import register_material
+
+    for name in MATERIALS:
+        register_material(name, partial(ground_truth, name))
+
+
+_register()

@@ -162,6 +162,14 @@ class KDTreeIndex:
         distances, indices = self.tree.query(queries, k=1, workers=-1)
         return indices.astype(np.int64), (distances**2).astype(np.float32)
 
+    def query_k(self, queries: np.ndarray, k: int) -> np.ndarray:
+        """Indices (n, k) of the ``k`` nearest rows of every query, nearest first."""
+        from scipy.spatial import cKDTree
+
+        tree = self.tree if self.tree is not None else cKDTree(self.data)
+        queries = np.ascontiguousarray(queries, dtype=np.float32)
+        return tree.query(queries, k=k, workers=-1)[1].astype(np.int64).reshape(len(queries), k)
+
 
 class PCAKDTreeIndex:
     """Approximate nearest neighbours: PCA (fit on the data) to ``dims``, then a k-d tree.
@@ -194,11 +202,18 @@ class PCAKDTreeIndex:
             data = (data - self.mean) @ self.basis
         self.tree = KDTreeIndex(data)
 
-    def query(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _project(self, queries: np.ndarray) -> np.ndarray:
         queries = np.asarray(queries, dtype=np.float32)
         if self.basis is not None:
             queries = (queries - self.mean) @ self.basis
-        return self.tree.query(queries)
+        return queries
+
+    def query(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.tree.query(self._project(queries))
+
+    def query_k(self, queries: np.ndarray, k: int) -> np.ndarray:
+        """Indices (n, k) of the ``k`` nearest rows (in the projected space), nearest first."""
+        return self.tree.query_k(self._project(queries), k)
 
 
 #: The index names :func:`make_index` knows.

@@ -1,7 +1,8 @@
 """The cross-device paper's Table 2 on procedural ground-truth materials.
 
-For every material: render the full BTF (``size`` x ``size``, 33 lights x 9 views,
-RGB; :mod:`data_gen.materials`), compress it (k = 100) as the reference S'; cut
+For every material: render the full BTF (``size`` x ``size``, e.g. 33 lights x 9
+views, RGB) through its *material source*, compress it (k = 100) as the reference
+S'; cut
 the ``sample_size`` x ``sample_size`` input region out of the *uncompressed*
 matrix and compress it on its own (so nothing of the rest leaks into the
 input); simulate four scans of the full sample (its own rows at the top view,
@@ -10,18 +11,29 @@ with a lamp colour and noise); then time each method and measure its relative
 error against S' from the factors alone.
 
 Methods: ``tiling`` (the sample repeated), the paper's four pixel-wise settings,
-``texture_optimization`` (the engine), and any method plugged in through
-``extra_methods`` (e.g. ``moving_average``: see :func:`default_extra_methods`).
+``texture_optimization`` (the engine, the paper's R = 8), two probes that are not in
+the paper (:data:`TUNED_TEXTURE`, texture optimization with small windows, and
+:data:`PIXELWISE_MEAN_SETTINGS`, the mean of the 16 nearest texels), and any method
+plugged in through ``extra_methods`` (``moving_average`` by default: see
+:func:`default_extra_methods`).
+
+Material sources: a source is a callable ``(size, seed) -> (S, light_dirs,
+view_dirs)`` giving the ground-truth BTF matrix (rows light x view x RGB, columns
+the size x size texels). This module knows no materials of its own: pass
+``sources={name: source}``, or name materials that someone registered with
+:func:`register_material`. ``data_gen.materials`` registers its procedural
+materials when it is imported (data_gen depends on imagemap, never the reverse).
 
 Example
 -------
->>> rows = run_experiment("table2/", materials=["leather"], size=128)  # doctest: +SKIP
+>>> import data_gen.materials  # registers cloth, leather, .., velvet, cobbles  # doctest: +SKIP
+>>> rows = run_experiment("table2/", materials=["leather"])  # doctest: +SKIP
 """
 
 from __future__ import annotations
 
 import csv
-import importlib
+import dataclasses
 import logging
 import os
 import time
@@ -34,9 +46,10 @@ import numpy as np
 from imagemap.btf.constraints import scanner_response
 from imagemap.btf.core import BTF, compress, relative_error
 from imagemap.btf.extrapolate import (
+    _OLD_SEARCH_NAMES,
     CONSTRAINT_AZIMUTHS,
     CONSTRAINT_THETA,
-    ExtrapolationParams,
+    PixelwiseParams,
     TextureOptimizationParams,
     constraint_images,
     pixelwise,
@@ -47,8 +60,17 @@ from imagemap.btf.extrapolate import (
 from imagemap.io import InputError, atomic_path, write_image
 
 __all__ = [
+    "PIXELWISE_MEAN_SETTINGS",
     "PIXELWISE_SETTINGS",
+    "TUNED_TEXTURE",
+    "MATERIAL_SOURCES",
     "ExperimentParams",
+    "GroundTruth",
+    "MaterialSource",
+    "comparison_picture",
+    "prepare_material",
+    "register_material",
+    "run_methods",
     "default_extra_methods",
     "run_material",
     "run_experiment",
@@ -57,16 +79,55 @@ __all__ = [
 
 log = logging.getLogger("imagemap")
 
-#: The paper's four pixel-wise trials (Table 2): name -> (R, ws, wc).
+#: The paper's four pixel-wise trials (Table 2), then R = 1 and 2 on colour only (not in
+#: the paper: separates the neighbourhood's effect from the descriptors'):
+#: name -> (R, ws, wc).
 PIXELWISE_SETTINGS = {
     "pixelwise_R0_ws0_wc1": (0, 0.0, 1.0),
     "pixelwise_R0_ws1_wc0": (0, 1.0, 0.0),
     "pixelwise_R1_ws1_wc10": (1, 1.0, 10.0),
     "pixelwise_R2_ws1_wc10": (2, 1.0, 10.0),
+    "pixelwise_R1_ws0_wc1": (1, 0.0, 1.0),
+    "pixelwise_R2_ws0_wc1": (2, 0.0, 1.0),
 }
+
+#: Not in the paper: R = 1 pixel-wise with the mean of the 16 nearest texels' rows, a
+#: probe of how much of a method's score comes from averaging candidates.
+PIXELWISE_MEAN_SETTINGS = {"pixelwise_R1_ws1_wc10_mean16": (1, 1.0, 10.0, 16)}
+
+#: Not in the paper: texture optimization with the settings that did best in our
+#: study (small windows, every window matched; README, BTF section).
+TUNED_TEXTURE = {"texture_optimization_R2_stride1": {"radius": 2, "stride": 1}}
 
 #: A method hook: (sample BTF, output shape (H, W), seed) -> BTF sharing the sample's U.
 ExtraMethod = Callable[[BTF, tuple[int, int], int], BTF]
+
+#: A ground truth: (size, seed) -> (S (n_rows, size * size) float32, light_dirs (n, 2),
+#: view_dirs (m, 2)); rows in (light, view, RGB) C order, columns row-major texels.
+MaterialSource = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+#: Materials known by name (filled by :func:`register_material`, e.g. on importing
+#: ``data_gen.materials``).
+MATERIAL_SOURCES: dict[str, MaterialSource] = {}
+
+
+def register_material(name: str, source: MaterialSource) -> None:
+    """Make ``source`` available to :func:`run_experiment` under ``name``."""
+    if not callable(source):
+        raise InputError(f"material {name!r}: the source must be callable (size, seed) -> S, ...")
+    MATERIAL_SOURCES[str(name)] = source
+
+
+def _source(name: str, sources: Mapping[str, MaterialSource] | None) -> MaterialSource:
+    if sources and name in sources:
+        return sources[name]
+    if name in MATERIAL_SOURCES:
+        return MATERIAL_SOURCES[name]
+    known = sorted({*(sources or {}), *MATERIAL_SOURCES})
+    raise InputError(
+        f"material {name!r}: no source; known: {known or 'none'} (import data_gen.materials "
+        f"to register the procedural materials, or pass sources={{name: source}})"
+    )
 
 
 @dataclass(frozen=True)
@@ -89,9 +150,14 @@ class ExperimentParams:
         Standard deviation of the scanner noise in scan units.
     search : {"approximate", "exact", "pynndescent"}
         Nearest-neighbour search of the pixel-wise method.
+    sample_sizes : mapping of material name to int
+        Cut-out side for some materials (the paper used 256 for its cloth).
     texture : TextureOptimizationParams
-    comparison_light : (theta, phi)
-        Light of the rendered comparison images (top view).
+    comparison_lights : sequence of (theta, phi)
+        Lights of the rendered comparison images, one row each.
+    comparison_view : (theta, phi)
+        View of the comparison images (the top view by default; an oblique view
+        shows what the scans cannot see: parallax, varnish, fibres).
     seed : int
     """
 
@@ -102,23 +168,22 @@ class ExperimentParams:
     scanner_gain: tuple[float, float, float] = (1.25, 1.1, 0.9)
     scanner_noise: float = 0.003
     search: str = "approximate"
+    sample_sizes: Mapping[str, int] = field(default_factory=lambda: {"cloth": 256, "velvet": 256})
     texture: TextureOptimizationParams = field(default_factory=TextureOptimizationParams)
-    comparison_light: tuple[float, float] = (60.0, 45.0)
+    comparison_lights: tuple[tuple[float, float], ...] = ((60.0, 45.0), (22.0, 180.0))
+    comparison_view: tuple[float, float] = (0.0, 0.0)
     seed: int = 0
+
+    def sample_side(self, name: str) -> int:
+        """The cut-out side for material ``name`` (never more than ``size``)."""
+        return min(int(self.sample_sizes.get(name, self.sample_size)), self.size)
 
 
 def default_extra_methods() -> dict[str, ExtraMethod]:
-    """Methods other modules offer: ``moving_average`` if
-    ``imagemap.btf.moving_average.experiment_method(sample, shape, seed)`` exists."""
-    methods: dict[str, ExtraMethod] = {}
-    try:
-        module = importlib.import_module("imagemap.btf.moving_average")
-    except ImportError:
-        return methods
-    hook = getattr(module, "experiment_method", None)
-    if callable(hook):
-        methods["moving_average"] = hook
-    return methods
+    """The methods beyond the paper's: ``moving_average`` (the parametric model)."""
+    from imagemap.btf.moving_average import experiment_method
+
+    return {"moving_average": experiment_method}
 
 
 def _scan_rows(
@@ -143,41 +208,51 @@ def _display(image: np.ndarray) -> np.ndarray:
     return np.clip(image, 0.0, 1.0) ** (1 / 2.2)
 
 
-def run_material(
+@dataclass
+class GroundTruth:
+    """One material's inputs and reference, shared by every method.
+
+    Attributes
+    ----------
+    name : str
+    reference : BTF
+        The full sample's own compression (k components), the error's S'.
+    sample : BTF
+        The cut-out, compressed on its own.
+    scans : list of four (H, W, 3) arrays
+        Simulated flatbed scans of the full sample (device response, lamp, noise).
+    seconds : float
+        Rendering and compression time.
+    """
+
+    name: str
+    reference: BTF
+    sample: BTF
+    scans: list
+    seconds: float = 0.0
+
+
+def prepare_material(
     name: str,
     params: ExperimentParams = ExperimentParams(),
     *,
-    methods: Sequence[str] | None = None,
-    extra_methods: Mapping[str, ExtraMethod] | None = None,
-    quiet: bool = True,
-) -> tuple[list[dict], dict[str, np.ndarray]]:
-    """Run every method on one procedural material.
-
-    Returns
-    -------
-    rows : list of dict
-        material, method, rel_error_pct, seconds.
-    renders : dict
-        method -> (H, W, 3) linear image at ``comparison_light`` (plus "reference").
-    """
-    from data_gen.materials import default_sampling, make_material, render_btf_matrix
-
-    if params.sample_size > params.size:
-        raise InputError(f"sample_size {params.sample_size} exceeds size {params.size}")
-    extra_methods = dict(extra_methods or {})
-    all_methods = ["tiling", *PIXELWISE_SETTINGS, "texture_optimization", *extra_methods]
-    methods = list(methods) if methods else all_methods
-    unknown = [m for m in methods if m not in all_methods]
-    if unknown:
-        raise InputError(f"methods: unknown {unknown}; choose from {all_methods}")
-
+    sources: Mapping[str, MaterialSource] | None = None,
+) -> GroundTruth:
+    """Render, compress, cut out and scan one material (see the module's docstring)."""
     started = time.perf_counter()
-    lights, views = default_sampling()
+    source = _source(name, sources)
+    s = params.sample_side(name)
+    matrix, lights, views = source(params.size, params.seed)
+    matrix = np.asarray(matrix, dtype=np.float32)
+    lights = np.asarray(lights, dtype=np.float32)
+    views = np.asarray(views, dtype=np.float32)
     shape = (params.size, params.size)
-    material = make_material(name, size=params.size, seed=params.seed)
-    matrix = render_btf_matrix(material, lights, views)
+    if matrix.shape != (len(lights) * len(views) * 3, params.size * params.size):
+        raise InputError(
+            f"material {name!r}: the source gave S of shape {matrix.shape} for "
+            f"{len(lights)} lights, {len(views)} views, RGB and {params.size}^2 texels"
+        )
     reference = compress(matrix, shape=shape, light_dirs=lights, view_dirs=views, k=params.k)
-    s = params.sample_size
     top, left = params.sample_origin or ((params.size - s) // 2, (params.size - s) // 2)
     columns = (np.arange(top, top + s)[:, None] * params.size + np.arange(left, left + s)).ravel()
     sample = compress(
@@ -191,12 +266,50 @@ def run_material(
         )
         for i, image in enumerate(truth)
     ]
-    log.info("%s: ground truth and compression %.1f s", name, time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+    log.info("%s: ground truth and compression %.1f s", name, seconds)
+    return GroundTruth(name, reference, sample, scans, seconds)
 
+
+def _renders(btf: BTF, params: ExperimentParams) -> list[np.ndarray]:
+    view = btf.nearest_view(*params.comparison_view)
+    return [btf.image(btf.nearest_light(*light), view) for light in params.comparison_lights]
+
+
+def run_methods(
+    truth: GroundTruth,
+    params: ExperimentParams = ExperimentParams(),
+    *,
+    methods: Sequence[str] | None = None,
+    extra_methods: Mapping[str, ExtraMethod] | None = None,
+    quiet: bool = True,
+) -> tuple[list[dict], dict[str, list[np.ndarray]]]:
+    """Time every method on one prepared material and measure its relative error.
+
+    Returns
+    -------
+    rows : list of dict
+        material, method, rel_error_pct, seconds.
+    renders : dict
+        method (and "reference") -> one (H, W, 3) linear image per comparison light.
+    """
+    extra_methods = dict(extra_methods or {})
+    all_methods = [
+        "tiling",
+        *PIXELWISE_SETTINGS,
+        "texture_optimization",
+        *TUNED_TEXTURE,
+        *PIXELWISE_MEAN_SETTINGS,
+        *extra_methods,
+    ]
+    methods = list(methods) if methods else all_methods
+    unknown = [m for m in methods if m not in all_methods]
+    if unknown:
+        raise InputError(f"methods: unknown {unknown}; choose from {all_methods}")
+    reference, sample, name = truth.reference, truth.sample, truth.name
+    shape = reference.shape
     sample_images = constraint_images(sample)
-    light = reference.nearest_light(*params.comparison_light)
-    view = reference.nearest_view(0.0, 0.0)
-    renders = {"reference": reference.image(light, view)}
+    renders = {"reference": _renders(reference, params)}
     rows = []
     for method in methods:
         t0 = time.perf_counter()
@@ -204,13 +317,26 @@ def run_material(
             result = tile(sample, shape)
         elif method in PIXELWISE_SETTINGS:
             radius, ws, wc = PIXELWISE_SETTINGS[method]
-            target_images = prepare_scans(scans, sample_images)
-            pw = ExtrapolationParams(radius, ws, wc, search=params.search, seed=params.seed)
+            target_images = prepare_scans(truth.scans, sample_images)
+            pw = PixelwiseParams(
+                radius, ws, wc, backend=_OLD_SEARCH_NAMES[params.search], seed=params.seed
+            )
             result, _ = pixelwise(sample, sample_images, target_images, pw)
-        elif method == "texture_optimization":
-            target_images = prepare_scans(scans, sample_images)
+        elif method in PIXELWISE_MEAN_SETTINGS:
+            radius, ws, wc, k = PIXELWISE_MEAN_SETTINGS[method]
+            target_images = prepare_scans(truth.scans, sample_images)
+            search = params.search if params.search != "pynndescent" else "approximate"
+            pw = PixelwiseParams(
+                radius, ws, wc, backend=_OLD_SEARCH_NAMES[search], seed=params.seed, neighbours=k
+            )
+            result, _ = pixelwise(sample, sample_images, target_images, pw)
+        elif method == "texture_optimization" or method in TUNED_TEXTURE:
+            target_images = prepare_scans(truth.scans, sample_images)
+            texture = params.texture
+            if method in TUNED_TEXTURE:
+                texture = dataclasses.replace(texture, **TUNED_TEXTURE[method])
             result, _ = texture_optimization(
-                sample, sample_images, target_images, params.texture, quiet=quiet
+                sample, sample_images, target_images, texture, quiet=quiet
             )
         else:
             result = extra_methods[method](sample, shape, params.seed)
@@ -219,9 +345,23 @@ def run_material(
         rows.append(
             {"material": name, "method": method, "rel_error_pct": error, "seconds": seconds}
         )
-        renders[method] = result.image(light, view)
+        renders[method] = _renders(result, params)
         log.info("%s %-24s %6.2f %%  %7.2f s", name, method, error, seconds)
     return rows, renders
+
+
+def run_material(
+    name: str,
+    params: ExperimentParams = ExperimentParams(),
+    *,
+    sources: Mapping[str, MaterialSource] | None = None,
+    methods: Sequence[str] | None = None,
+    extra_methods: Mapping[str, ExtraMethod] | None = None,
+    quiet: bool = True,
+) -> tuple[list[dict], dict[str, list[np.ndarray]]]:
+    """:func:`prepare_material`, then :func:`run_methods`."""
+    truth = prepare_material(name, params, sources=sources)
+    return run_methods(truth, params, methods=methods, extra_methods=extra_methods, quiet=quiet)
 
 
 def format_table(rows: Sequence[dict]) -> str:
@@ -241,20 +381,66 @@ def format_table(rows: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
-def _comparison(renders: dict[str, np.ndarray]) -> np.ndarray:
-    """Panels left to right, top to bottom in the order of ``renders`` (4 per row)."""
-    panels = [_display(img) for img in renders.values()]
-    height, width = panels[0].shape[:2]
+def comparison_picture(
+    renders: Mapping[str, Sequence[np.ndarray]],
+    *,
+    crop: tuple[int, int, int] | None = None,
+    labels: bool = True,
+) -> np.ndarray:
+    """One column per method (reference first), one row per comparison light.
+
+    Parameters
+    ----------
+    renders : method -> linear images, one per light (as :func:`run_methods` gives).
+    crop : (top, left, side), optional
+        Show only this square of each image (detail at full resolution).
+    labels : bool
+        Write the method's name on each panel of the first row (needs Pillow).
+
+    Returns
+    -------
+    (rows * (side + gap), columns * (side + gap), 3) float32 display image (gamma 2.2).
+    """
+    columns = list(renders)
+    n_rows = len(next(iter(renders.values())))
+    panels = {}
+    for method in columns:
+        for row, image in enumerate(renders[method]):
+            if crop is not None:
+                top, left, side = crop
+                image = image[top : top + side, left : left + side]
+            panels[method, row] = _display(image)
+    height, width = next(iter(panels.values())).shape[:2]
     gap = 4
-    per_row = 4
-    n_rows = -(-len(panels) // per_row)
     canvas = np.ones(
-        (n_rows * (height + gap) - gap, per_row * (width + gap) - gap, 3), dtype=np.float32
+        (n_rows * (height + gap) - gap, len(columns) * (width + gap) - gap, 3), dtype=np.float32
     )
-    for i, panel in enumerate(panels):
-        y, x = (i // per_row) * (height + gap), (i % per_row) * (width + gap)
+    for (method, row), panel in panels.items():
+        y, x = row * (height + gap), columns.index(method) * (width + gap)
         canvas[y : y + height, x : x + width] = panel
+    if labels:
+        canvas = _label(canvas, [(c, i * (width + gap)) for i, c in enumerate(columns)])
     return canvas
+
+
+def _detail_crop(params: ExperimentParams) -> tuple[int, int, int]:
+    """A square near the top-left corner, clear of the centred cut-out (full resolution)."""
+    side = max(8, min(160, params.size * 5 // 16))
+    return params.size // 16, params.size // 16, side
+
+
+def _label(canvas: np.ndarray, names: Sequence[tuple[str, int]]) -> np.ndarray:
+    try:
+        from PIL import Image, ImageDraw
+    except ImportError:  # labels are a nicety
+        return canvas
+    image = Image.fromarray((np.clip(canvas, 0, 1) * 255).astype(np.uint8))
+    draw = ImageDraw.Draw(image)
+    for text, x in names:
+        short = text.replace("pixelwise_", "pw ").replace("texture_optimization", "tex. opt.")
+        draw.rectangle([x, 0, x + 7 * len(short) + 4, 12], fill=(0, 0, 0))
+        draw.text((x + 2, 0), short, fill=(255, 255, 255))
+    return np.asarray(image, dtype=np.float32) / 255.0
 
 
 def run_experiment(
@@ -262,6 +448,7 @@ def run_experiment(
     *,
     materials: Sequence[str] = ("cloth", "leather", "wallpaper", "wood"),
     params: ExperimentParams = ExperimentParams(),
+    sources: Mapping[str, MaterialSource] | None = None,
     methods: Sequence[str] | None = None,
     extra_methods: Mapping[str, ExtraMethod] | None = None,
     quiet: bool = True,
@@ -269,8 +456,10 @@ def run_experiment(
     """Run :func:`run_material` for each material; write table2.csv, table2.md, PNGs.
 
     Writes ``out/table2.csv`` (material, method, rel_error_pct, seconds),
-    ``out/table2.md`` and ``out/<material>_comparison.png`` (reference, then each
-    method, rendered at ``params.comparison_light`` from the top view).
+    ``out/table2.md``, ``out/<material>_comparison.png`` (reference, then each
+    method, one row per comparison light, top view) and ``out/<material>_detail.png``
+    (the same for a square away from the cut-out, at full resolution). Materials are looked up in
+    ``sources``, then in :data:`MATERIAL_SOURCES`.
 
     Returns
     -------
@@ -278,6 +467,8 @@ def run_experiment(
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    for name in materials:
+        _source(name, sources)  # fail before any work
     if extra_methods is None:
         extra_methods = default_extra_methods()
     if params.search == "pynndescent":
@@ -286,22 +477,33 @@ def run_experiment(
     total = time.perf_counter()
     for name in materials:
         material_rows, renders = run_material(
-            name, params, methods=methods, extra_methods=extra_methods, quiet=quiet
+            name,
+            params,
+            sources=sources,
+            methods=methods,
+            extra_methods=extra_methods,
+            quiet=quiet,
         )
         rows += material_rows
-        write_image(out / f"{name}_comparison.png", _comparison(renders))
+        write_image(out / f"{name}_comparison.png", comparison_picture(renders))
+        write_image(
+            out / f"{name}_detail.png", comparison_picture(renders, crop=_detail_crop(params))
+        )
         _write_csv(out / "table2.csv", rows)
     seconds = time.perf_counter() - total
     order = " | ".join(["reference", *[r["method"] for r in rows if r["material"] == materials[0]]])
+    lights = "; ".join(f"theta {t:g}, phi {p:g}" for t, p in params.comparison_lights)
+    cut = ", ".join(f"{m} {params.sample_side(m)}" for m in materials)
     text = (
         f"# Table 2 on procedural materials\n\n"
-        f"{params.size}x{params.size} full sample, {params.sample_size}x{params.sample_size} "
-        f"cut-out, k = {params.k}, 33 lights x 9 views x RGB; relative error (%) against the "
-        f"full sample's own compression, and seconds per method. Whole run: {seconds:.0f} s.\n\n"
+        f"{params.size}x{params.size} full sample, cut-out side per material: {cut}; "
+        f"k = {params.k}; relative error (%) against the full sample's own compression, "
+        f"and seconds per method. Whole run: {seconds:.0f} s.\n\n"
         f"{format_table(rows)}\n\n"
-        f"Comparison images (`<material>_comparison.png`), left to right, top to bottom: "
-        f"{order}; light theta {params.comparison_light[0]:g}, phi "
-        f"{params.comparison_light[1]:g}, top view.\n"
+        f"Comparison images (`<material>_comparison.png`), columns left to right: "
+        f"{order}; rows: light {lights}; view theta {params.comparison_view[0]:g}, phi "
+        f"{params.comparison_view[1]:g}. `<material>_detail.png`: the "
+        f"square {_detail_crop(params)} (top, left, side), away from the cut-out.\n"
     )
     with atomic_path(out / "table2.md") as tmp:
         tmp.write_text(text)

@@ -80,6 +80,11 @@ class PixelwiseParams:
         first use).
     seed : int
         Seed of the approximate search.
+    neighbours : int
+        1: copy the nearest texel's row (Eq. 6). K > 1: the mean of the K nearest
+        texels' rows (not in the paper): where the scans leave a texel's BTF open,
+        the mean of the candidates estimates it with less squared error than any one
+        of them; where they determine it, it blurs. "approximate" or "exact" search.
     """
 
     radius: int = 0
@@ -87,6 +92,7 @@ class PixelwiseParams:
     wc: float = 1.0
     backend: str = "pca_kdtree"
     seed: int = 0
+    neighbours: int = 1
 
     def __post_init__(self) -> None:
         if self.backend not in PIXELWISE_BACKENDS:
@@ -107,6 +113,7 @@ def ExtrapolationParams(  # noqa: N802 - the deprecated class name
     wc: float = 1.0,
     search: str = "approximate",
     seed: int = 0,
+    neighbours: int = 1,
 ) -> PixelwiseParams:
     """Deprecated: :class:`PixelwiseParams` under its former name and vocabulary.
 
@@ -121,7 +128,9 @@ def ExtrapolationParams(  # noqa: N802 - the deprecated class name
     )
     if search not in _OLD_SEARCH_NAMES:
         raise InputError(f"search: {search!r} is not 'approximate', 'exact' or 'pynndescent'")
-    return PixelwiseParams(radius, ws, wc, backend=_OLD_SEARCH_NAMES[search], seed=seed)
+    return PixelwiseParams(
+        radius, ws, wc, backend=_OLD_SEARCH_NAMES[search], seed=seed, neighbours=neighbours
+    )
 
 
 @dataclass(frozen=True)
@@ -150,6 +159,9 @@ class TextureOptimizationParams:
         Window features kept after PCA.
     backend : str
         The engine's nearest-neighbour backend.
+    final_copy : bool
+        After the engine, give each texel the V Sigma row of its own match in the
+        final source map (no averaging in eigen-space) instead of the vote's mean.
     seed : int
     """
 
@@ -163,6 +175,7 @@ class TextureOptimizationParams:
     max_iterations: int = 4
     pca_max_components: int = 24
     backend: str = "patchmatch"
+    final_copy: bool = False
     seed: int = 0
 
 
@@ -213,13 +226,24 @@ def prepare_scans(
 
 
 def _search(sample: np.ndarray, target: np.ndarray, params: PixelwiseParams) -> np.ndarray:
-    """Index of the nearest sample row for every target row (Eq. 6)."""
+    """Index of the nearest sample row for every target row (Eq. 6): (n,), or (n, K)
+    for ``params.neighbours`` = K > 1."""
     from imagemap.search import make_index
 
     # Bands with weight 0 are 0 everywhere: they cost time and change nothing.
     used = np.any(sample != 0, axis=0) | np.any(target != 0, axis=0)
     sample, target = sample[:, used], target[:, used]
-    return make_index(params.backend, sample, seed=params.seed).query(target)[0]
+    k = int(params.neighbours)
+    if k < 1:
+        raise InputError(f"neighbours: at least 1, got {k}")
+    index = make_index(params.backend, sample, seed=params.seed)
+    if k == 1:
+        return index.query(target)[0]
+    if not hasattr(index, "query_k"):
+        raise InputError(
+            f"neighbours > 1 needs backend 'pca_kdtree' or 'kdtree', not {params.backend!r}"
+        )
+    return index.query_k(target, k)
 
 
 def pixelwise(
@@ -263,7 +287,14 @@ def pixelwise(
         sample_c.reshape(-1, sample_c.shape[2]), target_c.reshape(-1, target_c.shape[2]), params
     )
     flat = sample.eigentextures.reshape(-1, sample.n_components)
-    eigentextures = flat[index].reshape(height, width, -1)
+    if index.ndim == 2:  # the mean of the K nearest; the source map shows the nearest
+        eigentextures = np.zeros((len(index), flat.shape[1]), np.float32)
+        for column in index.T:
+            eigentextures += flat[column]
+        eigentextures = (eigentextures / index.shape[1]).reshape(height, width, -1)
+        index = index[:, 0]
+    else:
+        eigentextures = flat[index].reshape(height, width, -1)
     source = np.stack(np.unravel_index(index, sample.shape), axis=-1).reshape(height, width, 2)
     return sample.with_eigentextures(eigentextures), source.astype(np.int32)
 
@@ -333,6 +364,10 @@ def texture_optimization(
         )
     ]
     result = synthesize(query, [exemplar], engine_params, seed=params.seed, quiet=quiet)
+    if params.final_copy:
+        # One exemplar: source (H, W, 3) is (0, y, x) of each texel's match.
+        copied = sample.eigentextures[result.source[..., 1], result.source[..., 2]]
+        return sample.with_eigentextures(np.ascontiguousarray(copied)), result
     return sample.with_eigentextures(result.appearance[0]), result
 
 
