@@ -109,14 +109,19 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"evaluated {len(evaluation.objects)} objects x {len(methods)} methods in "
             f"{evaluation.seconds:.0f} s with {args.workers} worker(s); report {paths['html']}"
         )
-    # Objects that failed (reported by leave_one_out as (name, message) pairs once it
-    # goes on past a failing object): named here, and the exit code says so.
-    failed = list(getattr(evaluation, "failed", None) or [])
-    for name, message in failed:
+    for name, message in evaluation.failed:
         print(f"imagemap: {name}: failed: {message}", file=sys.stderr)
-    if failed:
+    if evaluation.failed:
         print(
-            f"imagemap: {len(evaluation.objects)} object(s) evaluated, {len(failed)} failed",
+            f"imagemap: {len(evaluation.objects)} object(s) evaluated, "
+            f"{len(evaluation.failed)} failed",
             file=sys.stderr,
         )
-    return 1 if failed else 0
+    if evaluation.interrupted:
+        print(
+            f"imagemap: interrupted: report of the {len(evaluation.objects)} object(s) "
+            f"evaluated so far written to {paths['html']}",
+            file=sys.stderr,
+        )
+        return 130
+    return 1 if evaluation.failed else 0
