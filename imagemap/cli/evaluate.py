@@ -119,8 +119,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
         )
     if evaluation.interrupted:
         print(
-            f"imagemap: interrupted: report of the {len(evaluation.objects)} object(s) "
-            f"evaluated so far written to {paths['html']}",
+            f"imagemap: report of the {len(evaluation.objects)} object(s) evaluated before "
+            f"the interruption written to {paths['html']}",
             file=sys.stderr,
         )
         return 130
