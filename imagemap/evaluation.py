@@ -279,11 +279,12 @@ def _detail_metrics(
     copy = copy_through([e.image for e in examples], source).astype(np.float32)
     copy[~mask] = 0.0  # as the map's own background
     blur = blur_ratio(image, copy, covered)
-    if labels is None or any(e.labels is None for e in examples):
+    example_labels = [e.labels for e in examples if e.labels is not None]
+    if labels is None or len(example_labels) < len(examples):
         return replace(metrics, blur_ratio=blur)
-    transferred = source_labels(source, [e.labels for e in examples], mask)
+    transferred = source_labels(source, example_labels, mask)
     drawn, measured = features_drawn(
-        image, truth, labels, mask, source=source, example_labels=[e.labels for e in examples]
+        image, truth, labels, mask, source=source, example_labels=example_labels
     )
     return replace(
         metrics,
@@ -378,7 +379,7 @@ def _init_worker(threads: int) -> None:
     # Each worker gets its share of the cores for numba's parallel kernels.
     import numba
 
-    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))  # type: ignore[attr-defined]
 
 
 def _task(args: tuple) -> ObjectEvaluation:

@@ -228,9 +228,11 @@ def _comparison_strip(obj: ObjectEvaluation, methods: tuple[str, ...], gap: int 
         _on_backdrop(obj.truth, obj.mask),
     ]
     tiles += [_on_backdrop(obj.results[m].image, obj.mask) for m in methods]
-    engine = next((obj.results[m] for m in methods if obj.results[m].provenance is not None), None)
-    if engine is not None:
-        tiles.append(engine.provenance)
+    provenance = next(
+        (p for p in (obj.results[m].provenance for m in methods) if p is not None), None
+    )
+    if provenance is not None:
+        tiles.append(provenance)
     h, w = obj.depth.shape
     strip = np.ones((h, len(tiles) * (w + gap) - gap, 3), dtype=np.float32)
     for k, tile in enumerate(tiles):
@@ -435,10 +437,12 @@ def write_report(evaluation: Evaluation, out_dir: str | os.PathLike) -> dict[str
             result = obj.results[method]
             entries[method] = f"{folder}/{method}.png"
             write_image(out / entries[method], _on_backdrop(result.image, obj.mask))
-        engine = next((r for r in obj.results.values() if r.provenance is not None), None)
-        if engine is not None:
+        provenance = next(
+            (r.provenance for r in obj.results.values() if r.provenance is not None), None
+        )
+        if provenance is not None:
             entries["provenance"] = f"{folder}/provenance.png"
-            write_image(out / entries["provenance"], engine.provenance)
+            write_image(out / entries["provenance"], provenance)
         entries["comparison"] = f"{folder}/comparison.png"
         write_image(out / entries["comparison"], _comparison_strip(obj, evaluation.methods))
         image_paths[obj.name] = entries

@@ -58,6 +58,8 @@ def load_script(path: Path | None = None) -> ModuleType:
     if name in sys.modules:
         return sys.modules[name]
     spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise InputError(f"{path}: cannot be loaded as a Python module")
     module = importlib.util.module_from_spec(spec)
     # Registered before it runs: dataclasses look their module up in sys.modules.
     sys.modules[name] = module

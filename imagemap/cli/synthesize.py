@@ -142,7 +142,8 @@ def parse_colour(text: str) -> tuple[float, float, float] | None:
         return None
     if len(text) == 7 and text.startswith("#"):
         try:
-            return tuple(int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+            red, green, blue = (int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+            return red, green, blue
         except ValueError:
             pass
     raise InputError(f"--background: not a colour: {text!r} (use transparent, white or #rrggbb)")
