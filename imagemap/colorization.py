@@ -25,6 +25,7 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
+from imagemap.align import centroid_shift, translate
 from imagemap.blend import place_seams, seamless_copy
 from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
@@ -175,36 +176,6 @@ def _resolve(preset: str | ColorizeParams | None, **overrides) -> ColorizeParams
             raise InputError(f"unknown preset {preset!r}; use one of {sorted(PRESETS)}") from None
     overrides = {k: v for k, v in overrides.items() if v is not None}
     return replace(params, **overrides) if overrides else params
-
-
-def _centroid(mask: np.ndarray) -> np.ndarray:
-    return np.array(ndimage.center_of_mass(mask), dtype=np.float64)
-
-
-def centroid_shift(source_mask: np.ndarray, target_mask: np.ndarray) -> np.ndarray:
-    """(dy, dx) that moves the centroid of ``source_mask`` onto that of ``target_mask``."""
-    return _centroid(target_mask) - _centroid(source_mask)
-
-
-def translate(array: np.ndarray, shift, shape: tuple[int, int]) -> np.ndarray:
-    """``array`` (H, W[, C]) translated by the rounded ``shift`` (dy, dx) onto a zero canvas.
-
-    Examples
-    --------
-    >>> translate(np.ones((2, 2)), (1, 1), (3, 3)).astype(int)
-    array([[0, 0, 0],
-           [0, 1, 1],
-           [0, 1, 1]])
-    """
-    array = np.asarray(array, dtype=np.float32)
-    dy, dx = (int(round(s)) for s in shift)
-    out = np.zeros(tuple(shape) + array.shape[2:], dtype=np.float32)
-    h, w = array.shape[:2]
-    y0, x0 = max(0, dy), max(0, dx)
-    y1, x1 = min(shape[0], h + dy), min(shape[1], w + dx)
-    if y1 > y0 and x1 > x0:
-        out[y0:y1, x0:x1] = array[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
-    return out
 
 
 def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[int]:

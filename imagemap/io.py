@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from imagemap.errors import InputError
+
 __all__ = [
     "InputError",
     "atomic_path",
@@ -27,10 +29,6 @@ __all__ = [
 ]
 
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
-
-
-class InputError(ValueError):
-    """Bad input: the message names the file (where there is one) and the problem."""
 
 
 @contextlib.contextmanager

@@ -64,6 +64,7 @@ from scipy.spatial import cKDTree
 from skimage import color
 from skimage.metrics import structural_similarity
 
+from imagemap.align import paste_aligned
 from imagemap.io import InputError
 
 __all__ = [
@@ -314,34 +315,6 @@ def image_metrics(
         features_drawn=drawn,
         features_measured=measured,
     )
-
-
-def paste_aligned(
-    image: np.ndarray, source_mask: np.ndarray, target_mask: np.ndarray
-) -> np.ndarray:
-    """``image`` translated so its object's centroid lies on ``target_mask``'s, zero outside.
-
-    This is what a modeller gets by reusing another object's map (Fig. 2d of the
-    paper); target pixels with no source colour are black.
-
-    Parameters
-    ----------
-    image : ndarray, (H, W, 3)
-        The source image-map.
-    source_mask, target_mask : ndarray of bool
-        The source's and the target's object masks.
-
-    Returns
-    -------
-    ndarray, (H_t, W_t, 3) float32
-    """
-    from imagemap.colorization import centroid_shift, translate
-
-    source = np.where(source_mask[..., None], image, 0.0)
-    shift = centroid_shift(source_mask, target_mask)
-    pasted = translate(source, shift, target_mask.shape)
-    pasted[~target_mask] = 0.0
-    return pasted
 
 
 def class_reference(

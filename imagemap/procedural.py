@@ -1,6 +1,6 @@
 """Procedural solid textures: gradient (Perlin) noise, fractal sums, marble, wood, stripes, spots.
 
-The classic tools of the texture-mapping lecture (papers/texture-mapping-lecture.txt):
+The classic tools of texture mapping (lecture notes "More Texture Mapping"):
 a lattice of seeded random unit gradients interpolated with a smooth fade (Perlin
 noise), sums of octaves whose frequency grows by ``lacunarity`` and whose amplitude
 shrinks by ``persistence`` (fbm, turbulence), marble ``sin(k . p + A * noise(p))``,

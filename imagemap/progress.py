@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -15,7 +15,7 @@ def progress(
     total: int | None = None,
     desc: str = "",
     quiet: bool = False,
-) -> Iterator[T]:
+) -> Generator[T, None, None]:
     """Wrap ``iterable`` in a tqdm bar when stderr is a terminal and not ``quiet``."""
     if quiet or not sys.stderr.isatty():
         yield from iterable

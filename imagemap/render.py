@@ -1,9 +1,10 @@
 """Previews: normals from height or depth maps, normal maps, bump-mapped shading, relief views.
 
-The classic texture-mapping tools of the lecture (papers/texture-mapping-lecture.txt):
+The classic tools of texture mapping (lecture notes "More Texture Mapping"):
 surface normals from a height map by central finite differences, normal maps stored as RGB,
 Lambert and Blinn-Phong shading of a bumped surface under a chosen light, and a textured
-relief view of a depth map with its image-map like Fig. 2d-e of the depth-map paper.
+relief view of a depth map with its image-map like Fig. 2d-e of Hassner & Basri,
+*Automatic Depth-Map Colorization* (2006).
 
 Frame
 -----

@@ -10,7 +10,7 @@ Examples
 >>> check_int("m", 1.5, minimum=1)
 Traceback (most recent call last):
 ...
-imagemap.io.InputError: m: expected an integer, got 1.5
+imagemap.errors.InputError: m: expected an integer, got 1.5
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ import argparse
 import math
 import numbers
 import os
+import sys
 
-import numpy as np
-
-from imagemap import budget  # also makes imagemap.budget available after "import imagemap"
-from imagemap.io import InputError
+# Nothing heavy at import: the command line builds its parser with these types
+# before NumPy is loaded (imagemap --help stays fast).
+from imagemap.errors import InputError
 
 __all__ = [
     "check_colorize_arguments",
@@ -38,13 +38,19 @@ __all__ = [
 ]
 
 
+def _is_bool(value) -> bool:
+    """A Python or NumPy boolean (a NumPy one exists only once NumPy is imported)."""
+    numpy = sys.modules.get("numpy")
+    return isinstance(value, bool) or (numpy is not None and isinstance(value, numpy.bool_))
+
+
 def check_int(name: str, value, minimum: int | None = None, maximum: int | None = None) -> int:
     """``value`` as an int, or :class:`InputError` naming ``name``.
 
     Booleans, floats (even 2.0) and strings are refused: ``m="2"`` is a mistake
     that would otherwise surface deep inside NumPy.
     """
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+    if _is_bool(value) or not isinstance(value, numbers.Integral):
         raise InputError(f"{name}: expected an integer, got {value!r}")
     value = int(value)
     if minimum is not None and value < minimum:
@@ -63,7 +69,7 @@ def check_float(
     name: str, value, minimum: float | None = None, maximum: float | None = None
 ) -> float:
     """``value`` as a finite float in [minimum, maximum], or :class:`InputError`."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+    if _is_bool(value) or not isinstance(value, numbers.Real):
         raise InputError(f"{name}: expected a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
@@ -112,6 +118,7 @@ def check_colorize_arguments(
     (:func:`imagemap.budget.guard_colorize`), so a run too large for this machine
     is refused before it starts.
     """
+    from imagemap import budget
     from imagemap.colorization import PRESETS, ColorizeParams
     from imagemap.database import Database
     from imagemap.engine import BACKENDS

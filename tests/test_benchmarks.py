@@ -20,6 +20,11 @@ def bench():
     return load_script()
 
 
+# The quick run (the tests marked slow + ci_slow below) takes about 40 s: every case, both
+# backends, two fresh processes. Out of the default run; CI keeps it, as the check that
+# the benchmark script still works.
+
+
 @pytest.fixture(scope="module")
 def quick_report(bench, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("bench")
@@ -42,6 +47,8 @@ def test_memory_probe_sees_an_allocation(bench):
     assert figures["rss_peak_mb"] >= figures["rss_delta_mb"]
 
 
+@pytest.mark.slow
+@pytest.mark.ci_slow
 def test_quick_run_has_every_row_with_positive_figures(quick_report):
     rows = quick_report["rows"]
     cases = {(r["case"], r["backend"]) for r in rows}
@@ -75,6 +82,8 @@ def test_quick_run_has_every_row_with_positive_figures(quick_report):
             assert 0 < row["image_error_pct"] < 100
 
 
+@pytest.mark.slow
+@pytest.mark.ci_slow
 def test_quick_run_exact_is_no_worse_than_patchmatch(quick_report):
     # Exact search finds the best window of each query: its final target value is
     # at most the approximate one (up to EM taking a different path, hence the slack).
@@ -84,6 +93,8 @@ def test_quick_run_exact_is_no_worse_than_patchmatch(quick_report):
     assert exact <= approximate * 1.05
 
 
+@pytest.mark.slow
+@pytest.mark.ci_slow
 def test_quick_run_report_names_the_machine_and_breaks_down_stages(bench, quick_report):
     assert quick_report["machine"]["cores"] >= 1
     assert quick_report["machine"]["memory_gb"] > 0

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import sys
+import types
 
 import numpy as np
 import pytest
@@ -25,8 +27,11 @@ def instances() -> dict:
     }
 
 
-def test_ray_backend_is_reported():
-    assert ray_backend() in ("embreex", "rtree")
+def test_ray_backend_follows_whether_embreex_imports(monkeypatch):
+    monkeypatch.setitem(sys.modules, "embreex", None)  # "import embreex" raises ImportError
+    assert ray_backend() == "rtree"
+    monkeypatch.setitem(sys.modules, "embreex", types.ModuleType("embreex"))
+    assert ray_backend() == "embreex"
 
 
 def test_sphere_depth_is_analytic_and_aligned():

@@ -44,6 +44,7 @@ def test_target_never_increases(blob_database, query_blob, backend):
         assert np.all(steps <= 1e-6 * np.abs(values[:-1])), (level, values)
 
 
+@pytest.mark.slow  # pynndescent compiles with numba in every fresh process: 40-90 s
 def test_pynndescent_target_never_increases(blob_database, query_blob):
     depth, _ = query_blob
     result = colorize(depth, blob_database, "busts", backend="pynndescent", m=1)

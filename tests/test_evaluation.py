@@ -225,3 +225,86 @@ def test_full_method_beats_baselines_on_generated_classes(name, tmp_path):
     assert full["ssim"] > one["ssim"]
     assert full["blur_ratio"] > 2 * one["blur_ratio"]
     assert not math.isnan(full["part_accuracy"])
+
+
+class _BrokenForOne(Database):
+    """A database whose leave-one-out of ``fish_001`` raises (in a worker process too)."""
+
+    def without(self, *names):
+        if "fish_001" in names:
+            raise InputError("fish_001: broken on purpose")
+        return super().without(*names)
+
+
+def _fail_for_fish_001(monkeypatch, exception):
+    import imagemap.evaluation
+
+    original = imagemap.evaluation.evaluate_object
+
+    def flaky(database, name, **kwargs):
+        if name == "fish_001":
+            raise exception
+        return original(database, name, **kwargs)
+
+    monkeypatch.setattr(imagemap.evaluation, "evaluate_object", flaky)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_object_is_reported_and_the_others_go_on(fish_dir, tmp_path, workers):
+    database = _BrokenForOne(Database.from_directory(fish_dir).examples, source=str(fish_dir))
+    evaluation = leave_one_out(database, methods=("copy_nearest",), limit=3, workers=workers)
+    assert [obj.name for obj in evaluation.objects] == ["fish_000", "fish_002"]
+    assert evaluation.failed == [("fish_001", "fish_001: broken on purpose")]
+    assert not evaluation.interrupted
+    paths = write_report(evaluation, tmp_path / "report")
+    assert check_report(tmp_path / "report") == []
+    assert "- fish_001: failed: fish_001: broken on purpose" in paths["summary"].read_text()
+    assert "fish_001: failed" in paths["html"].read_text()
+    with open(paths["csv"], newline="") as handle:
+        assert [r["object"] for r in csv.DictReader(handle)] == ["fish_000", "fish_002"]
+
+
+def test_cli_names_a_failed_object_and_exits_1(fish_dir, tmp_path, capsys, monkeypatch):
+    _fail_for_fish_001(monkeypatch, RuntimeError("boom"))
+    out = tmp_path / "report"
+    args = ["evaluate", str(fish_dir), "--out", str(out), "--methods", "copy_nearest"]
+    assert main([*args, "--limit", "3"]) == 1
+    err = capsys.readouterr().err
+    assert "fish_001: failed: RuntimeError: boom" in err and "2 object(s) evaluated" in err
+    assert check_report(out) == []
+
+
+def test_interrupted_evaluation_keeps_what_finished(fish_dir, tmp_path, capsys, monkeypatch):
+    _fail_for_fish_001(monkeypatch, KeyboardInterrupt())
+    evaluation = leave_one_out(
+        Database.from_directory(fish_dir), methods=("copy_nearest",), limit=3
+    )
+    assert evaluation.interrupted and not evaluation.failed
+    assert [obj.name for obj in evaluation.objects] == ["fish_000"]
+    out = tmp_path / "report"
+    args = ["evaluate", str(fish_dir), "--out", str(out), "--methods", "copy_nearest"]
+    assert main(args) == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert check_report(out) == []
+    assert "interrupted" in (out / "summary.md").read_text()
+
+
+def test_every_object_failing_still_writes_a_report(fish_dir, tmp_path, monkeypatch):
+    import imagemap.evaluation
+
+    def broken(database, name, **kwargs):
+        raise ValueError(f"{name} is broken")
+
+    monkeypatch.setattr(imagemap.evaluation, "evaluate_object", broken)
+    evaluation = leave_one_out(Database.from_directory(fish_dir), methods=("full",), limit=2)
+    assert evaluation.objects == [] and len(evaluation.failed) == 2
+    write_report(evaluation, tmp_path / "report")
+    assert check_report(tmp_path / "report") == []
+
+
+@pytest.mark.parametrize(
+    "keyword, value", [("workers", 0), ("workers", 1.5), ("limit", 0), ("seed", -1)]
+)
+def test_leave_one_out_checks_its_arguments(fish_dir, keyword, value):
+    with pytest.raises(InputError, match=keyword):
+        leave_one_out(Database.from_directory(fish_dir), **{keyword: value})

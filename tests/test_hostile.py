@@ -1,4 +1,4 @@
-"""Hostile and faulty input, one case per row of issue 11 (and the rows that already passed).
+"""Hostile and faulty input: one case per kind of bad input or unsafe output (README, Errors).
 
 Every case asserts the exit code (or the exception), a message naming the file or
 option, and that no input or earlier output changed (SHA-256 of every file under
@@ -615,7 +615,7 @@ def test_no_nan_or_inf_in_any_method_on_generated_classes(class_name):
     assert np.all(np.isfinite(full.cost[full.mask]))
 
 
-# -- rows that already passed before issue 11: kept so -------------------------------------------
+# -- cases that passed before the validation work: kept so ---------------------------------------
 
 
 def _write(path: Path, array) -> Path:

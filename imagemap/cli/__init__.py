@@ -5,6 +5,16 @@ Each topic registers its subcommands from its own module (listed in
 ``func`` on each parser it adds; ``func(args)`` returns the exit code. A module
 that makes a command group (``imagemap btf``) returns ``{group: subparsers}``;
 the modules of ``GROUP_MODULES`` add their subcommands to that group.
+A parser
+that sets ``forward_unknown=True`` (``imagemap bench``) receives the arguments it
+does not know itself as ``args.forwarded`` and parses them when it runs.
+
+Building the parser imports nothing heavy: ``register`` functions must not import
+NumPy, SciPy, scikit-image or numba (``imagemap --help`` and every ``COMMAND
+--help`` answer at once); the ``func`` functions import what their command needs.
+The option choices that live in heavy modules are restated here
+(:data:`PRESET_NAMES`, :data:`BACKEND_NAMES`, :data:`METHOD_NAMES`; a test checks
+them against the library).
 """
 
 from __future__ import annotations
@@ -14,7 +24,16 @@ import importlib
 import logging
 import sys
 
-from imagemap.io import InputError
+from imagemap.errors import InputError
+
+#: ``sorted(imagemap.colorization.PRESETS)``: the ``--preset`` choices.
+PRESET_NAMES = ("busts", "fish", "humans")
+#: ``imagemap.engine.BACKENDS``: the ``--backend`` choices.
+BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
+#: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
+PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
+#: ``imagemap.evaluation.METHODS``: the ``imagemap evaluate --methods`` names, in report order.
+METHOD_NAMES = ("full", "copy_nearest", "one_pass", "mean_vote", "no_position", "no_pyramid")
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",
@@ -50,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--version", action=_VersionAction)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     groups: dict[str, argparse._SubParsersAction] = {}
     for name in SUBCOMMAND_MODULES:
@@ -61,13 +80,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked for."""
 
-    try:
-        return f"imagemap {version('imagemap')}"
-    except PackageNotFoundError:
-        return "imagemap (not installed)"
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, **kwargs):
+        kwargs.setdefault("help", "show the version and exit")
+        super().__init__(option_strings, dest=dest, default=argparse.SUPPRESS, nargs=0, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import imagemap
+
+        print(f"imagemap {imagemap.__version__}")  # to stdout, as argparse's own action
+        parser.exit()
 
 
 def add_common_options(parser: argparse.ArgumentParser) -> None:
@@ -81,7 +105,11 @@ def add_common_options(parser: argparse.ArgumentParser) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, unknown = parser.parse_known_args(argv)
+        if getattr(args, "forward_unknown", False):
+            args.forwarded = unknown
+        elif unknown:  # what parse_args would say
+            parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     except SystemExit as exc:
         if exc.code == 2:  # argparse printed the error naming the option: exit code 2
             return 2

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from imagemap.io import InputError
+from imagemap.errors import InputError
 
 BATCH_HELP = """\
 Synthesize every depth map (NAME_depth.png|tif|tiff|npy -> NAME_image.png) and
@@ -185,9 +185,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import add_common_options
-    from imagemap.colorization import PRESETS
-    from imagemap.engine import BACKENDS
+    from imagemap.cli import BACKEND_NAMES, PRESET_NAMES, add_common_options
 
     p = subparsers.add_parser(
         "batch",
@@ -207,12 +205,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--preset",
-        choices=sorted(PRESETS),
+        choices=sorted(PRESET_NAMES),
         default="busts",
         help="class preset (default busts)",
     )
     p.add_argument("--m", type=int, help="number of examples to select automatically")
-    p.add_argument("--backend", choices=BACKENDS, help="nearest-neighbour search")
+    p.add_argument("--backend", choices=BACKEND_NAMES, help="nearest-neighbour search")
     p.add_argument("--example-preference", type=float, help="extra cost per example rank")
     p.add_argument(
         "--format", choices=("glb", "obj"), default="glb", help="textured mesh format (glb)"

@@ -7,10 +7,9 @@ import logging
 import sys
 from pathlib import Path
 
-from imagemap.btf import load_btf
-from imagemap.btf.extrapolate import PIXELWISE_BACKENDS
+from imagemap.cli import PIXELWISE_BACKEND_NAMES
 from imagemap.cli.paths import check_paths
-from imagemap.io import InputError
+from imagemap.errors import InputError
 
 log = logging.getLogger("imagemap")
 
@@ -54,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubP
     p.add_argument("--wc", type=float, default=None, help="colour weight (pixelwise 1)")
     p.add_argument(
         "--backend",
-        choices=PIXELWISE_BACKENDS,
+        choices=PIXELWISE_BACKEND_NAMES,
         default=None,
         help="pixel-wise nearest-neighbour search (default pca_kdtree; kdtree and exact are exact)",
     )
@@ -133,6 +132,7 @@ def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubP
 
 
 def _extrapolate(args: argparse.Namespace) -> int:
+    from imagemap.btf import load_btf
     from imagemap.btf.extrapolate import PixelwiseParams, TextureOptimizationParams, extrapolate
     from imagemap.io import read_image
 
@@ -245,6 +245,7 @@ def _response(chart: str | None):
 def _render(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from imagemap.btf import load_btf
     from imagemap.io import write_image
 
     check_paths({"-o": args.output}, {"btf": args.btf}, {"-o": (".png",)})

@@ -6,11 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from imagemap.btf import load_btf
 from imagemap.cli.paths import check_paths
-from imagemap.io import InputError
+from imagemap.errors import InputError
 
 
 def register(btf_subparsers: argparse._SubParsersAction) -> None:
@@ -63,6 +60,9 @@ def register(btf_subparsers: argparse._SubParsersAction) -> None:
 
 
 def _fit(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from imagemap.btf import load_btf
     from imagemap.btf.moving_average import (
         MAParams,
         compression_ratios,
@@ -105,6 +105,9 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _synthesize(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from imagemap.btf import load_btf
     from imagemap.btf.moving_average import (
         MovingAverageModel,
         synthesize_appearance,

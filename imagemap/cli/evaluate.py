@@ -10,17 +10,21 @@ EVALUATE_HELP = """\
 Leave-one-out evaluation of a database: every object's image-map is synthesized
 from the other objects only (automatic example selection, the class preset) and
 compared with its true image-map over the object's mask, for the full method and
-four baselines:
+five baselines:
 
   full          the method (pyramid, hard EM, depth + colour + position)
   copy_nearest  the nearest example's map pasted at the query's centroid
   one_pass      one pass of depth-only matching and voting (no EM, no position)
+  mean_vote     the full method with the paper's mean vote instead of the seam-
+                blended copy
   no_position   the full method without the position term
   no_pyramid    the full method on plain colour instead of Laplacian bands
 
 Writes REPORT_DIR/results.csv (object, method, ciede2000, ssim, part_accuracy,
-faulty, seconds), summary.md (a table per class), index.html (static; open it in
-a browser) with its pictures under images/, and overview.png.
+part_transfer, ..., faulty, seconds), summary.md (a table per class), index.html
+(static; open it in a browser) with its pictures under images/, and overview.png.
+An object whose synthesis fails is named (exit code 1) and the others go on;
+Ctrl-C stops the run and still writes the report of the objects finished.
 
 examples:
   python -m data_gen fish --count 12 --seed 0 --out fish_db
@@ -30,9 +34,7 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import add_common_options
-    from imagemap.colorization import PRESETS
-    from imagemap.evaluation import METHODS
+    from imagemap.cli import METHOD_NAMES, PRESET_NAMES, add_common_options
     from imagemap.validate import non_negative_int, positive_int
 
     p = subparsers.add_parser(
@@ -45,14 +47,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="REPORT_DIR", help="report directory")
     p.add_argument(
         "--preset",
-        choices=sorted(PRESETS),
+        choices=PRESET_NAMES,
         help="class preset (default: the preset named like each object's class, else busts)",
     )
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
     p.add_argument(
         "--methods",
-        default=",".join(METHODS),
-        help=f"comma-separated methods (default all: {','.join(METHODS)})",
+        default=",".join(METHOD_NAMES),
+        help=f"comma-separated methods (default all: {','.join(METHOD_NAMES)})",
     )
     p.add_argument("--limit", type=positive_int, help="evaluate only the first N objects")
     p.add_argument(
@@ -107,14 +109,19 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"evaluated {len(evaluation.objects)} objects x {len(methods)} methods in "
             f"{evaluation.seconds:.0f} s with {args.workers} worker(s); report {paths['html']}"
         )
-    # Objects that failed (reported by leave_one_out as (name, message) pairs once it
-    # goes on past a failing object): named here, and the exit code says so.
-    failed = list(getattr(evaluation, "failed", None) or [])
-    for name, message in failed:
+    for name, message in evaluation.failed:
         print(f"imagemap: {name}: failed: {message}", file=sys.stderr)
-    if failed:
+    if evaluation.failed:
         print(
-            f"imagemap: {len(evaluation.objects)} object(s) evaluated, {len(failed)} failed",
+            f"imagemap: {len(evaluation.objects)} object(s) evaluated, "
+            f"{len(evaluation.failed)} failed",
             file=sys.stderr,
         )
-    return 1 if failed else 0
+    if evaluation.interrupted:
+        print(
+            f"imagemap: report of the {len(evaluation.objects)} object(s) evaluated before "
+            f"the interruption written to {paths['html']}",
+            file=sys.stderr,
+        )
+        return 130
+    return 1 if evaluation.failed else 0

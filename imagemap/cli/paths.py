@@ -11,7 +11,7 @@ import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from imagemap.io import InputError
+from imagemap.errors import InputError
 
 __all__ = ["check_paths"]
 

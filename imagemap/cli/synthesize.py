@@ -7,10 +7,9 @@ import json
 import logging
 import sys
 import time
-import tracemalloc
 from pathlib import Path
 
-from imagemap.io import InputError
+from imagemap.errors import InputError
 
 log = logging.getLogger("imagemap")
 
@@ -40,10 +39,8 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import add_common_options
+    from imagemap.cli import BACKEND_NAMES, PRESET_NAMES, add_common_options
     from imagemap.cli.batch import add_mesh_options
-    from imagemap.colorization import PRESETS
-    from imagemap.engine import BACKENDS
     from imagemap.validate import non_negative_float, non_negative_int, positive_int
 
     p = subparsers.add_parser(
@@ -63,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="output image-map (.png, RGBA)")
     p.add_argument(
         "--preset",
-        choices=sorted(PRESETS),
+        choices=PRESET_NAMES,
         default="busts",
         help="class preset: weights, patch sizes and m after the paper's Table 1 (default busts)",
     )
@@ -74,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--exclude", help="comma-separated example names to leave out of the database")
     p.add_argument(
         "--backend",
-        choices=BACKENDS,
+        choices=BACKEND_NAMES,
         help="nearest-neighbour search (default patchmatch: fastest; exact: reference)",
     )
     p.add_argument(
@@ -147,7 +144,8 @@ def parse_colour(text: str) -> tuple[float, float, float] | None:
         return None
     if len(text) == 7 and text.startswith("#"):
         try:
-            return tuple(int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+            red, green, blue = (int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+            return red, green, blue
         except ValueError:
             pass
     raise InputError(f"--background: not a colour: {text!r} (use transparent, white or #rrggbb)")
@@ -336,6 +334,8 @@ def run_synthesize(args: argparse.Namespace) -> int:
 
 def _synthesize_one(args, job, depth, database, examples, background, batch) -> dict:
     """One map: synthesize, build every output, write them all-or-nothing."""
+    import tracemalloc
+
     from imagemap.budget import memory_check
     from imagemap.colorization import colorize
     from imagemap.io import image_writer
@@ -418,13 +418,11 @@ def _write_batch_report(args, reports, failures, interrupted: bool = False) -> N
 
 def _preview(depth, result, database):
     """The result on its depth beside the best example's map copied over (centroid-aligned)."""
-    from imagemap.colorization import centroid_shift, translate
+    from imagemap.align import translate_masked
     from imagemap.render import preview_pair
 
     best = database[result.example_names[0]]
-    shift = centroid_shift(best.mask, depth > 0)
-    reference = translate(best.image, shift, depth.shape)
-    reference_mask = translate(best.mask.astype("float32"), shift, depth.shape) > 0.5
+    reference, reference_mask = translate_masked(best.image, best.mask, depth > 0)
     return preview_pair(depth, result.image, reference, reference_mask=reference_mask)
 
 

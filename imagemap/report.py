@@ -1,0 +1,487 @@
+"""The report of a leave-one-out evaluation: ``results.csv``, ``summary.md``, ``index.html``.
+
+:func:`write_report` writes the files of an :class:`~imagemap.evaluation.Evaluation`
+(made by :func:`imagemap.evaluation.leave_one_out`) into a folder: the per-object
+rows as CSV, the per-class tables (:func:`summarize`) as Markdown, and a static
+HTML page with every object's depth, truth, each method's result and provenance
+side by side (pictures under ``images/``, all strips in ``overview.png``). Objects
+that failed are listed in the summary and on the page. :func:`check_report` checks
+that the page links only files that exist.
+
+Example
+-------
+>>> from imagemap.evaluation import leave_one_out
+>>> evaluation = leave_one_out(db, preset="fish", workers=2)  # doctest: +SKIP
+>>> write_report(evaluation, "report/")  # doctest: +SKIP
+>>> check_report("report/")  # doctest: +SKIP
+[]
+"""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import math
+import os
+from html.parser import HTMLParser
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from imagemap.io import InputError, atomic_path, write_image
+
+if TYPE_CHECKING:
+    from imagemap.evaluation import Evaluation, ObjectEvaluation
+
+__all__ = [
+    "CSV_COLUMNS",
+    "SUMMARY_COLUMNS",
+    "check_report",
+    "summarize",
+    "summary_markdown",
+    "write_report",
+]
+
+CSV_COLUMNS = (
+    "object",
+    "method",
+    "ciede2000",
+    "ssim",
+    "part_accuracy",
+    "part_transfer",
+    "part_transfer_macro",
+    "features_drawn",
+    "features_measured",
+    "blur_ratio",
+    "faulty",
+    "seconds",
+)
+
+#: Grey behind the objects in report pictures, so that black object pixels
+#: (holes of copy_nearest) stand out from the background.
+_BACKDROP = 0.82
+
+
+def summarize(evaluation: Evaluation) -> dict[str, dict[str, dict[str, float]]]:
+    """Per class, per method: means of the metrics, fraction faulty, mean seconds.
+
+    Returns
+    -------
+    dict
+        ``{class: {method: {"objects", "ciede2000", "ssim", "part_accuracy",
+        "part_transfer", "faulty", "seconds"}}}``; NaN means are skipped (a
+        metric NaN for every object stays NaN).
+    """
+    table: dict[str, dict[str, dict[str, float]]] = {}
+    for class_name in dict.fromkeys(obj.class_name for obj in evaluation.objects):
+        members = [obj for obj in evaluation.objects if obj.class_name == class_name]
+        table[class_name] = {}
+        for method in evaluation.methods:
+            results = [obj.results[method] for obj in members]
+            with_features = [r for r in results if r.metrics.features_measured]
+
+            def mean(values):
+                values = np.asarray(values, dtype=np.float64)
+                return (
+                    float(values[np.isfinite(values)].mean())
+                    if np.isfinite(values).any()
+                    else math.nan
+                )
+
+            table[class_name][method] = {
+                "objects": len(results),
+                "ciede2000": mean([r.metrics.ciede2000 for r in results]),
+                "ssim": mean([r.metrics.ssim for r in results]),
+                "part_accuracy": mean([r.metrics.part_accuracy for r in results]),
+                "part_transfer": mean([r.metrics.part_transfer for r in results]),
+                "part_transfer_macro": mean([r.metrics.part_transfer_macro for r in results]),
+                # Share of all measurable small features drawn, and of objects with all drawn.
+                "features_drawn": _share(
+                    sum(r.metrics.features_drawn for r in results),
+                    sum(r.metrics.features_measured for r in results),
+                ),
+                "objects_features_drawn": _share(
+                    sum(not r.metrics.features_missing for r in with_features),
+                    len(with_features),
+                ),
+                "blur_ratio": mean([r.metrics.blur_ratio for r in results]),
+                "faulty": mean([float(r.faulty) for r in results]),
+                "seconds": mean([r.seconds for r in results]),
+            }
+    return table
+
+
+#: Summary table columns: (key of :func:`summarize`'s rows, title, format).
+SUMMARY_COLUMNS = (
+    ("ciede2000", "ΔE00 ↓", "{:.2f}"),
+    ("ssim", "SSIM ↑", "{:.3f}"),
+    ("part_accuracy", "part acc. ↑", "{:.3f}"),
+    ("part_transfer", "part transfer ↑", "{:.3f}"),
+    ("part_transfer_macro", "macro part transfer ↑", "{:.3f}"),
+    ("features_drawn", "features drawn ↑", "pct"),
+    ("objects_features_drawn", "objects with all features ↑", "pct"),
+    ("blur_ratio", "blur ratio ↑", "{:.2f}"),
+    ("faulty", "faulty ↓", "pct"),
+    ("seconds", "s / object", "{:.2f}"),
+)
+
+
+def _summary_cells(row: dict) -> list[str]:
+    cells = []
+    for key, _, form in SUMMARY_COLUMNS:
+        value = row[key]
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            cells.append("–")
+        elif form == "pct":
+            cells.append(f"{100 * value:.0f}%")
+        else:
+            cells.append(form.format(value))
+    return cells
+
+
+def _share(part: int, whole: int) -> float:
+    return part / whole if whole else math.nan
+
+
+def _fmt(value: float, digits: int = 3) -> str:
+    return (
+        "–"
+        if value is None or (isinstance(value, float) and math.isnan(value))
+        else f"{value:.{digits}f}"
+    )
+
+
+def summary_markdown(evaluation: Evaluation) -> str:
+    """The per-class summary tables as Markdown."""
+    table = summarize(evaluation)
+    lines = ["# Leave-one-out evaluation", ""]
+    lines.append(
+        f"{len(evaluation.objects)} objects, methods {', '.join(evaluation.methods)}, "
+        f"seed {evaluation.seed}, {evaluation.workers} worker(s), "
+        f"{evaluation.seconds:.0f} s in all."
+    )
+    lines.append("")
+    lines.append(
+        "ΔE00: mean CIEDE2000 over the object (lower is better). SSIM: luminance SSIM "
+        "over the object. Part acc.: fraction of object pixels nearer to their own part's "
+        "true colours than to another part's. Part transfer: fraction of object pixels "
+        "whose colour was taken from the same part of an example (independent of the "
+        "query's palette); macro: the same averaged over parts, so a small eye counts as "
+        "much as the body. Features drawn: small labelled parts (under 1.5% of the object: "
+        "eyes, lips, eyebrows) whose L* pattern correlates with the truth's (NCC >= 0.5, "
+        "best over shifts of 3 px). Blur ratio: fine-band energy of the map over that of "
+        "its source map copied pixel by pixel (1 = as crisp as copied pixels). Faulty: "
+        "worse than the median paste of another member's map onto the object in luminance "
+        "SSIM or in part transfer (ΔE00 where there are no labels), or a small feature not "
+        "drawn: the class's bar below. The generated classes draw a palette per object, "
+        "which no method can know from the depth, so ΔE00 and part accuracy mostly measure "
+        "that lottery and reward blurred averages; SSIM and part transfer do not."
+    )
+    for class_name, methods in table.items():
+        rule = evaluation.rules[class_name]
+        ref = evaluation.reference.get(class_name, {})
+        lines += ["", f"## {class_name}", ""]
+        lines.append(
+            f"{methods[evaluation.methods[0]]['objects']} objects, preset "
+            f"`{evaluation.presets.get(class_name, '?')}`. Faulty when {rule.describe()} "
+            f"(medians over {ref.get('pairs', 0)} centroid-aligned pastes of one member's "
+            "map onto another's mask)."
+        )
+        lines += [
+            "",
+            "| method | " + " | ".join(title for _, title, _ in SUMMARY_COLUMNS) + " |",
+            "|---|" + "---:|" * len(SUMMARY_COLUMNS),
+        ]
+        for method, row in methods.items():
+            lines.append(f"| {method} | " + " | ".join(_summary_cells(row)) + " |")
+    problems = _problems(evaluation)
+    if problems:
+        lines += ["", "## Not evaluated", ""] + [f"- {text}" for text in problems]
+    return "\n".join(lines) + "\n"
+
+
+def _problems(evaluation: Evaluation) -> list[str]:
+    """Lines naming the objects that failed (and an interruption): none when all went well."""
+    lines = [f"{name}: failed: {message}" for name, message in evaluation.failed]
+    if evaluation.interrupted:
+        lines.append("interrupted (Ctrl-C): the objects not evaluated by then are missing")
+    return lines
+
+
+def _on_backdrop(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    return np.where(mask[..., None], image, _BACKDROP).astype(np.float32)
+
+
+def _depth_picture(depth: np.ndarray) -> np.ndarray:
+    mask = depth > 0
+    lo, hi = float(depth[mask].min()), float(depth[mask].max())
+    grey = 0.15 + 0.85 * (depth - lo) / max(hi - lo, 1e-6)
+    return np.where(mask, grey, _BACKDROP).astype(np.float32)
+
+
+def _comparison_strip(obj: ObjectEvaluation, methods: tuple[str, ...], gap: int = 4) -> np.ndarray:
+    """depth | truth | each method | provenance of full, side by side."""
+    tiles = [
+        _depth_picture(obj.depth)[..., None].repeat(3, axis=2),
+        _on_backdrop(obj.truth, obj.mask),
+    ]
+    tiles += [_on_backdrop(obj.results[m].image, obj.mask) for m in methods]
+    provenance = next(
+        (p for p in (obj.results[m].provenance for m in methods) if p is not None), None
+    )
+    if provenance is not None:
+        tiles.append(provenance)
+    h, w = obj.depth.shape
+    strip = np.ones((h, len(tiles) * (w + gap) - gap, 3), dtype=np.float32)
+    for k, tile in enumerate(tiles):
+        strip[:, k * (w + gap) : k * (w + gap) + w] = tile
+    return strip
+
+
+def _strip_captions(methods: tuple[str, ...], has_provenance: bool) -> list[str]:
+    return ["depth", "truth", *methods] + (["provenance"] if has_provenance else [])
+
+
+def _captioned_sheet(evaluation: Evaluation, gap: int = 4, caption_height: int = 16) -> np.ndarray:
+    """All objects' strips stacked under one caption row (an overview picture)."""
+    from PIL import Image, ImageDraw
+
+    if not evaluation.objects:  # every object failed: a blank picture keeps the link valid
+        return np.ones((caption_height, 200, 3), np.float32)
+    strips = [_comparison_strip(obj, evaluation.methods, gap) for obj in evaluation.objects]
+    width = max(s.shape[1] for s in strips)
+    h, w = evaluation.objects[0].depth.shape
+    sheet = np.ones((caption_height + sum(s.shape[0] + gap for s in strips), width, 3), np.float32)
+    top = caption_height
+    for strip in strips:
+        sheet[top : top + strip.shape[0], : strip.shape[1]] = strip
+        top += strip.shape[0] + gap
+    picture = Image.fromarray(np.round(sheet * 255).astype(np.uint8))
+    draw = ImageDraw.Draw(picture)
+    has_provenance = any(r.provenance is not None for r in evaluation.objects[0].results.values())
+    for k, text in enumerate(_strip_captions(evaluation.methods, has_provenance)):
+        draw.text((k * (w + gap) + 2, 2), text, fill=(0, 0, 0))
+    return np.asarray(picture, dtype=np.float32) / 255.0
+
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:1.5em;color:#222;background:#fafafa}
+table{border-collapse:collapse;margin:.5em 0 1.5em}
+td,th{border:1px solid #bbb;padding:.25em .6em;text-align:right}
+th:first-child,td:first-child{text-align:left}
+section{border-top:1px solid #ccc;padding:.6em 0}
+.row{display:flex;flex-wrap:wrap;gap:.5em;align-items:flex-start}
+figure{margin:0;font-size:.8em;text-align:center}
+figure img{display:block;image-rendering:pixelated;border:1px solid #999}
+.faulty{color:#b00;font-weight:bold}
+.ex{margin-top:.4em}
+.ex img{width:100px}
+"""
+
+
+def _report_html(evaluation: Evaluation, image_paths: dict, example_paths: dict) -> str:
+    esc = html.escape
+    table = summarize(evaluation)
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        "<title>imagemap leave-one-out evaluation</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>Leave-one-out evaluation</h1>",
+        f"<p>{len(evaluation.objects)} objects, seed {evaluation.seed}, "
+        f"{evaluation.workers} worker(s), {evaluation.seconds:.0f} s. Each object's image-map "
+        "was synthesized from the other objects only. ΔE00: mean CIEDE2000 over the object; "
+        "SSIM on luminance; part accuracy: pixels nearer to their own part's true colours; "
+        "part transfer: pixels whose colour came from the same part of an example. "
+        'Files: <a href="results.csv">results.csv</a>, <a href="summary.md">summary.md</a>, '
+        '<a href="overview.png">overview.png</a>.</p>',
+    ]
+    problems = _problems(evaluation)
+    if problems:
+        parts.append('<h2 class="faulty">Not evaluated</h2><ul>')
+        parts += [f"<li>{esc(text)}</li>" for text in problems]
+        parts.append("</ul>")
+    for class_name, methods in table.items():
+        rule = evaluation.rules[class_name]
+        parts.append(f"<h2>{esc(class_name)}</h2>")
+        parts.append(
+            f"<p>Preset <code>{esc(evaluation.presets.get(class_name, '?'))}</code>. "
+            f"Faulty when {esc(rule.describe())} (medians of pastes of one member's map "
+            "onto another).</p>"
+        )
+        parts.append(
+            "<table><tr><th>method</th>"
+            + "".join(f"<th>{esc(title)}</th>" for _, title, _ in SUMMARY_COLUMNS)
+            + "</tr>"
+        )
+        for method, row in methods.items():
+            cells = "".join(f"<td>{esc(cell)}</td>" for cell in _summary_cells(row))
+            parts.append(f"<tr><td>{esc(method)}</td>{cells}</tr>")
+        parts.append("</table>")
+    parts.append("<h2>Objects</h2>")
+    for obj in evaluation.objects:
+        paths = image_paths[obj.name]
+        full = obj.results.get("full") or next(iter(obj.results.values()))
+        parts.append(f'<section id="{esc(obj.name)}"><h3>{esc(obj.name)}</h3><div class="row">')
+        for key, caption in (("depth", "input depth"), ("truth", "truth")):
+            parts.append(
+                f'<figure><img src="{esc(paths[key])}" alt="{caption} of {esc(obj.name)}">'
+                f"<figcaption>{caption}</figcaption></figure>"
+            )
+        for method in evaluation.methods:
+            result = obj.results[method]
+            m = result.metrics
+            flag = ' <span class="faulty">faulty</span>' if result.faulty else ""
+            parts.append(
+                f'<figure><img src="{esc(paths[method])}" alt="{esc(method)}">'
+                f"<figcaption><b>{esc(method)}</b>{flag}<br>ΔE00 {_fmt(m.ciede2000, 1)} · "
+                f"SSIM {_fmt(m.ssim, 2)}<br>part acc. {_fmt(m.part_accuracy, 2)} · "
+                f"transfer {_fmt(m.part_transfer, 2)}<br>features {m.features_drawn}/"
+                f"{m.features_measured} · blur {_fmt(m.blur_ratio, 2)}<br>"
+                f"{result.seconds:.2f} s</figcaption>"
+                "</figure>"
+            )
+        if "provenance" in paths:
+            parts.append(
+                f'<figure><img src="{esc(paths["provenance"])}" alt="provenance">'
+                "<figcaption>provenance (full)</figcaption></figure>"
+            )
+        parts.append("</div>")
+        tints = dict(full.legend)
+        parts.append(
+            '<div class="row ex"><small>examples chosen (full),<br>framed in their '
+            "provenance tint:</small>"
+        )
+        for name in full.examples:
+            tint = tints.get(name)
+            style = ""
+            if tint is not None:
+                r, g, b = (int(round(255 * c)) for c in tint)
+                style = f' style="border:4px solid rgb({r},{g},{b})"'
+            parts.append(
+                f'<figure><img src="{esc(example_paths[name])}" alt="{esc(name)}"{style}>'
+                f"<figcaption>{esc(name)}</figcaption></figure>"
+            )
+        parts.append("</div></section>")
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def _write_text(path: Path, text: str) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_report(evaluation: Evaluation, out_dir: str | os.PathLike) -> dict[str, Path]:
+    """Write ``results.csv``, ``summary.md``, ``index.html`` and its pictures into ``out_dir``.
+
+    Pictures go to ``out_dir/images/`` (per object: depth, truth, each method,
+    provenance, a comparison strip) and ``out_dir/overview.png`` (all strips).
+    Every file is written atomically; the HTML is static and links only files
+    written here.
+
+    Parameters
+    ----------
+    evaluation : Evaluation
+    out_dir : str or path-like
+
+    Returns
+    -------
+    dict
+        ``{"csv", "summary", "html", "overview"}`` -> paths.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for row in evaluation.rows():
+        writer.writerow(
+            {
+                **row,
+                **{
+                    key: "" if math.isnan(row[key]) else f"{row[key]:.4f}"
+                    for key in (
+                        "ciede2000",
+                        "ssim",
+                        "part_accuracy",
+                        "part_transfer",
+                        "part_transfer_macro",
+                        "blur_ratio",
+                    )
+                },
+                "faulty": int(row["faulty"]),
+                "seconds": f"{row['seconds']:.3f}",
+            }
+        )
+    paths = {"csv": _write_text(out / "results.csv", buffer.getvalue())}
+    paths["summary"] = _write_text(out / "summary.md", summary_markdown(evaluation))
+
+    example_paths = {}
+    for name, image in evaluation.examples.items():
+        relative = f"images/examples/{name}.png"
+        write_image(out / relative, image)
+        example_paths[name] = relative
+    image_paths: dict[str, dict[str, str]] = {}
+    for obj in evaluation.objects:
+        folder = f"images/{obj.name}"
+        entries = {"depth": f"{folder}/depth.png", "truth": f"{folder}/truth.png"}
+        write_image(out / entries["depth"], _depth_picture(obj.depth))
+        write_image(out / entries["truth"], _on_backdrop(obj.truth, obj.mask))
+        for method in evaluation.methods:
+            result = obj.results[method]
+            entries[method] = f"{folder}/{method}.png"
+            write_image(out / entries[method], _on_backdrop(result.image, obj.mask))
+        provenance = next(
+            (r.provenance for r in obj.results.values() if r.provenance is not None), None
+        )
+        if provenance is not None:
+            entries["provenance"] = f"{folder}/provenance.png"
+            write_image(out / entries["provenance"], provenance)
+        entries["comparison"] = f"{folder}/comparison.png"
+        write_image(out / entries["comparison"], _comparison_strip(obj, evaluation.methods))
+        image_paths[obj.name] = entries
+    paths["overview"] = write_image(out / "overview.png", _captioned_sheet(evaluation))
+    paths["html"] = _write_text(
+        out / "index.html", _report_html(evaluation, image_paths, example_paths)
+    )
+    return paths
+
+
+class _Links(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.links: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        for key, value in attrs:
+            if key in ("src", "href") and value and not value.startswith("#"):
+                self.links.append(value)
+
+
+def check_report(out_dir: str | os.PathLike) -> list[str]:
+    """Links of ``out_dir/index.html`` that do not resolve to a file (empty when all do).
+
+    Example
+    -------
+    >>> check_report("report/")  # doctest: +SKIP
+    []
+    """
+    out = Path(out_dir)
+    index = out / "index.html"
+    if not index.is_file():
+        raise InputError(f"{index}: no report here")
+    parser = _Links()
+    parser.feed(index.read_text(encoding="utf-8"))
+    missing = []
+    for link in parser.links:
+        if "://" in link or link.startswith("/"):
+            missing.append(link)  # a static report links only its own files
+        elif not (out / html.unescape(link)).is_file():
+            missing.append(link)
+    return missing

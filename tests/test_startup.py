@@ -1,0 +1,110 @@
+"""Start-up: lazy package imports, a parser that imports nothing heavy, ``imagemap bench``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import imagemap
+from imagemap.cli import BACKEND_NAMES, METHOD_NAMES, PRESET_NAMES, build_parser, main
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAVY = ("numpy", "scipy", "skimage", "sklearn", "numba", "pynndescent", "imageio", "trimesh")
+
+
+def _modules_after(code: str) -> set[str]:
+    """Top-level modules loaded by ``code`` in a fresh interpreter using this checkout."""
+    probe = f"{code}\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, env=env
+    ).stdout
+    return {name.split(".")[0] for name in json.loads(out.splitlines()[-1])}
+
+
+def test_import_imagemap_loads_nothing_heavy():
+    assert not _modules_after("import imagemap").intersection(HEAVY)
+
+
+def test_building_the_parser_loads_no_scientific_module():
+    loaded = _modules_after("from imagemap.cli import build_parser; build_parser()")
+    # numpy: still loaded by imagemap/cli/btf*.py at registration (not this module's files).
+    assert not loaded.intersection(set(HEAVY) - {"numpy"})
+
+
+@pytest.mark.parametrize(
+    "module", ["imagemap.cli.synthesize", "imagemap.cli.evaluate", "imagemap.cli.bench"]
+)
+def test_registering_a_command_loads_not_even_numpy(module):
+    code = (
+        "import argparse, importlib\n"
+        f"importlib.import_module({module!r}).register("
+        "argparse.ArgumentParser().add_subparsers())"
+    )
+    assert not _modules_after(code).intersection(HEAVY)
+
+
+def test_public_names_are_importable_and_lazy_submodules_resolve():
+    from imagemap import Database, InputError, colorize  # noqa: F401
+
+    assert set(imagemap.__all__) <= set(dir(imagemap))
+    for name in imagemap.__all__:
+        assert getattr(imagemap, name) is not None
+    assert imagemap.InputError is imagemap.io.InputError
+    with imagemap.budget.memory_check(False):  # a submodule, reached as an attribute
+        pass
+    with pytest.raises(AttributeError, match="no_such_thing"):
+        imagemap.no_such_thing  # noqa: B018
+
+
+def test_option_choices_match_the_library():
+    from imagemap.colorization import PRESETS
+    from imagemap.engine import BACKENDS
+    from imagemap.evaluation import METHODS
+
+    assert PRESET_NAMES == tuple(sorted(PRESETS))
+    assert BACKEND_NAMES == tuple(BACKENDS)
+    assert METHOD_NAMES == tuple(METHODS)
+
+
+def test_version_has_one_source(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"imagemap {imagemap.__version__}"
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    assert 'dynamic = ["version"]' in pyproject or "\nversion = " in pyproject
+
+
+def test_unknown_arguments_are_still_refused(capsys):
+    assert main(["db", "check", "somewhere", "--bogus"]) == 2
+    assert "unrecognized arguments: --bogus" in capsys.readouterr().err
+
+
+def test_bench_help_is_the_scripts(capsys):
+    if not (ROOT / "benchmarks" / "run.py").is_file():
+        pytest.skip("no benchmarks/run.py checkout")
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "imagemap bench" in out and "--quick" in out and "examples:" in out
+    assert main(["bench", "--no-such-option"]) == 2
+    assert "--no-such-option" in capsys.readouterr().err
+
+
+def test_without_the_benchmark_script_only_bench_fails(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr("imagemap.cli.bench.SCRIPT", tmp_path / "benchmarks" / "run.py")
+    monkeypatch.delitem(sys.modules, "imagemap_benchmarks_run", raising=False)
+    build_parser()  # every other command builds and runs without it
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    capsys.readouterr()
+    assert main(["bench", "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert "run.py: not found" in err and "source checkout" in err
