@@ -38,6 +38,9 @@ _LAZY = {
     "read_depth": "imagemap.io",
     "read_image": "imagemap.io",
     "write_image": "imagemap.io",
+    "colorize_mesh": "imagemap.mesh",
+    "export_textured": "imagemap.mesh",
+    "render_mesh": "imagemap.mesh",
 }
 
 __all__ = [
@@ -51,8 +54,11 @@ __all__ = [
     "InputError",
     "Mapping",
     "colorize",
+    "colorize_mesh",
+    "export_textured",
     "read_depth",
     "read_image",
+    "render_mesh",
     "select_examples",
     "synthesize",
     "write_image",
@@ -70,6 +76,7 @@ if TYPE_CHECKING:  # what type checkers and editors see
     from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
     from imagemap.errors import InputError
     from imagemap.io import read_depth, read_image, write_image
+    from imagemap.mesh import colorize_mesh, export_textured, render_mesh
 
     __version__: str
 
