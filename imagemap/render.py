@@ -25,6 +25,7 @@ __all__ = [
     "BACKGROUND",
     "decode_normal_map",
     "direction_from_angles",
+    "display_gamma",
     "encode_normal_map",
     "normals_from_depth",
     "normals_from_height",
@@ -35,6 +36,20 @@ __all__ = [
 
 #: Background colour of previews (light grey: neither black nor white image-maps vanish).
 BACKGROUND = (0.82, 0.82, 0.84)
+
+#: Display gamma of linear renderings (BTF images, relit previews).
+DISPLAY_GAMMA = 2.2
+
+
+def display_gamma(linear: np.ndarray, gamma: float = DISPLAY_GAMMA) -> np.ndarray:
+    """Linear radiance clipped to [0, 1] and gamma-encoded for display.
+
+    Examples
+    --------
+    >>> float(display_gamma(np.array(0.25), 2.0))
+    0.5
+    """
+    return np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0) ** np.float32(1.0 / gamma)
 
 
 def direction_from_angles(elevation: float, azimuth: float) -> np.ndarray:

@@ -205,7 +205,9 @@ def _scan_rows(
 
 def _display(image: np.ndarray) -> np.ndarray:
     """Linear radiance to a viewable image (gamma 2.2)."""
-    return np.clip(image, 0.0, 1.0) ** (1 / 2.2)
+    from imagemap.render import display_gamma
+
+    return display_gamma(image)
 
 
 @dataclass

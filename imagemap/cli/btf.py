@@ -247,6 +247,7 @@ def _render(args: argparse.Namespace) -> int:
 
     from imagemap.btf import load_btf
     from imagemap.io import write_image
+    from imagemap.render import display_gamma
 
     check_paths({"-o": args.output}, {"btf": args.btf}, {"-o": (".png",)})
     for name, (theta, phi) in (("--light", args.light), ("--view", args.view)):
@@ -259,7 +260,7 @@ def _render(args: argparse.Namespace) -> int:
     view = btf.nearest_view(*args.view)
     image = np.clip(btf.image(light, view) * args.exposure, 0.0, 1.0)
     if not args.linear:
-        image = image ** (1 / 2.2)
+        image = display_gamma(image)
     write_image(args.output, image)
     return 0
 

@@ -115,6 +115,7 @@ def _synthesize(args: argparse.Namespace) -> int:
     )
     from imagemap.btf.photometric import btf_direction_vectors
     from imagemap.io import write_image
+    from imagemap.render import display_gamma
 
     height, width = args.size
     if height < 1 or width < 1:
@@ -141,7 +142,7 @@ def _synthesize(args: argparse.Namespace) -> int:
         view = btf_direction_vectors(np.array([args.view]))[0]
         image = synthesize_appearance(model, light, view, (height, width), seed=args.seed)
         image = np.clip(image * args.exposure, 0.0, 1.0)
-        write_image(args.output, image if args.linear else image ** (1 / 2.2))
+        write_image(args.output, image if args.linear else display_gamma(image))
     else:
         raise InputError(f"{args.output}: unsupported output {suffix!r} (use .npz or .png)")
     if not args.quiet:
