@@ -451,6 +451,7 @@ def feature_correlation(
     truth: np.ndarray,
     component: np.ndarray,
     *,
+    mask: np.ndarray | None = None,
     shift: int = FEATURE_SHIFT,
     margin: int = 3,
 ) -> float:
@@ -462,27 +463,38 @@ def feature_correlation(
     so a feature drawn in another palette (a darker eye) still counts; an eye
     that is missing or smeared into the body does not.
 
+    Only object pixels count (``mask``, the object in both images): near the
+    silhouette the object-to-background edge would otherwise correlate whether or
+    not the feature is there.
+
     Returns
     -------
     float
         In [-1, 1]; NaN when the truth shows no luminance pattern there (std < 1 L*).
     """
     lum_image, lum_truth = _lightness(image), _lightness(truth)
-    ys, xs = np.nonzero(component)
     h, w = component.shape
+    inside = np.ones((h, w), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    ys, xs = np.nonzero(component)
     y0, y1 = max(ys.min() - margin, shift), min(ys.max() + margin + 1, h - shift)
     x0, x1 = max(xs.min() - margin, shift), min(xs.max() + margin + 1, w - shift)
     if y1 <= y0 or x1 <= x0:
         return math.nan
-    t = lum_truth[y0:y1, x0:x1]
-    t = t - t.mean()
-    if t.std() < 1.0:
+    truth_in = inside[y0:y1, x0:x1]
+    if (
+        truth_in[component[y0:y1, x0:x1]].sum() == 0
+        or lum_truth[y0:y1, x0:x1][truth_in].std() < 1.0
+    ):
         return math.nan
     best = -1.0
     for dy in range(-shift, shift + 1):
         for dx in range(-shift, shift + 1):
-            o = lum_image[y0 + dy : y1 + dy, x0 + dx : x1 + dx]
-            o = o - o.mean()
+            both = truth_in & inside[y0 + dy : y1 + dy, x0 + dx : x1 + dx]
+            if both.sum() < 4:
+                continue
+            t = lum_truth[y0:y1, x0:x1][both]
+            o = lum_image[y0 + dy : y1 + dy, x0 + dx : x1 + dx][both]
+            t, o = t - t.mean(), o - o.mean()
             denominator = math.sqrt(float((o * o).sum()) * float((t * t).sum()))
             if denominator > 0:
                 best = max(best, float((o * t).sum()) / denominator)
@@ -557,7 +569,7 @@ def features_drawn(
     drawn = measurable = 0
     with_source = source is not None and example_labels is not None
     for part, component in feature_components(labels, mask, max_fraction=max_fraction):
-        ncc = feature_correlation(image, truth, component)
+        ncc = feature_correlation(image, truth, component, mask=mask)
         copied = (
             feature_transfer(component, part, source, example_labels) >= 0.5
             if with_source
