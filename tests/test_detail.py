@@ -158,3 +158,16 @@ def test_copy_vote_is_crisper_than_the_mean_vote(blob_database, query_blob):
 
     assert ratio(copied) > ratio(voted)
     assert ColorizeParams().vote == "copy"
+
+
+def test_a_missing_feature_at_the_silhouette_is_not_counted_as_drawn():
+    """The object-to-background edge next to an eye must not pass for the eye."""
+    mask = np.zeros((60, 80), bool)
+    mask[10:50, 10:70] = True
+    truth = np.repeat(np.where(mask, 0.7, 0.0)[..., None], 3, axis=2).astype(np.float32)
+    labels = mask.astype(np.int32)
+    truth[12:16, 12:16] = 0.05  # an eye two pixels from the edge
+    labels[12:16, 12:16] = 2
+    plain = np.repeat(np.where(mask, 0.6, 0.0)[..., None], 3, axis=2).astype(np.float32)
+    assert features_drawn(truth, truth, labels, mask) == (1, 1)
+    assert features_drawn(plain, truth, labels, mask) == (0, 1)
