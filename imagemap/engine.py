@@ -322,9 +322,14 @@ class _Projection:
         self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
         self.offset = mean @ basis
 
-    def project(self, view: np.ndarray, index: tuple[np.ndarray, ...]) -> np.ndarray:
+    def project(
+        self, view: np.ndarray, index: tuple[np.ndarray, ...], out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
+        which may be a column slice of a larger array), in blocks of windows."""
         n = index[0].shape[0]
-        out = np.empty((n, self.n_components), dtype=np.float32)
+        if out is None:
+            out = np.empty((n, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
             out[start : start + _CHUNK] = self.windows(view, sub) @ self.matrix - self.offset
@@ -401,7 +406,8 @@ class _LevelSolver:
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
             # Nearest candidate of every exemplar pixel: snaps propagated coordinates.
             _, (ny, nx) = ndimage.distance_transform_edt(~valid, return_indices=True)
-            self.exemplar_nearest.append(self.exemplar_lookup[e, ny, nx])
+            self.exemplar_nearest.append(self.exemplar_lookup[e, ny, nx].astype(np.int32))
+            del ny, nx
             n_cand += len(ys)
             cand_e.append(np.full(len(ys), e, dtype=np.int64))
             cand_y.append(ys.astype(np.int64))
@@ -498,16 +504,21 @@ class _LevelSolver:
         return ndimage.binary_dilation(mask, iterations=max(r, 1))
 
     def _features(self, view, index, position) -> np.ndarray:
-        parts = []
-        if self.guide_projection.n_components:
-            parts.append(self.guide_projection.project(view, index))
-        parts.append(position * np.float32(self.params.position_weight))
+        # Each part is written in place into one (N, D) array: no per-part copies.
+        n_guide = self.guide_projection.n_components
+        n_dims = self.n_init_dims + self.appearance_projection.n_components
+        out = np.empty((len(position), n_dims), dtype=np.float32)
+        if n_guide:
+            self.guide_projection.project(view, index, out[:, :n_guide])
+        out[:, n_guide : n_guide + 2] = position * np.float32(self.params.position_weight)
         # sqrt of the exemplar cost for candidates, 0 for the query: adds the cost.
-        bias = np.sqrt(self.cand_bias) if view is self.exemplar_view else np.zeros(len(position))
-        parts.append(bias.astype(np.float32)[:, None])
+        if view is self.exemplar_view:
+            out[:, n_guide + 2] = np.sqrt(self.cand_bias).astype(np.float32)
+        else:
+            out[:, n_guide + 2] = 0.0
         if self.appearance_projection.n_components:
-            parts.append(self.appearance_projection.project(view, index))
-        return np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32)
+            self.appearance_projection.project(view, index, out[:, self.n_init_dims :])
+        return out
 
     # -- the two steps ---------------------------------------------------------
 
@@ -520,8 +531,10 @@ class _LevelSolver:
             appearance_padded[..., self.appearance_active] * self.appearance_scale
         )
         if project and self.appearance_projection.n_components:
-            self.query_features[:, self.n_init_dims :] = self.appearance_projection.project(
-                self.query_view, (self.query_y, self.query_x)
+            self.appearance_projection.project(
+                self.query_view,
+                (self.query_y, self.query_x),
+                self.query_features[:, self.n_init_dims :],
             )
         self.timer.add("features", start)
 
@@ -662,9 +675,10 @@ class _LevelSolver:
         nearest = self.query_lookup[ny, nx]
         c = matches[nearest]
         e = self.cand_e[c]
-        yy, xx = np.mgrid[0:h, 0:w]
+        yy, xx = np.ogrid[0:h, 0:w]
         sy = self.cand_y[c] + (yy - ny)
         sx = self.cand_x[c] + (xx - nx)
+        del ny, nx
         if self.params.vote == "mode" and self.chosen is not None:
             r = self.r
             chosen = self.chosen[r : r + h, r : r + w]
@@ -758,6 +772,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         exemplars = [levels[level] for levels in exemplar_levels]
         smallest = min(min(e.shape) for e in exemplars)
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
+        solver = None  # the coarser level's solver is done: free it before building this one
         solver = _LevelSolver(query_levels[level], exemplars, k, params, rng, timer)
         level_seed = int(rng.integers(0, 2**62))
         h, w = query_levels[level].shape
