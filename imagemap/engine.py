@@ -373,6 +373,7 @@ class _LevelSolver:
         self.appearance_scale = appearance_scale.astype(np.float32)
 
         # Exemplars: padded and packed into one array each (zero beyond each one's size).
+        # Index arrays are int32 (half the memory of int64; sizes stay far below 2^31).
         heights = [e.shape[0] for e in exemplars]
         widths = [e.shape[1] for e in exemplars]
         n_ex = len(exemplars)
@@ -381,7 +382,7 @@ class _LevelSolver:
         self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
         self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         cand_e, cand_y, cand_x, positions = [], [], [], []
-        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int64)
+        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
         self.exemplar_nearest: list[np.ndarray] = []
         n_cand = 0
         for e, ex in enumerate(exemplars):
@@ -405,13 +406,15 @@ class _LevelSolver:
             ys, xs = np.nonzero(valid)
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
             # Nearest candidate of every exemplar pixel: snaps propagated coordinates.
-            _, (ny, nx) = ndimage.distance_transform_edt(~valid, return_indices=True)
+            ny, nx = ndimage.distance_transform_edt(
+                ~valid, return_distances=False, return_indices=True
+            )
             self.exemplar_nearest.append(self.exemplar_lookup[e, ny, nx].astype(np.int32))
             del ny, nx
             n_cand += len(ys)
-            cand_e.append(np.full(len(ys), e, dtype=np.int64))
-            cand_y.append(ys.astype(np.int64))
-            cand_x.append(xs.astype(np.int64))
+            cand_e.append(np.full(len(ys), e, dtype=np.int32))
+            cand_y.append(ys.astype(np.int32))
+            cand_x.append(xs.astype(np.int32))
             positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
         self.cand_e = np.concatenate(cand_e)
         self.cand_y = np.concatenate(cand_y)
@@ -437,8 +440,8 @@ class _LevelSolver:
             grid[h - 1, :: params.stride] = grid[:: params.stride, w - 1] = True
             grid[h - 1, w - 1] = True
             centres &= grid
-        self.query_y, self.query_x = (a.astype(np.int64) for a in np.nonzero(centres))
-        self.query_lookup = np.full((h, w), -1, dtype=np.int64)
+        self.query_y, self.query_x = (a.astype(np.int32) for a in np.nonzero(centres))
+        self.query_lookup = np.full((h, w), -1, dtype=np.int32)
         self.query_lookup[self.query_y, self.query_x] = np.arange(len(self.query_y))
         self.query_position = _positions(
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
@@ -569,7 +572,7 @@ class _LevelSolver:
         """M-step into ``appearance_padded`` (in place, also returned)."""
         if self.params.vote == "mode":
             start = time.perf_counter()
-            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int64)
+            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int32)
             _kernels.vote_mode(
                 self.exemplar_appearance,
                 self.window,
@@ -671,7 +674,9 @@ class _LevelSolver:
         """(H, W, 3) exemplar, y, x for every pixel: the pixel it copied (mode vote), else
         its position in the match of its nearest window centre."""
         h, w = self.query_shape
-        _, (ny, nx) = ndimage.distance_transform_edt(self.query_lookup < 0, return_indices=True)
+        ny, nx = ndimage.distance_transform_edt(
+            self.query_lookup < 0, return_distances=False, return_indices=True
+        )
         nearest = self.query_lookup[ny, nx]
         c = matches[nearest]
         e = self.cand_e[c]
