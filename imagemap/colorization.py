@@ -342,13 +342,20 @@ def _fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     A window at the silhouette then carries object-like colours beyond the edge,
     so no background colour bleeds into the synthesised object.
     """
-    _, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    ny, nx = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
     return image[ny, nx]
+
+
+_ROWS = 256  # rows per block of the colour conversions
 
 
 def to_ycbcr(rgb: np.ndarray) -> np.ndarray:
     """RGB in [0, 1] to YCbCr scaled to [0, 1] (ITU-R BT.601, as skimage)."""
-    return (color.rgb2ycbcr(rgb) / 255.0).astype(np.float32)
+    # In blocks of rows: skimage works in float64 (several full-size copies at 4096^2).
+    out = np.empty(rgb.shape, dtype=np.float32)
+    for y in range(0, rgb.shape[0], _ROWS):
+        out[y : y + _ROWS] = color.rgb2ycbcr(rgb[y : y + _ROWS]) / 255.0
+    return out
 
 
 def to_rgb(ycbcr: np.ndarray) -> np.ndarray:

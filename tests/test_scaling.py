@@ -102,3 +102,13 @@ def test_seamless_copy_by_channel_equals_all_channels_at_once():
     result = seamless_copy(exemplars, source, reference, scale=6.0)
     assert result.dtype == np.float32
     assert np.array_equal(result, expected)
+
+
+def test_colour_conversion_in_row_blocks_equals_whole_image():
+    from skimage import color
+
+    from imagemap.colorization import _ROWS, to_ycbcr
+
+    rgb = np.random.default_rng(2).random((2 * _ROWS + 17, 9, 3)).astype(np.float32)
+    whole = (color.rgb2ycbcr(rgb) / 255.0).astype(np.float32)
+    assert np.array_equal(to_ycbcr(rgb), whole)
