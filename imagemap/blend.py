@@ -187,13 +187,14 @@ def seamless_copy(
     has = source[..., 0] >= 0
     none_x = ~(has[:, 1:] & has[:, :-1])
     none_y = ~(has[1:] & has[:-1])
+    groups = _source_groups(exemplars, source)
     # One channel at a time (a third of the memory of all at once). Only the choice of
     # the stronger gradient across a seam couples the channels (it compares their summed
     # squares), so a first pass sums those squares.
     norms = [np.zeros((h, w - 1)), np.zeros((h, w - 1)), np.zeros((h - 1, w)), np.zeros((h - 1, w))]
     for channel in range(n_channels):
         for norm, difference in zip(
-            norms, _side_gradients(exemplars, source, has, reference, channel), strict=True
+            norms, _side_gradients(groups, has, reference, channel), strict=True
         ):
             norm += np.square(difference)
     right_wins = norms[0] >= norms[1]
@@ -207,7 +208,7 @@ def seamless_copy(
     out = np.empty((h, w, n_channels), dtype=np.float32)
     for channel in range(n_channels):
         ref = reference[..., channel]
-        a_x, b_x, a_y, b_y = _side_gradients(exemplars, source, has, reference, channel)
+        a_x, b_x, a_y, b_y = _side_gradients(groups, has, reference, channel)
         # Each side's own exemplar gradient (equal where the copy is coherent); across a
         # seam the stronger of the two, so an edge or stripe that meets the seam goes on
         # at full contrast instead of an average of two unrelated textures.
@@ -230,30 +231,43 @@ def seamless_copy(
     return out
 
 
-def _copy_channel(exemplars, source, has, reference, channel, dy=0, dx=0) -> np.ndarray:
-    """One channel of :func:`copy_through` shifted by (dy, dx); the reference where no source."""
-    e, sy, sx = source[..., 0], source[..., 1] + dy, source[..., 2] + dx
-    out = np.zeros(source.shape[:2], dtype=np.float32)
-    for k, exemplar in enumerate(exemplars):
-        here = e == k
+def _copy_channel(groups, has, reference, channel, dy=0, dx=0) -> np.ndarray:
+    """One channel of :func:`copy_through` shifted by (dy, dx); the reference where no source.
+
+    ``groups``: per exemplar, (exemplar, flat pixel indices, their source y and x)."""
+    h, w = has.shape
+    out = np.zeros(h * w, dtype=np.float32)
+    for exemplar, pixels, sy, sx in groups:
         eh, ew = exemplar.shape[:2]
-        out[here] = exemplar[np.clip(sy[here], 0, eh - 1), np.clip(sx[here], 0, ew - 1), channel]
-    return np.where(has, out, reference[..., channel])
+        out[pixels] = exemplar[np.clip(sy + dy, 0, eh - 1), np.clip(sx + dx, 0, ew - 1), channel]
+    return np.where(has, out.reshape(h, w), reference[..., channel])
 
 
-def _side_gradients(exemplars, source, has, reference, channel):
+def _source_groups(exemplars, source):
+    """Per exemplar: (exemplar, flat indices of the pixels copied from it, source y, x)."""
+    e = source[..., 0].ravel()
+    groups = []
+    for k, exemplar in enumerate(exemplars):
+        pixels = np.flatnonzero(e == k).astype(np.int32)
+        groups.append(
+            (exemplar, pixels, source[..., 1].ravel()[pixels], source[..., 2].ravel()[pixels])
+        )
+    return groups
+
+
+def _side_gradients(groups, has, reference, channel):
     """Per channel: the horizontal gradient by the left pixel's source and by the right
     pixel's, then the vertical one by the upper and by the lower pixel's source."""
-    copy = _copy_channel(exemplars, source, has, reference, channel)
-    right = _copy_channel(exemplars, source, has, reference, channel, 0, 1)
+    copy = _copy_channel(groups, has, reference, channel)
+    right = _copy_channel(groups, has, reference, channel, 0, 1)
     a_x = right[:, :-1] - copy[:, :-1]
     del right
-    left = _copy_channel(exemplars, source, has, reference, channel, 0, -1)
+    left = _copy_channel(groups, has, reference, channel, 0, -1)
     b_x = copy[:, 1:] - left[:, 1:]
     del left
-    down = _copy_channel(exemplars, source, has, reference, channel, 1, 0)
+    down = _copy_channel(groups, has, reference, channel, 1, 0)
     a_y = down[:-1] - copy[:-1]
     del down
-    up = _copy_channel(exemplars, source, has, reference, channel, -1, 0)
+    up = _copy_channel(groups, has, reference, channel, -1, 0)
     b_y = copy[1:] - up[1:]
     return a_x, b_x, a_y, b_y
