@@ -383,7 +383,7 @@ class _LevelSolver:
         self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         cand_e, cand_y, cand_x, positions = [], [], [], []
         self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
-        self.exemplar_nearest: list[np.ndarray] = []
+        self.exemplar_valid: list[np.ndarray] = []
         n_cand = 0
         for e, ex in enumerate(exemplars):
             h, w = ex.shape
@@ -405,12 +405,7 @@ class _LevelSolver:
             valid = self._region(ex.mask, (h, w), r)
             ys, xs = np.nonzero(valid)
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
-            # Nearest candidate of every exemplar pixel: snaps propagated coordinates.
-            ny, nx = ndimage.distance_transform_edt(
-                ~valid, return_distances=False, return_indices=True
-            )
-            self.exemplar_nearest.append(self.exemplar_lookup[e, ny, nx].astype(np.int32))
-            del ny, nx
+            self.exemplar_valid.append(valid)  # for propagate()
             n_cand += len(ys)
             cand_e.append(np.full(len(ys), e, dtype=np.int32))
             cand_y.append(ys.astype(np.int32))
@@ -665,7 +660,14 @@ class _LevelSolver:
         sy = np.minimum(2 * src[:, 1] + ys % 2, self.exemplar_shape[e, 0] - 1)
         sx = np.minimum(2 * src[:, 2] + xs % 2, self.exemplar_shape[e, 1] - 1)
         matches = np.empty(len(ys), dtype=np.int64)
-        for ex, nearest in enumerate(self.exemplar_nearest):
+        for ex, valid in enumerate(self.exemplar_valid):
+            # Nearest candidate of every exemplar pixel: snaps propagated coordinates (made
+            # here, used once: not kept through the level's iterations).
+            ny, nx = ndimage.distance_transform_edt(
+                ~valid, return_distances=False, return_indices=True
+            )
+            nearest = self.exemplar_lookup[ex, ny, nx]
+            del ny, nx
             sel = e == ex
             matches[sel] = nearest[sy[sel], sx[sel]]
         return matches
