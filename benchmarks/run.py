@@ -25,6 +25,7 @@ Usage
     python benchmarks/run.py --quick              # tiny sizes: checks the plumbing
     python benchmarks/run.py --only colorize --backends patchmatch,exact
     python benchmarks/run.py --only quality       # leave-one-out CIEDE2000 of a fish class
+    python benchmarks/run.py --only scaling       # time and memory against size, m, database
     imagemap bench --quick                        # the same, from the command line
 """
 
