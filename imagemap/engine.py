@@ -61,6 +61,7 @@ _MAX_BANDS = 8
 # Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
 _EXACT_START_FLOPS = 2e9
 _BAND_ROWS = 64
+_SOURCE_ROWS = 256  # rows per block when the dense source map is made
 
 
 @dataclass(frozen=True)
@@ -679,23 +680,27 @@ class _LevelSolver:
         ny, nx = ndimage.distance_transform_edt(
             self.query_lookup < 0, return_distances=False, return_indices=True
         )
-        nearest = self.query_lookup[ny, nx]
-        c = matches[nearest]
-        e = self.cand_e[c]
-        yy, xx = np.ogrid[0:h, 0:w]
-        sy = self.cand_y[c] + (yy - ny)
-        sx = self.cand_x[c] + (xx - nx)
-        del ny, nx
-        if self.params.vote == "mode" and self.chosen is not None:
-            r = self.r
-            chosen = self.chosen[r : r + h, r : r + w]
-            copied = chosen[..., 0] >= 0
-            e = np.where(copied, chosen[..., 0], e)
-            sy = np.where(copied, chosen[..., 1] - r, sy)
-            sx = np.where(copied, chosen[..., 2] - r, sx)
-        sy = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
-        sx = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
-        return np.stack([e, sy, sx], axis=-1).astype(np.int32)
+        copied_by_mode = self.params.vote == "mode" and self.chosen is not None
+        r = self.r
+        out = np.empty((h, w, 3), dtype=np.int32)
+        xx = np.arange(w)[None, :]
+        for y0 in range(0, h, _SOURCE_ROWS):  # in blocks of rows: int64 temporaries stay small
+            y1 = min(h, y0 + _SOURCE_ROWS)
+            block_ny, block_nx = ny[y0:y1], nx[y0:y1]
+            c = matches[self.query_lookup[block_ny, block_nx]]
+            e = self.cand_e[c]
+            sy = self.cand_y[c] + (np.arange(y0, y1)[:, None] - block_ny)
+            sx = self.cand_x[c] + (xx - block_nx)
+            if copied_by_mode:
+                chosen = self.chosen[r + y0 : r + y1, r : r + w]
+                copied = chosen[..., 0] >= 0
+                e = np.where(copied, chosen[..., 0], e)
+                sy = np.where(copied, chosen[..., 1] - r, sy)
+                sx = np.where(copied, chosen[..., 2] - r, sx)
+            out[y0:y1, :, 0] = e
+            out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
+            out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
+        return out
 
 
 def _validate(query_levels, exemplar_levels, params) -> None:
