@@ -25,12 +25,13 @@ the window of centre (y, x) is ``bands[y:y + k, x:x + k]``.
 
 from __future__ import annotations
 
+import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import config, njit
 
-_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
 #: Pieces of work per thread (the pool balances uneven pieces).
 _PIECES_PER_THREAD = 4
 
@@ -49,6 +50,15 @@ def n_threads() -> int:
     return max(1, int(config.NUMBA_NUM_THREADS))
 
 
+def _pool(threads: int) -> ThreadPoolExecutor:
+    # Keyed by process too: a forked child inherits the dict but not the threads.
+    key = (os.getpid(), threads)
+    pool = _POOLS.get(key)
+    if pool is None:
+        pool = _POOLS[key] = ThreadPoolExecutor(threads, thread_name_prefix="imagemap")
+    return pool
+
+
 def _run(function, n_items: int, min_piece: int = 1) -> None:
     """``function(start, stop)`` over [0, n_items) in pieces, on the thread pool."""
     threads = n_threads()
@@ -57,9 +67,7 @@ def _run(function, n_items: int, min_piece: int = 1) -> None:
         function(0, n_items)
         return
     edges = np.linspace(0, n_items, pieces + 1).astype(np.int64)
-    pool = _POOLS.get(threads)
-    if pool is None:
-        pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="imagemap")
+    pool = _pool(threads)
     futures = [
         pool.submit(function, int(a), int(b))
         for a, b in zip(edges[:-1], edges[1:], strict=True)
@@ -76,9 +84,7 @@ def _run_each(function, items: list) -> None:
         for item in items:
             function(item)
         return
-    pool = _POOLS.get(threads)
-    if pool is None:
-        pool = _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="imagemap")
+    pool = _pool(threads)
     for future in [pool.submit(function, item) for item in items]:
         future.result()
 

@@ -112,3 +112,29 @@ def test_colour_conversion_in_row_blocks_equals_whole_image():
     rgb = np.random.default_rng(2).random((2 * _ROWS + 17, 9, 3)).astype(np.float32)
     whole = (color.rgb2ycbcr(rgb) / 255.0).astype(np.float32)
     assert np.array_equal(to_ycbcr(rgb), whole)
+
+
+def test_kernels_work_in_a_forked_child():
+    """A forked child inherits the kernels' thread pools without their threads."""
+    import multiprocessing
+
+    from imagemap import _kernels
+
+    out = np.zeros((40, 40, 1), np.float32)
+    lookup = np.zeros((38, 38), np.int32)
+    args = (np.ones((1, 40, 40, 1), np.float32), np.ones((3, 3), np.float32), lookup,
+            np.zeros(1, np.int32), np.zeros(1, np.int32), np.zeros(1, np.int32),
+            np.zeros(1, np.int64))  # fmt: skip
+    _kernels.vote(*args, out)  # the pool exists in this process now
+    context = multiprocessing.get_context("fork")
+    with context.Pool(1) as pool:
+        result = pool.apply_async(_vote_in_child, args).get(timeout=120)
+    assert result == float(out.sum())
+
+
+def _vote_in_child(*args):
+    from imagemap import _kernels
+
+    out = np.zeros((40, 40, 1), np.float32)
+    _kernels.vote(*args, out)
+    return float(out.sum())
