@@ -25,6 +25,7 @@ Usage
     python benchmarks/run.py --quick              # tiny sizes: checks the plumbing
     python benchmarks/run.py --only colorize --backends patchmatch,exact
     python benchmarks/run.py --only quality       # leave-one-out CIEDE2000 of a fish class
+    python benchmarks/run.py --only scaling       # time and memory against size, m, database
     imagemap bench --quick                        # the same, from the command line
 """
 
@@ -55,9 +56,12 @@ if str(BENCHMARKS.parent) not in sys.path:
 
 from imagemap.io import InputError, atomic_path, write_image  # noqa: E402
 
-GROUPS = ("jit", "colorize", "btf", "cli", "quality")
+GROUPS = ("jit", "colorize", "btf", "cli", "scaling", "quality")
 BACKENDS = ("patchmatch", "exact", "pynndescent")
 MB = 1024.0 * 1024.0
+
+#: Targets of issue 14 for the scaling curves (seconds, MB), by map side.
+SCALING_TARGETS = {1024: (None, 400.0), 2048: (180.0, 1536.0), 4096: (900.0, 6144.0)}
 
 #: Targets of issue 7 (seconds), by case name.
 TARGETS = {
@@ -67,8 +71,8 @@ TARGETS = {
     "btf pixelwise R=2 128->512": 10.0,
     "btf texture optimization 128->512": 60.0,
 }
-#: Peak memory target of issue 7 (MB), by case name.
-MEMORY_TARGETS = {"colorize 1024x1024": 4096.0}
+#: Peak memory targets (MB), by case name: issue 14 (issue 7 asked 4 GB at 1024x1024).
+MEMORY_TARGETS = {"colorize 200x150": 150.0, "colorize 1024x1024": 400.0}
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,11 @@ class Settings:
     quality_count: int = 8
     cli_size: tuple[int, int] = (200, 150)
     radii: tuple[int, ...] = (0, 1, 2)
+    # Scaling curves (each point a fresh process: its whole peak RSS, warm numba cache).
+    scaling_sizes: tuple[int, ...] = (256, 512, 1024, 2048)  # square maps; 4096 by hand
+    scaling_m: tuple[int, ...] = (1, 2, 4, 8)
+    scaling_m_size: int = 256
+    scaling_database: tuple[int, ...] = (10, 30, 100, 300, 1000)
     extra: dict = field(default_factory=dict)
 
 
@@ -109,6 +118,10 @@ QUICK = Settings(
     quality_count=4,
     cli_size=(80, 60),
     radii=(0, 2),
+    scaling_sizes=(64, 96),
+    scaling_m=(1, 2),
+    scaling_m_size=64,
+    scaling_database=(10, 30),
 )
 
 
@@ -512,6 +525,100 @@ def run_cli(data_dir: Path, settings: Settings, out_dir: Path) -> list[dict]:
     return rows
 
 
+#: One colorize in a fresh process; prints its seconds and the process's peak RSS.
+_SCALING_CHILD = (
+    "import glob, json, re, sys, time\n"
+    "from imagemap import Database, colorize, read_depth\n"
+    "class_dir, m = sys.argv[1], int(sys.argv[2])\n"
+    "database = Database.from_directory(class_dir)\n"
+    "depth = read_depth(sorted(glob.glob(class_dir + '/holdout/*_depth.png'))[0])\n"
+    "start = time.perf_counter()\n"
+    "result = colorize(depth, database, preset='fish', m=m, seed=0)\n"
+    "seconds = time.perf_counter() - start\n"
+    "text = open('/proc/self/status').read()\n"
+    "hwm = int(re.search(r'^VmHWM:\\s+(\\d+) kB', text, re.M).group(1)) / 1024.0\n"
+    "print(json.dumps({'seconds': seconds, 'rss_peak_mb': hwm, 'stages': result.timings,\n"
+    "                  'object_pixels': int(result.mask.sum())}))\n"
+)
+
+
+def _scaling_point(class_dir: Path, m: int) -> dict:
+    done = subprocess.run(
+        [sys.executable, "-c", _SCALING_CHILD, str(class_dir), str(m)],
+        capture_output=True, text=True, env=_child_env(),
+    )  # fmt: skip
+    if done.returncode != 0:
+        raise RuntimeError(f"scaling point {class_dir} m={m} failed: {done.stderr.strip()}")
+    figures = json.loads(done.stdout.strip().splitlines()[-1])
+    figures["rss_method"] = "VmHWM of a fresh process (imports and numba cache load included)"
+    return figures
+
+
+def synthetic_database(data_dir: Path, size: int, n: int, seed: int = 0):
+    """``n`` examples made from a generated fish class by random shifts and flips (the
+    selection's cost does not depend on what the depth maps show)."""
+    from imagemap import Database, Example, read_depth
+
+    class_dir = fish_class(data_dir, (size, size * 3 // 4), count=6, holdout=1)
+    bases = [read_depth(p) for p in sorted(class_dir.glob("*_depth.png"))]
+    rng = np.random.default_rng(seed)
+    examples = []
+    for i in range(n):
+        depth = bases[i % len(bases)]
+        depth = np.roll(depth, tuple(rng.integers(-8, 9, 2)), axis=(0, 1))
+        if rng.random() < 0.5:
+            depth = depth[:, ::-1]
+        image = np.zeros(depth.shape + (3,), np.float32)
+        examples.append(Example.from_arrays(f"x{i:04d}", np.ascontiguousarray(depth), image))
+    query = read_depth(_holdout_depth(class_dir))
+    return Database(examples), query
+
+
+def run_scaling(data_dir: Path, settings: Settings, trace: bool) -> list[dict]:
+    """Time and peak memory against map size and m (fresh processes), and the example
+    selection's time per query against database size (in this process)."""
+    from imagemap import select_examples
+
+    rows = []
+    for side in settings.scaling_sizes:
+        class_dir = fish_class(data_dir, (side, side))
+        figures = _scaling_point(class_dir, 2)
+        target_s, target_mb = SCALING_TARGETS.get(side, (None, None))
+        rows.append(
+            _row("scaling", f"pixels {side}x{side} (m = 2, fresh process)", "patchmatch",
+                 figures, size=f"{side}x{side}", pixels=side * side, m=2,
+                 **({"target_seconds": target_s} if target_s else {}),
+                 **({"target_rss_mb": target_mb} if target_mb else {}))
+        )  # fmt: skip
+        _progress(rows[-1])
+    side = settings.scaling_m_size
+    class_dir = fish_class(data_dir, (side, side), count=max(settings.scaling_m) + 1)
+    for m in settings.scaling_m:
+        figures = _scaling_point(class_dir, m)
+        rows.append(
+            _row("scaling", f"examples m = {m} ({side}x{side}, fresh process)", "patchmatch",
+                 figures, size=f"{side}x{side}", m=m)
+        )  # fmt: skip
+        _progress(rows[-1])
+    for n in settings.scaling_database:
+        database, query = synthetic_database(data_dir, 200, n)
+        for example in database:  # arrays in memory: the figure is the selection alone
+            _ = example.depth
+        _, first = measure(lambda d=database, q=query: select_examples(q, d, 2), trace)
+        queries = 5
+        start = time.perf_counter()
+        for _ in range(queries):
+            select_examples(query, database, 2)
+        per_query = (time.perf_counter() - start) / queries
+        rows.append(
+            _row("scaling", f"selection, database of {n} (200x150)", "-",
+                 {**first, "seconds": per_query}, database_size=n,
+                 first_query_seconds=first["seconds"], per_query_seconds=per_query)
+        )  # fmt: skip
+        _progress(rows[-1])
+    return rows
+
+
 def run_quality(data_dir: Path, settings: Settings, backend: str) -> dict:
     """Leave-one-out mean CIEDE2000 of the full method on a small fish class."""
     from imagemap import Database
@@ -741,7 +848,10 @@ def _choices(
 def run(args: argparse.Namespace) -> dict:
     """Run the benchmark groups of ``args``; returns the report (also written as JSON)."""
     settings = QUICK if args.quick else FULL
-    default_groups = [g for g in GROUPS if g != "quality"] if args.quick else list(GROUPS)
+    # The scaling curves start fresh processes and generate larger classes: never by default
+    # with --quick (ask for them with --only scaling).
+    quick_groups = [g for g in GROUPS if g not in ("quality", "scaling")]
+    default_groups = quick_groups if args.quick else list(GROUPS)
     groups = _choices(args.only, GROUPS, default_groups, "--only")
     if args.quality and "quality" not in groups:
         groups.append("quality")
@@ -776,6 +886,8 @@ def run(args: argparse.Namespace) -> dict:
         report["rows"] += run_btf(data_dir, settings, backends, trace, images)
     if "cli" in groups:
         report["rows"] += run_cli(data_dir, settings, data_dir / "cli")
+    if "scaling" in groups:
+        report["rows"] += run_scaling(data_dir, settings, trace)
     if "quality" in groups:
         report["quality"] = run_quality(data_dir, settings, backends[0])
     report["seconds"] = time.perf_counter() - started

@@ -5,6 +5,16 @@ from a counter-based hash of (seed, pixel, pass, trial), never from a shared
 generator, and parallel work is split into fixed bands of rows whose members
 only read matches inside their own band.
 
+Threads: every kernel is a *serial* numba function (``nogil=True``) over a range
+of its work items, and the public wrappers below run those ranges on a small
+pool of Python threads. numba's ``parallel=True`` would do the same, but its
+parfors compilation costs about three times as much on a fresh numba cache
+(measured: 82 s against 31 s for the six kernels on a busy 2-core machine) and
+loads a threading layer. The work items are independent (pixels, rows of one
+colour of a red-black sweep, PatchMatch bands), so the split never changes a
+result. The thread count is numba's (``NUMBA_NUM_THREADS``, or
+``numba.set_num_threads`` once numba's own pool is up).
+
 Coordinates: a *candidate* is an exemplar window centre, numbered 0..N-1, with
 ``cand_e, cand_y, cand_x`` its exemplar index and centre (unpadded coordinates);
 ``exemplar_lookup[e, y, x]`` maps a centre back to its number (-1 when it is
@@ -15,22 +25,83 @@ the window of centre (y, x) is ``bands[y:y + k, x:x + k]``.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
-from numba import njit, prange
+from numba import config, njit
+
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+#: Pieces of work per thread (the pool balances uneven pieces).
+_PIECES_PER_THREAD = 4
+
+
+def n_threads() -> int:
+    """Threads the kernels use: numba's setting (``numba.set_num_threads`` honoured)."""
+    try:
+        from numba.np.ufunc import parallel
+
+        if parallel._is_initialized:  # numba's pool is up: its (thread-local) setting
+            import numba
+
+            return max(1, int(numba.get_num_threads()))
+    except (ImportError, AttributeError):  # pragma: no cover - other numba versions
+        pass
+    return max(1, int(config.NUMBA_NUM_THREADS))
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    # Keyed by process too: a forked child inherits the dict but not the threads.
+    key = (os.getpid(), threads)
+    pool = _POOLS.get(key)
+    if pool is None:
+        pool = _POOLS[key] = ThreadPoolExecutor(threads, thread_name_prefix="imagemap")
+    return pool
+
+
+def _run(function, n_items: int, min_piece: int = 1) -> None:
+    """``function(start, stop)`` over [0, n_items) in pieces, on the thread pool."""
+    threads = n_threads()
+    pieces = min(threads * _PIECES_PER_THREAD, max(1, n_items // max(min_piece, 1)))
+    if threads == 1 or pieces <= 1:
+        function(0, n_items)
+        return
+    edges = np.linspace(0, n_items, pieces + 1).astype(np.int64)
+    pool = _pool(threads)
+    futures = [
+        pool.submit(function, int(a), int(b))
+        for a, b in zip(edges[:-1], edges[1:], strict=True)
+        if b > a
+    ]
+    for future in futures:
+        future.result()
+
+
+def _run_each(function, items: list) -> None:
+    """``function(item)`` for every item, on the thread pool."""
+    threads = n_threads()
+    if threads == 1 or len(items) <= 1:
+        for item in items:
+            function(item)
+        return
+    pool = _pool(threads)
+    for future in [pool.submit(function, item) for item in items]:
+        future.result()
+
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 
 
-@njit(inline="always", cache=True)
+@njit(cache=True, nogil=True)
 def _splitmix(z):
     z = (z ^ (z >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
     return z ^ (z >> np.uint64(31))
 
 
-@njit(inline="always", cache=True)
+@njit(cache=True, nogil=True)
 def _random_below(seed, a, b, c, n):
     """A deterministic pseudo-random integer in [0, n) for the counter (seed, a, b, c)."""
     z = _splitmix(np.uint64(seed) + _GOLDEN)
@@ -40,7 +111,7 @@ def _random_below(seed, a, b, c, n):
     return np.int64(z % np.uint64(n))
 
 
-@njit(inline="always", cache=True)
+@njit(cache=True, nogil=True)
 def _sq_dist(a, b, ndims):
     s = np.float32(0.0)
     for i in range(ndims):
@@ -49,16 +120,116 @@ def _sq_dist(a, b, ndims):
     return s
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _feature_distances(query_features, candidate_features, matches, ndims, out, start, stop):
+    for m in range(start, stop):
+        out[m] = _sq_dist(query_features[m], candidate_features[matches[m]], ndims)
+
+
 def feature_distances(query_features, candidate_features, matches, ndims):
     """Squared distance over the first ``ndims`` feature columns for each (m, matches[m])."""
     out = np.empty(matches.shape[0], dtype=np.float32)
-    for m in prange(matches.shape[0]):
-        out[m] = _sq_dist(query_features[m], candidate_features[matches[m]], ndims)
+    _run(
+        lambda a, b: _feature_distances(
+            query_features, candidate_features, matches, ndims, out, a, b
+        ),
+        matches.shape[0],
+        4096,
+    )
     return out
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _patchmatch_band(
+    band,
+    query_features,
+    candidate_features,
+    ndims,
+    query_y,
+    query_x,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    exemplar_lookup,
+    exemplar_shape,
+    band_starts,
+    matches,
+    distances,
+    n_passes,
+    stride,
+    seed,
+):
+    """PatchMatch of one band of query centres (see :func:`patchmatch`)."""
+    n_candidates = candidate_features.shape[0]
+    height = query_lookup.shape[0]
+    width = query_lookup.shape[1]
+    m0 = band_starts[band]
+    m1 = band_starts[band + 1]
+    if m1 <= m0:
+        return
+    row0 = query_y[m0]
+    row1 = query_y[m1 - 1]
+    for p in range(n_passes):
+        forward = p % 2 == 0
+        step = stride if forward else -stride
+        for t in range(m1 - m0):
+            m = m0 + t if forward else m1 - 1 - t
+            y = query_y[m]
+            x = query_x[m]
+            best = matches[m]
+            best_d = distances[m]
+            qf = query_features[m]
+            # Propagation: the neighbour already visited in this pass, shifted.
+            for axis in range(2):
+                ny = y - step if axis == 0 else y
+                nx = x - step if axis == 1 else x
+                if ny < row0 or ny > row1 or nx < 0 or nx >= width or ny >= height:
+                    continue
+                n = query_lookup[ny, nx]
+                if n < 0:
+                    continue
+                c = matches[n]
+                e = cand_e[c]
+                cy = cand_y[c] + (step if axis == 0 else 0)
+                cx = cand_x[c] + (step if axis == 1 else 0)
+                if cy < 0 or cx < 0 or cy >= exemplar_shape[e, 0] or cx >= exemplar_shape[e, 1]:
+                    continue
+                cc = exemplar_lookup[e, cy, cx]
+                if cc < 0 or cc == best:
+                    continue
+                d = _sq_dist(qf, candidate_features[cc], ndims)
+                if d < best_d:
+                    best = cc
+                    best_d = d
+            # Random search around the current best, radius halving.
+            e = cand_e[best]
+            radius = max(exemplar_shape[e, 0], exemplar_shape[e, 1])
+            trial = 0
+            while radius >= 1:
+                cy = cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
+                cx = cand_x[best] + _random_below(seed, m, p, 2 * trial + 1, 2 * radius + 1)
+                cx -= radius
+                cy = min(max(cy, 0), exemplar_shape[e, 0] - 1)
+                cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
+                cc = exemplar_lookup[e, cy, cx]
+                if cc >= 0 and cc != best:
+                    d = _sq_dist(qf, candidate_features[cc], ndims)
+                    if d < best_d:
+                        best = cc
+                        best_d = d
+                radius //= 2
+                trial += 1
+            # One jump anywhere: lets a pixel leave a poor exemplar.
+            cc = _random_below(seed, m, p, 1000003, n_candidates)
+            d = _sq_dist(qf, candidate_features[cc], ndims)
+            if d < best_d:
+                best = cc
+                best_d = d
+            matches[m] = best
+            distances[m] = best_d
+
+
 def patchmatch(
     query_features,
     candidate_features,
@@ -83,81 +254,79 @@ def patchmatch(
     Each pass visits the query centres of a band in scan order (reversed on odd
     passes): propagation from the previous neighbour in x and y (shifted by one
     stride), random search around the current match with halving radius, and one
-    uniformly random candidate (a jump to any exemplar).
+    uniformly random candidate (a jump to any exemplar). Bands are independent
+    (propagation does not cross their borders): one thread each.
     """
-    n_candidates = candidate_features.shape[0]
-    height = query_lookup.shape[0]
-    width = query_lookup.shape[1]
-    for band in prange(band_starts.shape[0] - 1):
-        m0 = band_starts[band]
-        m1 = band_starts[band + 1]
-        if m1 <= m0:
-            continue
-        row0 = query_y[m0]
-        row1 = query_y[m1 - 1]
-        for p in range(n_passes):
-            forward = p % 2 == 0
-            step = stride if forward else -stride
-            for t in range(m1 - m0):
-                m = m0 + t if forward else m1 - 1 - t
-                y = query_y[m]
-                x = query_x[m]
-                best = matches[m]
-                best_d = distances[m]
-                qf = query_features[m]
-                # Propagation: the neighbour already visited in this pass, shifted.
-                for axis in range(2):
-                    ny = y - step if axis == 0 else y
-                    nx = x - step if axis == 1 else x
-                    if ny < row0 or ny > row1 or nx < 0 or nx >= width or ny >= height:
-                        continue
-                    n = query_lookup[ny, nx]
-                    if n < 0:
-                        continue
-                    c = matches[n]
-                    e = cand_e[c]
-                    cy = cand_y[c] + (step if axis == 0 else 0)
-                    cx = cand_x[c] + (step if axis == 1 else 0)
-                    if cy < 0 or cx < 0 or cy >= exemplar_shape[e, 0] or cx >= exemplar_shape[e, 1]:
-                        continue
-                    cc = exemplar_lookup[e, cy, cx]
-                    if cc < 0 or cc == best:
-                        continue
-                    d = _sq_dist(qf, candidate_features[cc], ndims)
-                    if d < best_d:
-                        best = cc
-                        best_d = d
-                # Random search around the current best, radius halving.
-                e = cand_e[best]
-                radius = max(exemplar_shape[e, 0], exemplar_shape[e, 1])
-                trial = 0
-                while radius >= 1:
-                    cy = (
-                        cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
-                    )
-                    cx = cand_x[best] + _random_below(seed, m, p, 2 * trial + 1, 2 * radius + 1)
-                    cx -= radius
-                    cy = min(max(cy, 0), exemplar_shape[e, 0] - 1)
-                    cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
-                    cc = exemplar_lookup[e, cy, cx]
-                    if cc >= 0 and cc != best:
-                        d = _sq_dist(qf, candidate_features[cc], ndims)
-                        if d < best_d:
-                            best = cc
-                            best_d = d
-                    radius //= 2
-                    trial += 1
-                # One jump anywhere: lets a pixel leave a poor exemplar.
-                cc = _random_below(seed, m, p, 1000003, n_candidates)
-                d = _sq_dist(qf, candidate_features[cc], ndims)
-                if d < best_d:
-                    best = cc
-                    best_d = d
-                matches[m] = best
-                distances[m] = best_d
+
+    def band(b):
+        _patchmatch_band(
+            b,
+            query_features,
+            candidate_features,
+            ndims,
+            query_y,
+            query_x,
+            query_lookup,
+            cand_e,
+            cand_y,
+            cand_x,
+            exemplar_lookup,
+            exemplar_shape,
+            band_starts,
+            matches,
+            distances,
+            n_passes,
+            stride,
+            seed,
+        )
+
+    _run_each(band, list(range(band_starts.shape[0] - 1)))
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _window_costs(
+    start,
+    stop,
+    out,
+    query_bands,
+    exemplar_bands,
+    window_weights,
+    query_y,
+    query_x,
+    cand_e,
+    cand_y,
+    cand_x,
+    matches,
+    query_position,
+    cand_position,
+    position_weight2,
+    cand_bias,
+):
+    """Window distances of query centres [start, stop) (see :func:`window_costs`)."""
+    k = window_weights.shape[0]
+    channels = query_bands.shape[2]
+    for m in range(start, stop):
+        c = matches[m]
+        e = cand_e[c]
+        qy = query_y[m]
+        qx = query_x[m]
+        ey = cand_y[c]
+        ex = cand_x[c]
+        s = 0.0
+        for oy in range(k):
+            for ox in range(k):
+                w = window_weights[oy, ox]
+                acc = 0.0
+                for ch in range(channels):
+                    d = query_bands[qy + oy, qx + ox, ch] - exemplar_bands[e, ey + oy, ex + ox, ch]
+                    acc += d * d
+                s += w * acc
+        dy = query_position[m, 0] - cand_position[c, 0]
+        dx = query_position[m, 1] - cand_position[c, 1]
+        s += position_weight2 * (dy * dy + dx * dx) + cand_bias[c]
+        out[m] = s
+
+
 def window_costs(
     query_bands,
     exemplar_bands,
@@ -180,34 +349,36 @@ def window_costs(
     ``window_weights`` (k, k) is the Gaussian window, summing to one;
     ``cand_bias`` (N,) an additive cost per candidate (exemplar preference).
     """
-    k = window_weights.shape[0]
-    channels = query_bands.shape[2]
     out = np.empty(matches.shape[0], dtype=np.float32)
-    for m in prange(matches.shape[0]):
-        c = matches[m]
-        e = cand_e[c]
-        qy = query_y[m]
-        qx = query_x[m]
-        ey = cand_y[c]
-        ex = cand_x[c]
-        s = 0.0
-        for oy in range(k):
-            for ox in range(k):
-                w = window_weights[oy, ox]
-                acc = 0.0
-                for ch in range(channels):
-                    d = query_bands[qy + oy, qx + ox, ch] - exemplar_bands[e, ey + oy, ex + ox, ch]
-                    acc += d * d
-                s += w * acc
-        dy = query_position[m, 0] - cand_position[c, 0]
-        dx = query_position[m, 1] - cand_position[c, 1]
-        s += position_weight2 * (dy * dy + dx * dx) + cand_bias[c]
-        out[m] = s
+    _run(
+        lambda a, b: _window_costs(
+            a,
+            b,
+            out,
+            query_bands,
+            exemplar_bands,
+            window_weights,
+            query_y,
+            query_x,
+            cand_e,
+            cand_y,
+            cand_x,
+            matches,
+            query_position,
+            cand_position,
+            position_weight2,
+            cand_bias,
+        ),
+        matches.shape[0],
+        1024,
+    )
     return out
 
 
-@njit(parallel=True, cache=True)
-def vote(
+@njit(cache=True, nogil=True)
+def _vote_rows(
+    row0,
+    row1,
     exemplar_appearance,
     window_weights,
     query_lookup,
@@ -217,16 +388,11 @@ def vote(
     matches,
     out,
 ):
-    """M-step: every padded query pixel becomes the weighted mean of its window estimates.
-
-    ``out`` (Hq + 2r, Wq + 2r, Ca) receives the mean where at least one window
-    covers a pixel and keeps its value elsewhere.
-    """
     k = window_weights.shape[0]
     height = query_lookup.shape[0]
     width = query_lookup.shape[1]
     channels = exemplar_appearance.shape[3]
-    for py in prange(out.shape[0]):
+    for py in range(row0, row1):
         acc = np.zeros(channels, dtype=np.float64)
         for px in range(out.shape[1]):
             wsum = 0.0
@@ -256,8 +422,43 @@ def vote(
                     out[py, px, ch] = acc[ch] / wsum
 
 
-@njit(parallel=True, cache=True)
-def vote_mode(
+def vote(
+    exemplar_appearance,
+    window_weights,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    matches,
+    out,
+):
+    """M-step: every padded query pixel becomes the weighted mean of its window estimates.
+
+    ``out`` (Hq + 2r, Wq + 2r, Ca) receives the mean where at least one window
+    covers a pixel and keeps its value elsewhere.
+    """
+    _run(
+        lambda a, b: _vote_rows(
+            a,
+            b,
+            exemplar_appearance,
+            window_weights,
+            query_lookup,
+            cand_e,
+            cand_y,
+            cand_x,
+            matches,
+            out,
+        ),
+        out.shape[0],
+        8,
+    )
+
+
+@njit(cache=True, nogil=True)
+def _vote_mode_rows(
+    row0,
+    row1,
     exemplar_appearance,
     window_weights,
     query_lookup,
@@ -269,24 +470,11 @@ def vote_mode(
     out,
     chosen,
 ):
-    """M-step by copying: every padded query pixel takes the exemplar pixel that most of
-    its overlapping windows agree on.
-
-    Each window covering a pixel proposes one exemplar pixel (its match shifted by
-    the pixel's offset in the window), with the Gaussian window weight times
-    ``match_weights[m]``. Proposals of the same exemplar pixel add up, and the
-    pixel copies the appearance of the heaviest (the weighted mode of source
-    positions). Where neighbouring windows are matched coherently they agree and
-    the copy is exact; where they disagree the boundary between sources falls
-    where the weights change sides, without averaging colours. ``chosen``
-    (Hq + 2r, Wq + 2r, 3) receives the exemplar index and *padded* source
-    coordinates (-1 where no window covers the pixel).
-    """
     k = window_weights.shape[0]
     height = query_lookup.shape[0]
     width = query_lookup.shape[1]
     channels = exemplar_appearance.shape[3]
-    for py in prange(out.shape[0]):
+    for py in range(row0, row1):
         ke = np.empty(k * k, dtype=np.int64)
         ky = np.empty(k * k, dtype=np.int64)
         kx = np.empty(k * k, dtype=np.int64)
@@ -340,7 +528,52 @@ def vote_mode(
             chosen[py, px, 2] = sx
 
 
-@njit(inline="always", cache=True)
+def vote_mode(
+    exemplar_appearance,
+    window_weights,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    matches,
+    match_weights,
+    out,
+    chosen,
+):
+    """M-step by copying: every padded query pixel takes the exemplar pixel that most of
+    its overlapping windows agree on.
+
+    Each window covering a pixel proposes one exemplar pixel (its match shifted by
+    the pixel's offset in the window), with the Gaussian window weight times
+    ``match_weights[m]``. Proposals of the same exemplar pixel add up, and the
+    pixel copies the appearance of the heaviest (the weighted mode of source
+    positions). Where neighbouring windows are matched coherently they agree and
+    the copy is exact; where they disagree the boundary between sources falls
+    where the weights change sides, without averaging colours. ``chosen``
+    (Hq + 2r, Wq + 2r, 3) receives the exemplar index and *padded* source
+    coordinates (-1 where no window covers the pixel).
+    """
+    _run(
+        lambda a, b: _vote_mode_rows(
+            a,
+            b,
+            exemplar_appearance,
+            window_weights,
+            query_lookup,
+            cand_e,
+            cand_y,
+            cand_x,
+            matches,
+            match_weights,
+            out,
+            chosen,
+        ),
+        out.shape[0],
+        8,
+    )
+
+
+@njit(cache=True, nogil=True)
 def _label_colour_distance(exemplars, e1, y1, x1, e2, y2, x2):
     s = 0.0
     for ch in range(exemplars.shape[3]):
@@ -349,7 +582,7 @@ def _label_colour_distance(exemplars, e1, y1, x1, e2, y2, x2):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label_cost(exemplars, shapes, reference, label_e, label_y, label_x, y, x, e, oy, ox, smooth):
     """Data + seam cost of giving pixel (y, x) the label (e, oy, ox) (source = pixel + o)."""
     height, width = label_e.shape
@@ -388,7 +621,62 @@ def _label_cost(exemplars, shapes, reference, label_e, label_y, label_x, y, x, e
     return cost
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
+def _seam_rows(exemplars, shapes, reference, label_e, label_y, label_x, smooth, colour, row0, row1):
+    """One colour of a red-black sweep over rows [row0, row1) (see :func:`seam_sweeps`)."""
+    height, width = label_e.shape
+    for y in range(row0, row1):
+        for x in range((y + colour) % 2, width, 2):
+            e = label_e[y, x]
+            if e < 0:
+                continue
+            oy, ox = label_y[y, x], label_x[y, x]
+            best = _label_cost(
+                exemplars,
+                shapes,
+                reference,
+                label_e,
+                label_y,
+                label_x,
+                y,
+                x,
+                e,
+                oy,
+                ox,
+                smooth,
+            )
+            for k in range(4):
+                ny = y + (1 if k == 0 else -1 if k == 1 else 0)
+                nx = x + (1 if k == 2 else -1 if k == 3 else 0)
+                if ny < 0 or nx < 0 or ny >= height or nx >= width:
+                    continue
+                ce = label_e[ny, nx]
+                if ce < 0:
+                    continue
+                cy, cx = label_y[ny, nx], label_x[ny, nx]
+                if ce == label_e[y, x] and cy == label_y[y, x] and cx == label_x[y, x]:
+                    continue
+                cost = _label_cost(
+                    exemplars,
+                    shapes,
+                    reference,
+                    label_e,
+                    label_y,
+                    label_x,
+                    y,
+                    x,
+                    ce,
+                    cy,
+                    cx,
+                    smooth,
+                )
+                if cost < best:
+                    best = cost
+                    label_e[y, x] = ce
+                    label_y[y, x] = cy
+                    label_x[y, x] = cx
+
+
 def seam_sweeps(exemplars, shapes, reference, label_e, label_y, label_x, smooth, sweeps):
     """Iterated conditional modes on source offsets: fewer, cheaper seams.
 
@@ -400,56 +688,13 @@ def seam_sweeps(exemplars, shapes, reference, label_e, label_y, label_x, smooth,
     al.'s graph-cut textures). Pixels are updated in a red-black order, so the
     result does not depend on the number of threads.
     """
-    height, width = label_e.shape
+    height = label_e.shape[0]
     for _ in range(sweeps):
         for colour in range(2):
-            for y in prange(height):
-                for x in range((y + colour) % 2, width, 2):
-                    e = label_e[y, x]
-                    if e < 0:
-                        continue
-                    oy, ox = label_y[y, x], label_x[y, x]
-                    best = _label_cost(
-                        exemplars,
-                        shapes,
-                        reference,
-                        label_e,
-                        label_y,
-                        label_x,
-                        y,
-                        x,
-                        e,
-                        oy,
-                        ox,
-                        smooth,
-                    )
-                    for k in range(4):
-                        ny = y + (1 if k == 0 else -1 if k == 1 else 0)
-                        nx = x + (1 if k == 2 else -1 if k == 3 else 0)
-                        if ny < 0 or nx < 0 or ny >= height or nx >= width:
-                            continue
-                        ce = label_e[ny, nx]
-                        if ce < 0:
-                            continue
-                        cy, cx = label_y[ny, nx], label_x[ny, nx]
-                        if ce == label_e[y, x] and cy == label_y[y, x] and cx == label_x[y, x]:
-                            continue
-                        cost = _label_cost(
-                            exemplars,
-                            shapes,
-                            reference,
-                            label_e,
-                            label_y,
-                            label_x,
-                            y,
-                            x,
-                            ce,
-                            cy,
-                            cx,
-                            smooth,
-                        )
-                        if cost < best:
-                            best = cost
-                            label_e[y, x] = ce
-                            label_y[y, x] = cy
-                            label_x[y, x] = cx
+            _run(
+                lambda a, b, colour=colour: _seam_rows(
+                    exemplars, shapes, reference, label_e, label_y, label_x, smooth, colour, a, b
+                ),
+                height,
+                8,
+            )

@@ -123,7 +123,7 @@ def place_seams(
     for k, exemplar in enumerate(exemplars):
         packed[k, : exemplar.shape[0], : exemplar.shape[1]] = exemplar
     shapes = np.array([heights, widths], dtype=np.int64).T.copy()
-    yy, xx = np.mgrid[0 : source.shape[0], 0 : source.shape[1]]
+    yy, xx = np.ogrid[0 : source.shape[0], 0 : source.shape[1]]
     label_e = source[..., 0].astype(np.int64).copy()
     label_y = (source[..., 1] - yy).astype(np.int64)
     label_x = (source[..., 2] - xx).astype(np.int64)
@@ -138,11 +138,6 @@ def place_seams(
         int(sweeps),
     )
     return np.stack([label_e, label_y + yy, label_x + xx], axis=-1).astype(np.int32)
-
-
-def _stronger(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Per pixel, whichever of two gradient vectors (last axis: channels) is larger."""
-    return np.where((np.square(a).sum(-1) >= np.square(b).sum(-1))[..., None], a, b)
 
 
 def seamless_copy(
@@ -188,32 +183,91 @@ def seamless_copy(
         raise ValueError(f"reference {reference.shape} and source {source.shape} do not fit")
     if scale <= 0:
         raise ValueError(f"scale must be positive, got {scale}")
-    h, w, _ = reference.shape
-    has = (source[..., 0] >= 0)[..., None]
-    copy = np.where(has, copy_through(exemplars, source), reference)
-    right = np.where(has, copy_through(exemplars, source, 0, 1), reference)
-    left = np.where(has, copy_through(exemplars, source, 0, -1), reference)
-    down = np.where(has, copy_through(exemplars, source, 1, 0), reference)
-    up = np.where(has, copy_through(exemplars, source, -1, 0), reference)
-    # Each side's own exemplar gradient (equal where the copy is coherent); across a
-    # seam the stronger of the two, so an edge or stripe that meets the seam goes on
-    # at full contrast instead of an average of two unrelated textures.
-    gx = _stronger(right[:, :-1] - copy[:, :-1], copy[:, 1:] - left[:, 1:])
-    gy = _stronger(down[:-1] - copy[:-1], copy[1:] - up[1:])
-    none_x = ~(has[:, 1:] & has[:, :-1])[..., 0]
-    none_y = ~(has[1:] & has[:-1])[..., 0]
-    gx[none_x] = (reference[:, 1:] - reference[:, :-1])[none_x]
-    gy[none_y] = (reference[1:] - reference[:-1])[none_y]
+    h, w, n_channels = reference.shape
+    has = source[..., 0] >= 0
+    none_x = ~(has[:, 1:] & has[:, :-1])
+    none_y = ~(has[1:] & has[:-1])
+    groups = _source_groups(exemplars, source)
+    # One channel at a time (a third of the memory of all at once). Only the choice of
+    # the stronger gradient across a seam couples the channels (it compares their summed
+    # squares), so a first pass sums those squares.
+    norms = [np.zeros((h, w - 1)), np.zeros((h, w - 1)), np.zeros((h - 1, w)), np.zeros((h - 1, w))]
+    for channel in range(n_channels):
+        for norm, difference in zip(
+            norms, _side_gradients(groups, has, reference, channel), strict=True
+        ):
+            norm += np.square(difference)
+    right_wins = norms[0] >= norms[1]
+    down_wins = norms[2] >= norms[3]
+    del norms
     lam = 1.0 / scale**2
-    # Normal equations: (lam - L) O = lam R + div g (L: Neumann graph Laplacian).
-    rhs = lam * reference
-    rhs[:, 1:] += gx
-    rhs[:, :-1] -= gx
-    rhs[1:] += gy
-    rhs[:-1] -= gy
     # -L is diagonal in the DCT-II basis: eigenvalues (2 - 2cos(pi u / H)) + (2 - 2cos(pi v / W)).
     eig_y = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
     eig_x = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
-    denominator = (lam + eig_y[:, None] + eig_x[None, :])[..., None]
-    spectrum = fft.dctn(rhs, type=2, axes=(0, 1), norm="ortho")
-    return fft.idctn(spectrum / denominator, type=2, axes=(0, 1), norm="ortho").astype(np.float32)
+    denominator = lam + eig_y[:, None] + eig_x[None, :]
+    out = np.empty((h, w, n_channels), dtype=np.float32)
+    for channel in range(n_channels):
+        ref = reference[..., channel]
+        a_x, b_x, a_y, b_y = _side_gradients(groups, has, reference, channel)
+        # Each side's own exemplar gradient (equal where the copy is coherent); across a
+        # seam the stronger of the two, so an edge or stripe that meets the seam goes on
+        # at full contrast instead of an average of two unrelated textures.
+        gx = np.where(right_wins, a_x, b_x)
+        gy = np.where(down_wins, a_y, b_y)
+        del a_x, b_x, a_y, b_y
+        gx[none_x] = (ref[:, 1:] - ref[:, :-1])[none_x]
+        gy[none_y] = (ref[1:] - ref[:-1])[none_y]
+        # Normal equations: (lam - L) O = lam R + div g (L: Neumann graph Laplacian).
+        rhs = lam * ref
+        rhs[:, 1:] += gx
+        rhs[:, :-1] -= gx
+        rhs[1:] += gy
+        rhs[:-1] -= gy
+        del gx, gy
+        spectrum = fft.dctn(rhs, type=2, axes=(0, 1), norm="ortho")
+        del rhs
+        spectrum /= denominator
+        out[..., channel] = fft.idctn(spectrum, type=2, axes=(0, 1), norm="ortho")
+    return out
+
+
+def _copy_channel(groups, has, reference, channel, dy=0, dx=0) -> np.ndarray:
+    """One channel of :func:`copy_through` shifted by (dy, dx); the reference where no source.
+
+    ``groups``: per exemplar, (exemplar, flat pixel indices, their source y and x)."""
+    h, w = has.shape
+    out = np.zeros(h * w, dtype=np.float32)
+    for exemplar, pixels, sy, sx in groups:
+        eh, ew = exemplar.shape[:2]
+        out[pixels] = exemplar[np.clip(sy + dy, 0, eh - 1), np.clip(sx + dx, 0, ew - 1), channel]
+    return np.where(has, out.reshape(h, w), reference[..., channel])
+
+
+def _source_groups(exemplars, source):
+    """Per exemplar: (exemplar, flat indices of the pixels copied from it, source y, x)."""
+    e = source[..., 0].ravel()
+    groups = []
+    for k, exemplar in enumerate(exemplars):
+        pixels = np.flatnonzero(e == k).astype(np.int32)
+        groups.append(
+            (exemplar, pixels, source[..., 1].ravel()[pixels], source[..., 2].ravel()[pixels])
+        )
+    return groups
+
+
+def _side_gradients(groups, has, reference, channel):
+    """Per channel: the horizontal gradient by the left pixel's source and by the right
+    pixel's, then the vertical one by the upper and by the lower pixel's source."""
+    copy = _copy_channel(groups, has, reference, channel)
+    right = _copy_channel(groups, has, reference, channel, 0, 1)
+    a_x = right[:, :-1] - copy[:, :-1]
+    del right
+    left = _copy_channel(groups, has, reference, channel, 0, -1)
+    b_x = copy[:, 1:] - left[:, 1:]
+    del left
+    down = _copy_channel(groups, has, reference, channel, 1, 0)
+    a_y = down[:-1] - copy[:-1]
+    del down
+    up = _copy_channel(groups, has, reference, channel, -1, 0)
+    b_y = copy[1:] - up[1:]
+    return a_x, b_x, a_y, b_y

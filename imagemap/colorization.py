@@ -196,13 +196,26 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
     depth = validate_depth(depth)
     if m < 1:
         raise InputError(f"m must be at least 1, got {m}")
+    # SSD over the query frame plus the example's depth that falls outside it (a larger
+    # object is a worse fit) = |D|^2 + |Di|^2 - 2 <D, shifted Di> over their overlap, with
+    # each example's centroid and |Di|^2 computed once (Example.selection_stats).
+    query_centroid = _centroid(depth > 0)
+    query_norm = float(np.square(depth, dtype=np.float64).sum())
+    height, width = depth.shape
     distances = []
     for example in database:
         other = example.depth
-        shifted = translate(other, centroid_shift(other > 0, depth > 0), depth.shape)
-        # Depth outside the query frame counts too: a larger object is a worse fit.
-        outside = float(np.square(other, dtype=np.float64).sum() - np.square(shifted).sum())
-        distances.append(float(np.square(depth - shifted, dtype=np.float64).sum()) + outside)
+        centroid, other_norm = example.selection_stats
+        dy, dx = (int(round(s)) for s in query_centroid - centroid)
+        y0, x0 = max(0, dy), max(0, dx)
+        y1, x1 = min(height, other.shape[0] + dy), min(width, other.shape[1] + dx)
+        cross = 0.0
+        if y1 > y0 and x1 > x0:
+            here = depth[y0:y1, x0:x1]
+            there = other[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
+            # Not a BLAS dot: a multithreaded BLAS spins on a busy machine (15 ms a call).
+            cross = float(np.multiply(here, there, dtype=np.float64).sum())
+        distances.append(query_norm + other_norm - 2.0 * cross)
     order = np.argsort(distances, kind="stable")
     return [int(i) for i in order[:m]]
 
@@ -303,13 +316,20 @@ def _fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     A window at the silhouette then carries object-like colours beyond the edge,
     so no background colour bleeds into the synthesised object.
     """
-    _, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    ny, nx = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
     return image[ny, nx]
+
+
+_ROWS = 256  # rows per block of the colour conversions
 
 
 def to_ycbcr(rgb: np.ndarray) -> np.ndarray:
     """RGB in [0, 1] to YCbCr scaled to [0, 1] (ITU-R BT.601, as skimage)."""
-    return (color.rgb2ycbcr(rgb) / 255.0).astype(np.float32)
+    # In blocks of rows: skimage works in float64 (several full-size copies at 4096^2).
+    out = np.empty(rgb.shape, dtype=np.float32)
+    for y in range(0, rgb.shape[0], _ROWS):
+        out[y : y + _ROWS] = color.rgb2ycbcr(rgb[y : y + _ROWS]) / 255.0
+    return out
 
 
 def to_rgb(ycbcr: np.ndarray) -> np.ndarray:

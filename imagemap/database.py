@@ -143,6 +143,16 @@ class Example:
     def mask(self) -> np.ndarray:
         return self.depth > 0
 
+    @cached_property
+    def selection_stats(self) -> tuple[np.ndarray, float]:
+        """(centroid (y, x) of the foreground, sum of squared depth): what example
+        selection needs of this example, computed once (not once per query)."""
+        from scipy import ndimage
+
+        depth = self.depth
+        centroid = np.array(ndimage.center_of_mass(depth > 0), dtype=np.float64)
+        return centroid, float(np.square(depth, dtype=np.float64).sum())
+
 
 def _image_from_array(image: np.ndarray, name: str) -> np.ndarray:
     """An image-map array as float32 in [0, 1]: uint8 / 255, uint16 / 65535, floats checked."""

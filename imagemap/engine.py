@@ -61,6 +61,7 @@ _MAX_BANDS = 8
 # Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
 _EXACT_START_FLOPS = 2e9
 _BAND_ROWS = 64
+_SOURCE_ROWS = 256  # rows per block when the dense source map is made
 
 
 @dataclass(frozen=True)
@@ -322,9 +323,14 @@ class _Projection:
         self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
         self.offset = mean @ basis
 
-    def project(self, view: np.ndarray, index: tuple[np.ndarray, ...]) -> np.ndarray:
+    def project(
+        self, view: np.ndarray, index: tuple[np.ndarray, ...], out: np.ndarray | None = None
+    ) -> np.ndarray:
+        """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
+        which may be a column slice of a larger array), in blocks of windows."""
         n = index[0].shape[0]
-        out = np.empty((n, self.n_components), dtype=np.float32)
+        if out is None:
+            out = np.empty((n, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
             out[start : start + _CHUNK] = self.windows(view, sub) @ self.matrix - self.offset
@@ -368,6 +374,7 @@ class _LevelSolver:
         self.appearance_scale = appearance_scale.astype(np.float32)
 
         # Exemplars: padded and packed into one array each (zero beyond each one's size).
+        # Index arrays are int32 (half the memory of int64; sizes stay far below 2^31).
         heights = [e.shape[0] for e in exemplars]
         widths = [e.shape[1] for e in exemplars]
         n_ex = len(exemplars)
@@ -376,8 +383,8 @@ class _LevelSolver:
         self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
         self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         cand_e, cand_y, cand_x, positions = [], [], [], []
-        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int64)
-        self.exemplar_nearest: list[np.ndarray] = []
+        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
+        self.exemplar_valid: list[np.ndarray] = []
         n_cand = 0
         for e, ex in enumerate(exemplars):
             h, w = ex.shape
@@ -399,13 +406,11 @@ class _LevelSolver:
             valid = self._region(ex.mask, (h, w), r)
             ys, xs = np.nonzero(valid)
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
-            # Nearest candidate of every exemplar pixel: snaps propagated coordinates.
-            _, (ny, nx) = ndimage.distance_transform_edt(~valid, return_indices=True)
-            self.exemplar_nearest.append(self.exemplar_lookup[e, ny, nx])
+            self.exemplar_valid.append(valid)  # for propagate()
             n_cand += len(ys)
-            cand_e.append(np.full(len(ys), e, dtype=np.int64))
-            cand_y.append(ys.astype(np.int64))
-            cand_x.append(xs.astype(np.int64))
+            cand_e.append(np.full(len(ys), e, dtype=np.int32))
+            cand_y.append(ys.astype(np.int32))
+            cand_x.append(xs.astype(np.int32))
             positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
         self.cand_e = np.concatenate(cand_e)
         self.cand_y = np.concatenate(cand_y)
@@ -431,8 +436,8 @@ class _LevelSolver:
             grid[h - 1, :: params.stride] = grid[:: params.stride, w - 1] = True
             grid[h - 1, w - 1] = True
             centres &= grid
-        self.query_y, self.query_x = (a.astype(np.int64) for a in np.nonzero(centres))
-        self.query_lookup = np.full((h, w), -1, dtype=np.int64)
+        self.query_y, self.query_x = (a.astype(np.int32) for a in np.nonzero(centres))
+        self.query_lookup = np.full((h, w), -1, dtype=np.int32)
         self.query_lookup[self.query_y, self.query_x] = np.arange(len(self.query_y))
         self.query_position = _positions(
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
@@ -498,16 +503,21 @@ class _LevelSolver:
         return ndimage.binary_dilation(mask, iterations=max(r, 1))
 
     def _features(self, view, index, position) -> np.ndarray:
-        parts = []
-        if self.guide_projection.n_components:
-            parts.append(self.guide_projection.project(view, index))
-        parts.append(position * np.float32(self.params.position_weight))
+        # Each part is written in place into one (N, D) array: no per-part copies.
+        n_guide = self.guide_projection.n_components
+        n_dims = self.n_init_dims + self.appearance_projection.n_components
+        out = np.empty((len(position), n_dims), dtype=np.float32)
+        if n_guide:
+            self.guide_projection.project(view, index, out[:, :n_guide])
+        out[:, n_guide : n_guide + 2] = position * np.float32(self.params.position_weight)
         # sqrt of the exemplar cost for candidates, 0 for the query: adds the cost.
-        bias = np.sqrt(self.cand_bias) if view is self.exemplar_view else np.zeros(len(position))
-        parts.append(bias.astype(np.float32)[:, None])
+        if view is self.exemplar_view:
+            out[:, n_guide + 2] = np.sqrt(self.cand_bias).astype(np.float32)
+        else:
+            out[:, n_guide + 2] = 0.0
         if self.appearance_projection.n_components:
-            parts.append(self.appearance_projection.project(view, index))
-        return np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float32)
+            self.appearance_projection.project(view, index, out[:, self.n_init_dims :])
+        return out
 
     # -- the two steps ---------------------------------------------------------
 
@@ -520,8 +530,10 @@ class _LevelSolver:
             appearance_padded[..., self.appearance_active] * self.appearance_scale
         )
         if project and self.appearance_projection.n_components:
-            self.query_features[:, self.n_init_dims :] = self.appearance_projection.project(
-                self.query_view, (self.query_y, self.query_x)
+            self.appearance_projection.project(
+                self.query_view,
+                (self.query_y, self.query_x),
+                self.query_features[:, self.n_init_dims :],
             )
         self.timer.add("features", start)
 
@@ -556,7 +568,7 @@ class _LevelSolver:
         """M-step into ``appearance_padded`` (in place, also returned)."""
         if self.params.vote == "mode":
             start = time.perf_counter()
-            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int64)
+            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int32)
             _kernels.vote_mode(
                 self.exemplar_appearance,
                 self.window,
@@ -649,7 +661,14 @@ class _LevelSolver:
         sy = np.minimum(2 * src[:, 1] + ys % 2, self.exemplar_shape[e, 0] - 1)
         sx = np.minimum(2 * src[:, 2] + xs % 2, self.exemplar_shape[e, 1] - 1)
         matches = np.empty(len(ys), dtype=np.int64)
-        for ex, nearest in enumerate(self.exemplar_nearest):
+        for ex, valid in enumerate(self.exemplar_valid):
+            # Nearest candidate of every exemplar pixel: snaps propagated coordinates (made
+            # here, used once: not kept through the level's iterations).
+            ny, nx = ndimage.distance_transform_edt(
+                ~valid, return_distances=False, return_indices=True
+            )
+            nearest = self.exemplar_lookup[ex, ny, nx]
+            del ny, nx
             sel = e == ex
             matches[sel] = nearest[sy[sel], sx[sel]]
         return matches
@@ -658,23 +677,30 @@ class _LevelSolver:
         """(H, W, 3) exemplar, y, x for every pixel: the pixel it copied (mode vote), else
         its position in the match of its nearest window centre."""
         h, w = self.query_shape
-        _, (ny, nx) = ndimage.distance_transform_edt(self.query_lookup < 0, return_indices=True)
-        nearest = self.query_lookup[ny, nx]
-        c = matches[nearest]
-        e = self.cand_e[c]
-        yy, xx = np.mgrid[0:h, 0:w]
-        sy = self.cand_y[c] + (yy - ny)
-        sx = self.cand_x[c] + (xx - nx)
-        if self.params.vote == "mode" and self.chosen is not None:
-            r = self.r
-            chosen = self.chosen[r : r + h, r : r + w]
-            copied = chosen[..., 0] >= 0
-            e = np.where(copied, chosen[..., 0], e)
-            sy = np.where(copied, chosen[..., 1] - r, sy)
-            sx = np.where(copied, chosen[..., 2] - r, sx)
-        sy = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
-        sx = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
-        return np.stack([e, sy, sx], axis=-1).astype(np.int32)
+        ny, nx = ndimage.distance_transform_edt(
+            self.query_lookup < 0, return_distances=False, return_indices=True
+        )
+        copied_by_mode = self.params.vote == "mode" and self.chosen is not None
+        r = self.r
+        out = np.empty((h, w, 3), dtype=np.int32)
+        xx = np.arange(w)[None, :]
+        for y0 in range(0, h, _SOURCE_ROWS):  # in blocks of rows: int64 temporaries stay small
+            y1 = min(h, y0 + _SOURCE_ROWS)
+            block_ny, block_nx = ny[y0:y1], nx[y0:y1]
+            c = matches[self.query_lookup[block_ny, block_nx]]
+            e = self.cand_e[c]
+            sy = self.cand_y[c] + (np.arange(y0, y1)[:, None] - block_ny)
+            sx = self.cand_x[c] + (xx - block_nx)
+            if copied_by_mode:
+                chosen = self.chosen[r + y0 : r + y1, r : r + w]
+                copied = chosen[..., 0] >= 0
+                e = np.where(copied, chosen[..., 0], e)
+                sy = np.where(copied, chosen[..., 1] - r, sy)
+                sx = np.where(copied, chosen[..., 2] - r, sx)
+            out[y0:y1, :, 0] = e
+            out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
+            out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
+        return out
 
 
 def _validate(query_levels, exemplar_levels, params) -> None:
@@ -758,6 +784,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         exemplars = [levels[level] for levels in exemplar_levels]
         smallest = min(min(e.shape) for e in exemplars)
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
+        solver = None  # the coarser level's solver is done: free it before building this one
         solver = _LevelSolver(query_levels[level], exemplars, k, params, rng, timer)
         level_seed = int(rng.integers(0, 2**62))
         h, w = query_levels[level].shape

@@ -121,3 +121,20 @@ def test_unknown_group_is_an_input_error(bench, tmp_path):
     with pytest.raises(InputError, match="--only"):
         bench.run(args)
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.slow
+def test_scaling_curves_have_time_and_memory_per_point(bench, tmp_path):
+    settings = bench.replace(
+        bench.QUICK, scaling_sizes=(64,), scaling_m=(1,), scaling_database=(10,)
+    )
+    rows = bench.run_scaling(tmp_path / "data", settings, trace=False)
+    cases = [r["case"] for r in rows]
+    assert cases == [
+        "pixels 64x64 (m = 2, fresh process)",
+        "examples m = 1 (64x64, fresh process)",
+        "selection, database of 10 (200x150)",
+    ]
+    for row in rows:
+        assert row["seconds"] > 0 and row["rss_peak_mb"] > 10, row
+    assert rows[-1]["per_query_seconds"] > 0 and rows[-1]["database_size"] == 10

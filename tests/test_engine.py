@@ -79,6 +79,28 @@ def test_same_seed_same_bytes_and_seed_matters(blob_database, query_blob):
     assert a.source.tobytes() != c.source.tobytes()
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+def test_same_bytes_at_any_thread_count(blob_database, query_blob, monkeypatch, threads):
+    """The kernels' work split follows the thread count; the result must not."""
+    from imagemap import _kernels
+
+    depth, _ = query_blob
+    reference = colorize(depth, blob_database, "busts", seed=3)
+    rng = np.random.default_rng(0)
+    guide = ndimage.gaussian_filter(rng.random((140, 150, 1)), 2).astype(np.float32)
+    exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
+    query = Mapping(guide=np.roll(guide, 5, axis=0))  # 140 rows: two PatchMatch bands
+    params = EngineParams(patch_sizes=(5,), guide_weights=(1.0,), appearance_weights=(1.0, 1.0))
+    engine_reference = synthesize([query], [[exemplar]], params, seed=1)
+    monkeypatch.setattr(_kernels, "n_threads", lambda: threads)
+    again = colorize(depth, blob_database, "busts", seed=3)
+    assert again.image.tobytes() == reference.image.tobytes()
+    assert again.source.tobytes() == reference.source.tobytes()
+    engine_again = synthesize([query], [[exemplar]], params, seed=1)
+    assert engine_again.appearance[0].tobytes() == engine_reference.appearance[0].tobytes()
+    assert engine_again.source.tobytes() == engine_reference.source.tobytes()
+
+
 def test_exact_and_patchmatch_agree_on_small_case(blob_database, query_blob):
     depth, truth = query_blob
     exact = colorize(depth, blob_database, "busts", backend="exact")
