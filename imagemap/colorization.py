@@ -25,6 +25,7 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
+from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import place_seams, seamless_copy
 from imagemap.database import Database, Example
