@@ -37,7 +37,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -564,9 +564,12 @@ class _LevelSolver:
         self.timer.add("costs", start)
         return out
 
-    def vote(self, matches: np.ndarray, appearance_padded: np.ndarray) -> np.ndarray:
-        """M-step into ``appearance_padded`` (in place, also returned)."""
-        if self.params.vote == "mode":
+    def vote(
+        self, matches: np.ndarray, appearance_padded: np.ndarray, kind: str | None = None
+    ) -> np.ndarray:
+        """M-step into ``appearance_padded`` (in place, also returned); ``kind`` overrides
+        ``params.vote`` ("mode" also records the copied sources for :meth:`dense_source`)."""
+        if (kind or self.params.vote) == "mode":
             start = time.perf_counter()
             self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int32)
             _kernels.vote_mode(
@@ -673,14 +676,17 @@ class _LevelSolver:
             matches[sel] = nearest[sy[sel], sx[sel]]
         return matches
 
-    def dense_source(self, matches: np.ndarray) -> np.ndarray:
-        """(H, W, 3) exemplar, y, x for every pixel: the pixel it copied (mode vote), else
-        its position in the match of its nearest window centre."""
+    def dense_source(self, matches: np.ndarray, copied: bool | None = None) -> np.ndarray:
+        """(H, W, 3) exemplar, y, x for every pixel: the pixel it copied (after a mode vote;
+        ``copied`` overrides ``params.vote``), else its position in the match of its
+        nearest window centre."""
         h, w = self.query_shape
         ny, nx = ndimage.distance_transform_edt(
             self.query_lookup < 0, return_distances=False, return_indices=True
         )
-        copied_by_mode = self.params.vote == "mode" and self.chosen is not None
+        if copied is None:
+            copied = self.params.vote == "mode"
+        copied_by_mode = copied and self.chosen is not None
         r = self.r
         out = np.empty((h, w, 3), dtype=np.int32)
         xx = np.arange(w)[None, :]
@@ -843,10 +849,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
     if params.vote == "mode":
         copy_source = coarse_source
     else:  # the mode of the final matches' sources, for front ends that copy
-        solver.params = replace(params, vote="mode")
-        solver.vote(matches, appearance.copy())
-        copy_source = solver.dense_source(matches)
-        solver.params = params
+        solver.vote(matches, appearance.copy(), kind="mode")
+        copy_source = solver.dense_source(matches, copied=True)
     solver.set_appearance(appearance, project=False)
     final_cost = solver.costs(matches)
     cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
