@@ -11,18 +11,7 @@ from data_gen import CLASSES
 from data_gen.dataset import write_class
 from data_gen.render import ray_backend
 from imagemap.io import InputError
-from imagemap.validate import non_negative_int
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``"200x150"`` -> (200, 150) (width x height)."""
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    if width < 16 or height < 16:
-        raise argparse.ArgumentTypeError(f"size {text!r} is too small (at least 16x16)")
-    return width, height
+from imagemap.validate import non_negative_int, parse_size
 
 
 def build_parser() -> argparse.ArgumentParser:

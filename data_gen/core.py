@@ -172,6 +172,36 @@ def _interpolate_canonical(
     return np.einsum("nk,nkc->nc", barycentric, corners).astype(np.float32)
 
 
+def posed_instance(object_class: ObjectClass, index: int, seed: int = 0) -> tuple:
+    """Instance ``index``'s parameters, view, assembly, pose and posed mesh.
+
+    One random sequence per instance (parameters first, then the view), so the
+    rendered instance and its textured mesh are the same object.
+    """
+    rng = instance_rng(object_class.name, index, seed)
+    params = object_class.sample_params(rng)
+    view = _sample_view(rng, object_class.max_jitter)
+    assembly = object_class.build(params)
+    pose = _view_rotation(view["yaw"], view["pitch"], view["roll"])
+    mesh = assembly.mesh.copy()
+    mesh.apply_transform(pose)
+    return params, view, assembly, pose, mesh
+
+
+def colour_surface(
+    object_class: ObjectClass, params, assembly, pose, mesh, faces, points
+) -> tuple[np.ndarray, np.ndarray]:
+    """Part labels and unlit colours of surface points (posed) on the given faces."""
+    canonical = _interpolate_canonical(mesh, assembly.vertex_canonical, faces, points)
+    surface = SurfaceHits(
+        component=assembly.face_component[faces],
+        component_names=assembly.component_names,
+        canonical=canonical,
+        points=trimesh.transform_points(points, np.linalg.inv(pose)).astype(np.float32),
+    )
+    return object_class.colorize(params, surface)
+
+
 def make_instance(
     object_class: ObjectClass,
     index: int,
@@ -206,26 +236,12 @@ def make_instance(
     ((60, 80), (60, 80, 3), True)
     """
     size = tuple(size) if size is not None else object_class.default_size
-    rng = instance_rng(object_class.name, index, seed)
-    params = object_class.sample_params(rng)
-    view = _sample_view(rng, object_class.max_jitter)
-    assembly = object_class.build(params)
-
-    pose = _view_rotation(view["yaw"], view["pitch"], view["roll"])
-    mesh = assembly.mesh.copy()
-    mesh.apply_transform(pose)
+    params, view, assembly, pose, mesh = posed_instance(object_class, index, seed)
     window = _view_window(object_class, size, view)
     hits = cast_orthographic(mesh, window)
-
-    canonical = _interpolate_canonical(mesh, assembly.vertex_canonical, hits.faces, hits.points)
-    object_points = trimesh.transform_points(hits.points, np.linalg.inv(pose)).astype(np.float32)
-    surface = SurfaceHits(
-        component=assembly.face_component[hits.faces],
-        component_names=assembly.component_names,
-        canonical=canonical,
-        points=object_points,
+    hit_labels, hit_rgb = colour_surface(
+        object_class, params, assembly, pose, mesh, hits.faces, hits.points
     )
-    hit_labels, hit_rgb = object_class.colorize(params, surface)
 
     width, height = size
     z_far, z_near = object_class.depth_range

@@ -12,12 +12,9 @@ import numpy as np
 from data_gen.core import (
     Instance,
     ObjectClass,
-    SurfaceHits,
-    _interpolate_canonical,
-    _sample_view,
-    _view_rotation,
-    instance_rng,
+    colour_surface,
     make_instance,
+    posed_instance,
 )
 from data_gen.render import ray_backend
 from imagemap.io import InputError, atomic_path, write_image
@@ -53,28 +50,14 @@ def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_
     the mesh rendered from the front shows the instance's image-map. Same seed, same
     mesh and texture.
     """
-    import trimesh
 
     from imagemap.mesh import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
 
-    rng = instance_rng(object_class.name, index, seed)
-    params = object_class.sample_params(rng)
-    view = _sample_view(rng, object_class.max_jitter)
-    assembly = object_class.build(params)
-    pose = _view_rotation(view["yaw"], view["pitch"], view["roll"])
-    mesh = assembly.mesh.copy()
-    mesh.apply_transform(pose)
+    params, _, assembly, pose, mesh = posed_instance(object_class, index, seed)
     vertices, faces, uv, source = uv_atlas(mesh)
     texel, face, bary = rasterize_uv(uv, faces, texture_size)
     points = np.einsum("nk,nkc->nc", bary, vertices[faces[face]])
-    canonical = _interpolate_canonical(mesh, assembly.vertex_canonical, face, points)
-    surface = SurfaceHits(
-        component=assembly.face_component[face],
-        component_names=assembly.component_names,
-        canonical=canonical,
-        points=trimesh.transform_points(points, np.linalg.inv(pose)).astype(np.float32),
-    )
-    _, rgb = object_class.colorize(params, surface)
+    _, rgb = colour_surface(object_class, params, assembly, pose, mesh, face, points)
     texture = np.zeros((texture_size, texture_size, 3), dtype=np.float32)
     texture.reshape(-1, 3)[texel] = rgb
     covered = np.zeros((texture_size, texture_size), dtype=bool)

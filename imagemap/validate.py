@@ -34,6 +34,7 @@ __all__ = [
     "finite_float",
     "non_negative_float",
     "non_negative_int",
+    "parse_size",
     "positive_int",
 ]
 
@@ -181,3 +182,14 @@ non_negative_float = _argparse_type(
 )
 #: argparse ``type=`` for any finite float.
 finite_float = _argparse_type(lambda v: check_float("value", v), "a finite float")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """argparse ``type=`` for ``--size WIDTHxHEIGHT``: ``"200x150"`` -> (200, 150)."""
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    if width < 16 or height < 16:
+        raise argparse.ArgumentTypeError(f"size {text!r} is too small (at least 16x16)")
+    return width, height

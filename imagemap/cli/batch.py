@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from imagemap.errors import InputError
+from imagemap.validate import parse_size
 
 BATCH_HELP = """\
 Synthesize every depth map (NAME_depth.png|tif|tiff|npy -> NAME_image.png) and
@@ -32,17 +33,6 @@ examples:
   # four views baked into one UV atlas per mesh, OBJ + MTL + PNG
   imagemap batch busts/ --db bust_meshes/ -o out/ --views front,back,left,right --format obj
 """
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``"200x150"`` -> (200, 150)."""
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    if width < 16 or height < 16:
-        raise argparse.ArgumentTypeError(f"size {text!r} is too small (at least 16x16)")
-    return width, height
 
 
 def add_mesh_options(parser: argparse.ArgumentParser) -> None:
