@@ -466,7 +466,6 @@ def _vote_mode_rows(
     cand_y,
     cand_x,
     matches,
-    match_weights,
     out,
     chosen,
 ):
@@ -496,7 +495,7 @@ def _vote_mode_rows(
                     e = cand_e[c]
                     sy = cand_y[c] + oy
                     sx = cand_x[c] + ox
-                    w = window_weights[oy, ox] * match_weights[m]
+                    w = window_weights[oy, ox]
                     found = False
                     for j in range(n):
                         if ke[j] == e and ky[j] == sy and kx[j] == sx:
@@ -536,7 +535,6 @@ def vote_mode(
     cand_y,
     cand_x,
     matches,
-    match_weights,
     out,
     chosen,
 ):
@@ -544,13 +542,13 @@ def vote_mode(
     its overlapping windows agree on.
 
     Each window covering a pixel proposes one exemplar pixel (its match shifted by
-    the pixel's offset in the window), with the Gaussian window weight times
-    ``match_weights[m]``. Proposals of the same exemplar pixel add up, and the
-    pixel copies the appearance of the heaviest (the weighted mode of source
-    positions). Where neighbouring windows are matched coherently they agree and
-    the copy is exact; where they disagree the boundary between sources falls
-    where the weights change sides, without averaging colours. ``chosen``
-    (Hq + 2r, Wq + 2r, 3) receives the exemplar index and *padded* source
+    the pixel's offset in the window), with its Gaussian window weight. Proposals
+    of the same exemplar pixel add up, and the pixel copies the appearance of the
+    heaviest (the weighted mode of source positions). Where neighbouring windows
+    are matched coherently they agree and the copy is exact; where they disagree
+    the boundary between sources falls where the weights change sides, without
+    averaging colours. ``chosen`` (Hq + 2r, Wq + 2r, 3) receives the exemplar
+    index and *padded* source
     coordinates (-1 where no window covers the pixel).
     """
     _run(
@@ -564,7 +562,6 @@ def vote_mode(
             cand_y,
             cand_x,
             matches,
-            match_weights,
             out,
             chosen,
         ),

@@ -569,25 +569,8 @@ class _LevelSolver:
     ) -> np.ndarray:
         """M-step into ``appearance_padded`` (in place, also returned); ``kind`` overrides
         ``params.vote`` ("mode" also records the copied sources for :meth:`dense_source`)."""
-        if (kind or self.params.vote) == "mode":
-            start = time.perf_counter()
-            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int32)
-            _kernels.vote_mode(
-                self.exemplar_appearance,
-                self.window,
-                self.query_lookup,
-                self.cand_e,
-                self.cand_y,
-                self.cand_x,
-                matches,
-                np.ones(len(matches), dtype=np.float64),
-                appearance_padded,
-                self.chosen,
-            )
-            self.timer.add("vote", start)
-            return appearance_padded
         start = time.perf_counter()
-        _kernels.vote(
+        windows = (
             self.exemplar_appearance,
             self.window,
             self.query_lookup,
@@ -595,8 +578,12 @@ class _LevelSolver:
             self.cand_y,
             self.cand_x,
             matches,
-            appearance_padded,
         )
+        if (kind or self.params.vote) == "mode":
+            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int32)
+            _kernels.vote_mode(*windows, appearance_padded, self.chosen)
+        else:
+            _kernels.vote(*windows, appearance_padded)
         self.timer.add("vote", start)
         return appearance_padded
 
