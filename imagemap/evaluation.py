@@ -70,7 +70,6 @@ from imagemap.metrics import (
     ImageMetrics,
     blur_ratio,
     class_reference,
-    features_drawn,
     image_metrics,
     macro_part_transfer,
     source_labels,
@@ -268,33 +267,32 @@ def _copy_nearest(depth: np.ndarray, others: Database) -> tuple:
 def _detail_metrics(
     metrics: ImageMetrics,
     image: np.ndarray,
-    truth: np.ndarray,
     source: np.ndarray,
     mask: np.ndarray,
     labels: np.ndarray | None,
     examples: list[Example],
 ) -> ImageMetrics:
-    """Add the measures that need the source map: part transfer (micro and macro), blur,
-    and small features drawn judged by their sources too."""
+    """Add the measures that need the source map: part transfer (micro and macro), blur."""
     covered = mask & (source[..., 0] >= 0)
     copy = copy_through([e.image for e in examples], source).astype(np.float32)
     copy[~mask] = 0.0  # as the map's own background
     blur = blur_ratio(image, copy, covered)
-    example_labels = [e.labels for e in examples if e.labels is not None]
-    if labels is None or len(example_labels) < len(examples):
+    example_labels = _example_labels(examples)
+    if labels is None or example_labels is None:
         return replace(metrics, blur_ratio=blur)
     transferred = source_labels(source, example_labels, mask)
-    drawn, measured = features_drawn(
-        image, truth, labels, mask, source=source, example_labels=example_labels
-    )
     return replace(
         metrics,
-        features_drawn=drawn,
-        features_measured=measured,
         part_transfer=float(np.mean(transferred[mask] == labels[mask])),
         part_transfer_macro=macro_part_transfer(transferred, labels, mask),
         blur_ratio=blur,
     )
+
+
+def _example_labels(examples: list[Example]) -> list[np.ndarray] | None:
+    """The examples' part labels, or None unless every example has them."""
+    labels = [e.labels for e in examples]
+    return None if any(item is None for item in labels) else labels
 
 
 def evaluate_object(
@@ -348,15 +346,11 @@ def evaluate_object(
             image, source, used = colorized.image, colorized.source, colorized.example_names
             provenance, legend = colorized.provenance, colorized.legend
         seconds = time.perf_counter() - start
-        metrics = _detail_metrics(
-            image_metrics(image, truth, mask, labels),
-            image,
-            truth,
-            source,
-            mask,
-            labels,
-            [others[n] for n in used],
+        sources = [others[n] for n in used]
+        measured = image_metrics(
+            image, truth, mask, labels, source=source, example_labels=_example_labels(sources)
         )
+        metrics = _detail_metrics(measured, image, source, mask, labels, sources)
         results[method] = MethodResult(
             method=method,
             image=image.astype(np.float32),

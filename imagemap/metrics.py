@@ -287,8 +287,12 @@ def image_metrics(
     truth: np.ndarray,
     mask: np.ndarray,
     labels: np.ndarray | None = None,
+    *,
+    source: np.ndarray | None = None,
+    example_labels: list[np.ndarray] | None = None,
 ) -> ImageMetrics:
-    """The metrics of one synthesized image-map that need no source map.
+    """The metrics of one synthesized image-map that need no source map (part
+    transfer and blur ratio are the evaluation's).
 
     Parameters
     ----------
@@ -297,6 +301,9 @@ def image_metrics(
         The object's pixels.
     labels : ndarray of int, (H, W), optional
         Part ids (0 background); without them part accuracy is NaN.
+    source, example_labels : optional
+        The map's source map and its exemplars' labels: small features then count
+        as drawn when copied from the same part too (:func:`features_drawn`).
 
     Returns
     -------
@@ -307,7 +314,9 @@ def image_metrics(
     if labels is not None:
         labels = np.where(mask, np.asarray(labels), 0)
         accuracy = part_accuracy(image, truth, labels)
-        drawn, measured = features_drawn(image, truth, labels, mask)
+        drawn, measured = features_drawn(
+            image, truth, labels, mask, source=source, example_labels=example_labels
+        )
     return ImageMetrics(
         ciede2000=ciede2000(image, truth, mask),
         ssim=luminance_ssim(image, truth, mask),
@@ -392,6 +401,8 @@ FEATURE_FRACTION = 0.015
 FEATURE_MIN_PIXELS = 4
 #: Best correlation over shifts of up to this many pixels (features may move a little).
 FEATURE_SHIFT = 3
+#: Pixels around a feature's bounding box that its correlation window takes in.
+FEATURE_MARGIN = 3
 #: A feature is drawn when the correlation of its L* pattern with the truth's reaches this.
 FEATURE_NCC = 0.5
 
@@ -453,7 +464,7 @@ def feature_correlation(
     *,
     mask: np.ndarray | None = None,
     shift: int = FEATURE_SHIFT,
-    margin: int = 3,
+    margin: int = FEATURE_MARGIN,
 ) -> float:
     """Best normalized cross-correlation of L* around a feature, over small shifts.
 
@@ -472,9 +483,17 @@ def feature_correlation(
     float
         In [-1, 1]; NaN when the truth shows no luminance pattern there (std < 1 L*).
     """
-    lum_image, lum_truth = _lightness(image), _lightness(truth)
+    inside = None if mask is None else np.asarray(mask, dtype=bool)
+    return _pattern_correlation(
+        _lightness(image), _lightness(truth), component, inside, shift, margin
+    )
+
+
+def _pattern_correlation(lum_image, lum_truth, component, inside, shift, margin) -> float:
+    """:func:`feature_correlation` on L* images already computed (once per object)."""
     h, w = component.shape
-    inside = np.ones((h, w), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if inside is None:
+        inside = np.ones((h, w), dtype=bool)
     ys, xs = np.nonzero(component)
     y0, y1 = max(ys.min() - margin, shift), min(ys.max() + margin + 1, h - shift)
     x0, x1 = max(xs.min() - margin, shift), min(xs.max() + margin + 1, w - shift)
@@ -527,14 +546,24 @@ def feature_transfer(
     example_labels : list of ndarray of int
         Part labels of the exemplars, indexed by ``source[..., 0]``.
     """
+    return _transfer(component, source, _part_distances(example_labels, part), tolerance)
+
+
+def _part_distances(example_labels: list[np.ndarray], part: int) -> list[np.ndarray | None]:
+    """Per exemplar, each pixel's distance to ``part`` (None where the part is absent)."""
+    return [
+        ndimage.distance_transform_edt(labels != part) if (labels == part).any() else None
+        for labels in example_labels
+    ]
+
+
+def _transfer(component, source, distances, tolerance) -> float:
     index, sy, sx = (a[component] for a in np.moveaxis(source, -1, 0))
     near = np.zeros(len(index), dtype=bool)
-    for k, labels in enumerate(example_labels):
+    for k, distance in enumerate(distances):
         here = index == k
-        if not here.any() or not (labels == part).any():
-            continue
-        distance = ndimage.distance_transform_edt(labels != part)
-        near[here] = distance[sy[here], sx[here]] <= tolerance
+        if distance is not None and here.any():
+            near[here] = distance[sy[here], sx[here]] <= tolerance
     return float(near.mean())
 
 
@@ -566,16 +595,24 @@ def features_drawn(
     >>> features_drawn(truth, truth, labels, mask), features_drawn(plain, truth, labels, mask)
     ((1, 1), (0, 1))
     """
-    drawn = measurable = 0
+    components = feature_components(labels, mask, max_fraction=max_fraction)
+    if not components:
+        return 0, 0
     with_source = source is not None and example_labels is not None
-    for part, component in feature_components(labels, mask, max_fraction=max_fraction):
-        ncc = feature_correlation(image, truth, component, mask=mask)
-        copied = (
-            feature_transfer(component, part, source, example_labels) >= 0.5
-            if with_source
-            else False
+    inside = np.asarray(mask, dtype=bool)
+    lum_image, lum_truth = _lightness(image), _lightness(truth)  # once per object
+    distances: dict[int, list] = {}  # per part, once per object
+    drawn = measurable = 0
+    for part, component in components:
+        ncc = _pattern_correlation(
+            lum_image, lum_truth, component, inside, FEATURE_SHIFT, FEATURE_MARGIN
         )
-        if math.isnan(ncc) and not with_source:
+        copied = False
+        if with_source:
+            if part not in distances:
+                distances[part] = _part_distances(example_labels, part)
+            copied = _transfer(component, source, distances[part], FEATURE_TOLERANCE) >= 0.5
+        elif math.isnan(ncc):
             continue
         measurable += 1
         drawn += bool(copied or (not math.isnan(ncc) and ncc >= FEATURE_NCC))
