@@ -195,8 +195,6 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
     """
     m = check_int("m", m, minimum=1)
     depth = validate_depth(depth)
-    if m < 1:
-        raise InputError(f"m must be at least 1, got {m}")
     # SSD over the query frame plus the example's depth that falls outside it (a larger
     # object is a worse fit) = |D|^2 + |Di|^2 - 2 <D, shifted Di> over their overlap, with
     # each example's centroid and |Di|^2 computed once (Example.selection_stats).
@@ -263,13 +261,6 @@ def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = 
 def level_patch_sizes(patch_sizes: tuple[int, ...], levels: int) -> tuple[int, ...]:
     """The preset's window widths cut or extended (coarsest width repeated) to ``levels``."""
     return tuple(patch_sizes[:levels]) + (patch_sizes[-1],) * max(0, levels - len(patch_sizes))
-
-
-#: The depth detail band is measured in units of its spread inside the object and
-#: soft-clipped at this many units: the silhouette's jump (depth to background) would
-#: otherwise set the band's scale and leave interior relief (an eye's bulge, a fin's
-#: edge) a thousandth of it.
-DETAIL_CLIP = 3.0
 
 
 #: Percentile of |detail| inside the object taken as the detail band's unit: the
@@ -533,6 +524,8 @@ def colorize(
     if params.vote in ("copy", "mode"):
         # Every pixel copied from the exemplar pixel its windows agree on, the seams
         # blended in the gradient domain into the voted result.
+        # Made again rather than kept from the pyramids: full-size arrays held through
+        # the synthesis would add to its peak memory, and they cost little to remake.
         exemplars = [_example_ycbcr(example) for example in chosen]
         source = result.copy_source
         if params.seam_smoothness > 0:
