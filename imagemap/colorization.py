@@ -238,8 +238,9 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
 MIN_WINDOWS_ACROSS = 1.25
 #: A level is added while the next coarser one would still see the object this many
 #: windows across (the paper's 200x150 objects are about 2 to 3.5 windows across at
-#: its coarsest level): large maps get the pyramid their size calls for.
-ADD_WINDOWS_ACROSS = 2.0
+#: its coarsest level): large maps get the pyramid their size calls for. At 2, busts
+#: at 4x (5 levels) lost most eyes, brows and lips to the coarse levels' layout.
+ADD_WINDOWS_ACROSS = 3.5
 
 
 def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = True) -> int:
@@ -261,7 +262,7 @@ def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = 
     2
     >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
     >>> pyramid_levels(big, (7, 11, 9))
-    5
+    4
     """
     size = float(np.sqrt(mask.sum()))
     levels = len(patch_sizes)

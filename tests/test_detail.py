@@ -98,8 +98,9 @@ def test_pyramid_grows_with_large_objects():
 
     sizes = (7, 11, 9)
     assert pyramid_levels(square(80), sizes) == 3  # the paper's size: its 3 levels
-    assert pyramid_levels(square(160), sizes) == 4
-    assert pyramid_levels(square(640), sizes) == 6
+    assert pyramid_levels(square(160), sizes) == 3
+    assert pyramid_levels(square(300), sizes) == 4
+    assert pyramid_levels(square(640), sizes) == 5
     assert level_patch_sizes(sizes, 5) == (7, 11, 9, 9, 9)
     assert level_patch_sizes(sizes, 2) == (7, 11)
 
