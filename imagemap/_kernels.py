@@ -115,7 +115,7 @@ def _random_below(seed, a, b, c, n):
 def _sq_dist(a, b, ndims):
     s = np.float32(0.0)
     for i in range(ndims):
-        d = a[i] - b[i]
+        d = np.float32(a[i]) - np.float32(b[i])  # float32 or quantized (int16) features
         s += d * d
     return s
 

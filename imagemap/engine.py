@@ -62,6 +62,10 @@ _MAX_BANDS = 8
 _EXACT_START_FLOPS = 2e9
 _BAND_ROWS = 64
 _SOURCE_ROWS = 256  # rows per block when the dense source map is made
+#: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
+#: margin of that largest magnitude over the largest value in the PCA samples.
+_FEATURE_RANGE = 32767
+_FEATURE_MARGIN = 2.0
 
 
 @dataclass(frozen=True)
@@ -163,6 +167,12 @@ class EngineParams:
         (Gaussian-weighted) agree on, so the output is made of exemplar pixels and
         small features survive; a mode M-step that would raise the target is
         refused (the level then stops), so the target still never increases.
+    quantize_features : bool
+        Store the PCA window features as 16-bit integers in one unit per level
+        (``_FEATURE_RANGE`` steps cover twice the largest value seen in the PCA
+        samples) instead of float32: half the engine's largest arrays. The search
+        proposes candidates on them; every accepted match is decided on the exact
+        float window distance, so the target still never increases.
     """
 
     patch_sizes: tuple[int, ...] = (7, 11, 9)
@@ -183,6 +193,7 @@ class EngineParams:
     window_sigma: float = 1.0 / 3.0
     exemplar_costs: tuple[float, ...] = ()
     vote: str = "mean"
+    quantize_features: bool = True
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
@@ -377,17 +388,36 @@ class _Projection:
         self.offset = mean @ basis
 
     def project(
-        self, windows: _Windows, index: tuple[np.ndarray, ...], out: np.ndarray | None = None
+        self,
+        windows: _Windows,
+        index: tuple[np.ndarray, ...],
+        out: np.ndarray | None = None,
+        inverse_unit: float | None = None,
     ) -> np.ndarray:
         """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
-        which may be a column slice of a larger array), in blocks of windows."""
+        which may be a column slice of a larger array), in blocks of windows; with
+        ``inverse_unit``, quantized (see :func:`_store`)."""
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
-            out[start : start + _CHUNK] = windows(sub) @ self.matrix - self.offset
+            _store(
+                out[start : start + _CHUNK], windows(sub) @ self.matrix - self.offset, inverse_unit
+            )
         return out
+
+
+def _store(out: np.ndarray, values: np.ndarray, inverse_unit: float | None) -> None:
+    """``out[...] = values``, or the nearest integer multiples of the unit, clipped to
+    +-_FEATURE_RANGE, when ``inverse_unit`` is given (``values`` is overwritten)."""
+    if inverse_unit is None:
+        out[...] = values
+        return
+    np.multiply(values, np.float32(inverse_unit), out=values)
+    np.rint(values, out=values)
+    np.clip(values, -_FEATURE_RANGE, _FEATURE_RANGE, out=values)
+    out[...] = values
 
 
 class _LevelSolver:
@@ -519,10 +549,24 @@ class _LevelSolver:
         pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
         sample_index = (self.cand_e[pick], self.cand_y[pick], self.cand_x[pick])
         projections = (self.guide_projection, self.appearance_projection)
+        largest = 0.0
         for projection, windows in zip(projections, self.exemplar_windows, strict=True):
             if projection.n_channels:
                 samples = windows(sample_index)
                 projection.fit(samples, params.pca_fraction, params.pca_max_components, rng)
+                if params.quantize_features:
+                    largest = max(
+                        largest, float(np.abs(projection.project(windows, sample_index)).max())
+                    )
+        if params.quantize_features:
+            position = np.float32(params.position_weight)
+            for values in (self.cand_position, self.query_position):
+                largest = max(largest, float(np.abs(values).max(initial=0.0)) * position)
+            largest = max(largest, float(np.sqrt(self.cand_bias.max(initial=0.0))), 1e-30)
+            # Features in steps of one unit, to _FEATURE_MARGIN times the largest value seen.
+            self.inverse_unit: float | None = _FEATURE_RANGE / (_FEATURE_MARGIN * largest)
+        else:
+            self.inverse_unit = None
         timer.add("pca", start)
 
         # Features: [guide PCA | weighted position | exemplar cost | appearance PCA].
@@ -570,17 +614,26 @@ class _LevelSolver:
         return ndimage.binary_dilation(mask, iterations=max(r, 1))
 
     def _features(self, windows, index, position, bias) -> np.ndarray:
-        # Each part is written in place into one (N, D) array: no per-part copies.
+        """(N, D) features [guide PCA | weighted position | sqrt of the exemplar cost
+        (candidates; 0 for the query) | appearance PCA], made in blocks of windows and
+        stored as float32 or quantized (int16)."""
         n_guide = self.guide_projection.n_components
         n_dims = self.n_init_dims + self.appearance_projection.n_components
-        out = np.empty((len(position), n_dims), dtype=np.float32)
-        if n_guide:
-            self.guide_projection.project(windows[0], index, out[:, :n_guide])
-        out[:, n_guide : n_guide + 2] = position * np.float32(self.params.position_weight)
-        # sqrt of the exemplar cost for candidates, 0 for the query: adds the cost.
-        out[:, n_guide + 2] = bias
-        if self.appearance_projection.n_components:
-            self.appearance_projection.project(windows[1], index, out[:, self.n_init_dims :])
+        dtype = np.float32 if self.inverse_unit is None else np.int16
+        out = np.empty((len(position), n_dims), dtype=dtype)
+        block = np.empty((min(_CHUNK, len(position)), n_dims), dtype=np.float32)
+        weight = np.float32(self.params.position_weight)
+        for start in range(0, len(position), _CHUNK):
+            stop = min(start + _CHUNK, len(position))
+            sub = tuple(i[start:stop] for i in index)
+            values = block[: stop - start]
+            if n_guide:
+                self.guide_projection.project(windows[0], sub, values[:, :n_guide])
+            values[:, n_guide : n_guide + 2] = position[start:stop] * weight
+            values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
+            if self.appearance_projection.n_components:
+                self.appearance_projection.project(windows[1], sub, values[:, self.n_init_dims :])
+            _store(out[start:stop], values, self.inverse_unit)
         return out
 
     # -- the two steps ---------------------------------------------------------
@@ -590,14 +643,18 @@ class _LevelSolver:
         too unless ``project`` is False (exact costs need only the bands)."""
         start = time.perf_counter()
         n_ga = self.n_guide_active
-        self.query_active[..., n_ga:] = (
-            appearance_padded[..., self.appearance_active] * self.appearance_scale
+        # No temporaries: the product is written into the query's band stack.
+        np.multiply(
+            _channels(appearance_padded, self.appearance_active),
+            self.appearance_scale,
+            out=self.query_active[..., n_ga:],
         )
         if project and self.appearance_projection.n_components:
             self.appearance_projection.project(
                 self.query_windows[1],
                 (self.query_y, self.query_x),
                 self.query_features[:, self.n_init_dims :],
+                self.inverse_unit,
             )
         self.timer.add("features", start)
 
@@ -665,8 +722,11 @@ class _LevelSolver:
                 n_query, n_cand = len(self.query_y), len(self.cand_e)
                 if n_query * n_cand * ndims <= _EXACT_START_FLOPS:
                     # A small (coarsest) level: an exact global start costs little.
-                    start_index = make_index("exact", self.candidate_features[:, :ndims])
-                    matches, _ = start_index.query(self.query_features[:, :ndims])
+                    data = self.candidate_features[:, :ndims].astype(np.float32)
+                    start_index = make_index("exact", data)
+                    matches, _ = start_index.query(
+                        self.query_features[:, :ndims].astype(np.float32)
+                    )
                 else:
                     matches = rng.integers(0, n_cand, size=n_query)
                     passes *= 2
@@ -698,11 +758,11 @@ class _LevelSolver:
         key = "init" if init else "full"
         if key not in self.indexes:
             start = time.perf_counter()
-            data = np.ascontiguousarray(self.candidate_features[:, :ndims])
+            data = np.ascontiguousarray(self.candidate_features[:, :ndims], dtype=np.float32)
             self.indexes[key] = make_index(backend, data, seed=seed)
             self.timer.add("index", start)
         start = time.perf_counter()
-        queries = np.ascontiguousarray(self.query_features[:, :ndims])
+        queries = np.ascontiguousarray(self.query_features[:, :ndims], dtype=np.float32)
         new, _ = self.indexes[key].query(queries)
         self.timer.add("search", start)
         return new.astype(np.int64)
@@ -900,13 +960,18 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
+    solver.set_appearance(appearance, project=False)
+    final_cost = solver.costs(matches)
     if params.vote == "mode":
         copy_source = coarse_source
     else:  # the mode of the final matches' sources, for front ends that copy
-        solver.vote(matches, appearance.copy(), kind="mode")
+        # The padded estimate is not needed any more (its interior was copied into
+        # appearance_levels, unless there is no padding): the mode vote may overwrite it.
+        scratch = appearance if solver.r > 0 else appearance.copy()
+        solver.vote(matches, scratch, kind="mode")
+        appearance = scratch = None  # freed before the dense map is made
         copy_source = solver.dense_source(matches, copied=True)
-    solver.set_appearance(appearance, project=False)
-    final_cost = solver.costs(matches)
+    solver.chosen = None
     cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
     cost[solver.query_y, solver.query_x] = final_cost
     return EngineResult(
