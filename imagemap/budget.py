@@ -1,8 +1,8 @@
 """Memory and time of a colorization, estimated from the sizes before it starts.
 
 The engine's memory at a pyramid level is dominated by the PCA window features of
-every query window centre and every exemplar candidate (``4 * D`` bytes each, D
-the feature dimension: a fifth of the 2 k^2 guide and 3 k^2 appearance window
+every query window centre and every exemplar candidate (``2 * D`` bytes each: int16,
+D the feature dimension: a fifth of the 2 k^2 guide and 3 k^2 appearance window
 values, plus position and exemplar cost), by the per-pixel arrays of the query
 (padded bands, lookup tables, vote buffers, the dense source map) and of the
 exemplars, and by the previous (coarser) level's solver, still alive while the
@@ -50,7 +50,8 @@ log = logging.getLogger("imagemap")
 _QUERY_CENTRE_BYTES = 70  # coordinates, positions, matches, candidates, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
 _QUERY_PIXEL_BYTES = 150  # padded bands, lookup, vote buffers, dense source map temporaries
-_EXEMPLAR_PIXEL_BYTES = 110  # packed bands, lookups, the example's own pyramids
+_FEATURE_BYTES = 2  # per feature dimension: int16 (EngineParams.quantize_features)
+_EXEMPLAR_PIXEL_BYTES = 98  # packed bands, lookups, the example's own pyramids
 _OVERHEAD_BYTES = 100 * 2**20  # numba kernels and lazily imported modules on first use
 _MEMORY_FACTOR = 0.75
 _SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
@@ -146,8 +147,8 @@ def estimate_colorize(
         candidates = sum(f / scale**2 + r * b / scale for _, f, b in exemplars)
         ex_pixels = n_ex * (ex_h / scale + 2 * r) * (ex_w / scale + 2 * r)
         solver = (
-            centres * (4 * dims + _QUERY_CENTRE_BYTES)
-            + candidates * (4 * dims + _CANDIDATE_BYTES)
+            centres * (_FEATURE_BYTES * dims + _QUERY_CENTRE_BYTES)
+            + candidates * (_FEATURE_BYTES * dims + _CANDIDATE_BYTES)
             + pixels * _QUERY_PIXEL_BYTES
             + ex_pixels * _EXEMPLAR_PIXEL_BYTES
         )

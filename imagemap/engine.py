@@ -767,6 +767,23 @@ class _LevelSolver:
         self.timer.add("search", start)
         return new.astype(np.int64)
 
+    def release_search(self) -> None:
+        """Free what only the E-step and the exact costs need (features, guide and query
+        bands, exemplar lookups): the votes and the dense source maps do not."""
+        for name in (
+            "candidate_features",
+            "query_features",
+            "exemplar_guide",
+            "exemplar_windows",
+            "query_active",
+            "query_windows",
+            "exemplar_lookup",
+            "exemplar_valid",
+            "cand_position",
+            "indexes",
+        ):
+            setattr(self, name, None)
+
     def propagate(self, coarse_source: np.ndarray) -> np.ndarray:
         """Initial matches from the coarser level's dense source map (coordinates x2)."""
         ys, xs = self.query_y, self.query_x
@@ -958,10 +975,12 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             previous = value
         r = solver.r
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
+        if level == 0:  # the finest level's exact costs, while the bands are there
+            solver.set_appearance(appearance, project=False)
+            final_cost = solver.costs(matches)
+        solver.release_search()  # what only the E-step needs, before the dense maps
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
-    solver.set_appearance(appearance, project=False)
-    final_cost = solver.costs(matches)
     if params.vote == "mode":
         copy_source = coarse_source
     else:  # the mode of the final matches' sources, for front ends that copy
