@@ -27,7 +27,7 @@ from skimage import color
 
 from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
-from imagemap.blend import place_seams, seamless_copy
+from imagemap.blend import fill_background, place_seams, seamless_copy
 from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
 from imagemap.io import InputError, validate_depth
@@ -113,6 +113,17 @@ class ColorizeParams:
         object and soft-clipped at this many units (0: raw band). Without it the
         silhouette's jump sets the band's scale and interior relief (eye sockets,
         lips, an eye's bulge) hardly counts.
+    silhouette_weight : float
+        Weight of the silhouette band: the signed distance to the object's outline
+        in pixels of each level, clipped at ``SILHOUETTE_RANGE``. With it the depth
+        bands see the depth extended smoothly past the outline, so a window at the
+        edge matches the relief it holds (an eye close to the outline) rather than
+        the jump to background; 0 keeps the paper's bands (the jump marks the edge).
+    guide_reseed : float
+        Per level, where the propagated matches fit the depth worst, matches on
+        depth and position alone replace them when they fit in less than this
+        fraction of the distance (the engine's ``guide_reseed``; 0: off). Features
+        that only the finer levels resolve are then drawn.
     """
 
     m: int = 2
@@ -133,6 +144,8 @@ class ColorizeParams:
     seam_smoothness: float = 1.0
     detail_clip: float = 3.0
     grow_pyramid: bool = True
+    silhouette_weight: float = 0.5
+    guide_reseed: float = 0.5
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
@@ -147,7 +160,8 @@ class ColorizeParams:
         return EngineParams(
             exemplar_costs=costs if self.example_preference else (),
             patch_sizes=self.patch_sizes,
-            guide_weights=(self.depth_weight, self.depth_detail_weight),
+            guide_weights=(self.depth_weight, self.depth_detail_weight)
+            + ((self.silhouette_weight,) if self.silhouette_weight else ()),
             appearance_weights=(self.luma_weight, self.chroma_weight, self.chroma_weight),
             position_weight=self.position_weight,
             pca_fraction=self.pca_fraction,
@@ -156,6 +170,7 @@ class ColorizeParams:
             tolerance=self.tolerance,
             guide_padding="constant",
             vote="mode" if self.vote == "mode" else "mean",
+            guide_reseed=self.guide_reseed,
         )
 
 
@@ -277,39 +292,66 @@ def _interior_scale(detail: np.ndarray, mask: np.ndarray) -> float:
     return scale if scale > 0 else max(float(np.abs(detail).max()), 1e-12)
 
 
-def _depth_guides(depth: np.ndarray, levels: int, clip: float | None = None) -> list[np.ndarray]:
-    """Per level: (H_l, W_l, 2) depth Gaussian level and its Laplacian (detail) band."""
+#: The silhouette band saturates this many pixels (of each level) inside and
+#: outside the outline: it says "edge here" to a window, not how deep inside it is.
+SILHOUETTE_RANGE = 2.0
+#: Smoothing (pixels) of the depth extended past the outline.
+EXTENSION_SIGMA = 2.0
+
+
+def _extend_depth(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The depth continued past the outline: nearest object depth, smoothed outside.
+
+    Windows at the outline then compare relief with relief; the outline itself
+    is the silhouette band's job.
+    """
+    outside = ndimage.gaussian_filter(fill_background(depth, mask), EXTENSION_SIGMA)
+    return np.where(mask, depth, outside).astype(np.float32)
+
+
+def _silhouette_band(mask: np.ndarray) -> np.ndarray:
+    """Signed distance to the outline (positive inside), clipped at SILHOUETTE_RANGE."""
+    inside = ndimage.distance_transform_edt(mask)
+    outside = ndimage.distance_transform_edt(~mask)
+    signed = (inside - outside) / SILHOUETTE_RANGE
+    return np.clip(signed, -1.0, 1.0).astype(np.float32)
+
+
+def _depth_guides(
+    depth: np.ndarray, levels: int, clip: float | None = None, silhouette: bool = False
+) -> list[np.ndarray]:
+    """Per level: (H_l, W_l, B) depth Gaussian level, its Laplacian (detail) band and,
+    with ``silhouette``, the silhouette band (the depth then extended past the outline)."""
+    mask = depth > 0
+    masks = mask_pyramid(mask, levels)
+    if silhouette:
+        depth = _extend_depth(depth, mask)
     gaussian = gaussian_pyramid(depth, levels)
     # One level more, so that even the coarsest level has a true band-pass detail band.
     detail = laplacian_pyramid(depth, levels + 1)[:levels]
     if clip:
-        masks = mask_pyramid(depth > 0, levels)
         scaled = []
         for d, m in zip(detail, masks, strict=True):
             unit = _interior_scale(d, m)
             scaled.append((clip * unit) * np.tanh(d / (clip * unit)))
         detail = scaled
-    return [np.stack([g, d], axis=-1) for g, d in zip(gaussian, detail, strict=True)]
+    bands = [[g, d] for g, d in zip(gaussian, detail, strict=True)]
+    if silhouette:
+        for level_bands, m in zip(bands, masks, strict=True):
+            level_bands.append(_silhouette_band(m))
+    return [np.stack(level_bands, axis=-1) for level_bands in bands]
 
 
-def depth_mappings(depth: np.ndarray, levels: int = 3, clip: float | None = None) -> list[Mapping]:
+def depth_mappings(
+    depth: np.ndarray, levels: int = 3, clip: float | None = None, silhouette: bool = False
+) -> list[Mapping]:
     """The query's pyramid of mappings (guide bands and mask) for a depth map."""
     depth = validate_depth(depth)
     masks = mask_pyramid(depth > 0, levels)
     return [
         Mapping(guide=guide, mask=mask if mask.any() else None)
-        for guide, mask in zip(_depth_guides(depth, levels, clip), masks, strict=True)
+        for guide, mask in zip(_depth_guides(depth, levels, clip, silhouette), masks, strict=True)
     ]
-
-
-def _fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Extend the object's colours into the background (nearest foreground pixel).
-
-    A window at the silhouette then carries object-like colours beyond the edge,
-    so no background colour bleeds into the synthesised object.
-    """
-    ny, nx = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
-    return image[ny, nx]
 
 
 _ROWS = 256  # rows per block of the colour conversions
@@ -330,11 +372,15 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
 
 
 def _example_ycbcr(example: Example) -> np.ndarray:
-    return to_ycbcr(_fill_background(example.image, example.mask))
+    return to_ycbcr(fill_background(example.image, example.mask))
 
 
 def example_mappings(
-    example: Example, levels: int = 3, use_pyramid: bool = True, clip: float | None = None
+    example: Example,
+    levels: int = 3,
+    use_pyramid: bool = True,
+    clip: float | None = None,
+    silhouette: bool = False,
 ) -> list[Mapping]:
     """An example's pyramid of mappings: depth bands, YCbCr (Laplacian) bands, mask."""
     mask = example.mask
@@ -347,7 +393,7 @@ def example_mappings(
     return [
         Mapping(guide=guide, appearance=bands, mask=level_mask if level_mask.any() else None)
         for guide, bands, level_mask in zip(
-            _depth_guides(example.depth, levels, clip), appearance, masks, strict=True
+            _depth_guides(example.depth, levels, clip, silhouette), appearance, masks, strict=True
         )
     ]
 
@@ -507,8 +553,11 @@ def colorize(
         log.info("object size calls for %d pyramid levels (preset: %d)", levels, params.levels)
         params = replace(params, patch_sizes=level_patch_sizes(params.patch_sizes, levels))
     clip = params.detail_clip or None
-    query = depth_mappings(depth, levels, clip)
-    exemplar_levels = [example_mappings(e, levels, params.use_pyramid, clip) for e in chosen]
+    outline = bool(params.silhouette_weight)
+    query = depth_mappings(depth, levels, clip, outline)
+    exemplar_levels = [
+        example_mappings(e, levels, params.use_pyramid, clip, outline) for e in chosen
+    ]
     pyramid_seconds = time.perf_counter() - start
 
     result: EngineResult = synthesize(

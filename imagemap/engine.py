@@ -66,6 +66,9 @@ _SOURCE_ROWS = 256  # rows per block when the dense source map is made
 #: margin of that largest magnitude over the largest value in the PCA samples.
 _FEATURE_RANGE = 32767
 _FEATURE_MARGIN = 2.0
+#: Share of a level's windows, the worst fits of the guide after propagation, that
+#: ``EngineParams.guide_reseed`` may give a match on guide and position only.
+RESEED_WORST = 0.1
 
 
 @dataclass(frozen=True)
@@ -159,6 +162,13 @@ class EngineParams:
     exemplar_costs : tuple of float
         Additive cost of matching into each exemplar (empty: none), in the units of
         the window distance: a preference for some exemplars over others.
+    guide_reseed : float
+        At every level but the coarsest, after the coarser level's matches are
+        propagated, also match on guide and position only, and take that match
+        where the propagated one is among the worst-fitting tenth of the guide
+        (``RESEED_WORST``) and the new one fits in less than this fraction of its
+        distance (0: off). Without it a feature that only the finer level's guide
+        resolves is voted away by the coarser level's appearance.
     vote : {"mean", "mode"}
         The M-step. ``"mean"`` (the paper): every pixel becomes the Gaussian-weighted
         mean of the estimates of the windows that cover it, the exact minimiser of
@@ -194,6 +204,7 @@ class EngineParams:
     exemplar_costs: tuple[float, ...] = ()
     vote: str = "mean"
     quantize_features: bool = True
+    guide_reseed: float = 0.0
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
@@ -206,6 +217,8 @@ class EngineParams:
             raise ValueError("pca_fraction must be in (0, 1]")
         if self.guide_padding not in ("constant", "reflect", "edge"):
             raise ValueError("guide_padding must be 'constant', 'reflect' or 'edge'")
+        if not 0 <= self.guide_reseed < 1:
+            raise ValueError("guide_reseed must be in [0, 1)")
         if self.stride < 1 or self.max_iterations < 0:
             raise ValueError("stride must be at least 1 and max_iterations at least 0")
 
@@ -784,6 +797,27 @@ class _LevelSolver:
         ):
             setattr(self, name, None)
 
+    def reseed(self, matches: np.ndarray, ratio: float, seed: int, rng) -> np.ndarray:
+        """Propagated matches, some replaced by matches on guide and position only.
+
+        A replacement is taken where the propagated match is among the
+        ``RESEED_WORST`` worst fits of the guide and the guide-only match fits it
+        in less than ``ratio`` of that distance: relief that the coarser levels
+        could not resolve (a small bulging eye) then gets its own match instead of
+        the coarser level's appearance there.
+        """
+        guided = self.search(matches, init=True, seed=seed, rng=rng)
+        n = self.n_init_dims
+        matches = np.ascontiguousarray(matches, dtype=np.int64)
+        fit = _kernels.feature_distances(self.query_features, self.candidate_features, matches, n)
+        fit_guided = _kernels.feature_distances(
+            self.query_features, self.candidate_features, guided, n
+        )
+        worst = fit > np.quantile(fit, 1.0 - RESEED_WORST)
+        take = worst & (fit_guided < ratio * fit)
+        log.info("reseed: %d of %d matches taken from the guide", int(take.sum()), len(take))
+        return np.where(take, guided, matches)
+
     def propagate(self, coarse_source: np.ndarray) -> np.ndarray:
         """Initial matches from the coarser level's dense source map (coordinates x2)."""
         ys, xs = self.query_y, self.query_x
@@ -933,6 +967,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             matches = rng.integers(0, len(solver.cand_e), size=len(solver.query_y))
         else:
             matches = solver.propagate(coarse_source)
+            if params.guide_reseed > 0:
+                matches = solver.reseed(matches, params.guide_reseed, level_seed, rng)
         appearance = solver.vote(matches, appearance)
         previous = np.inf
         for iteration in range(params.max_iterations):

@@ -61,7 +61,7 @@ from multiprocessing import get_context
 import numpy as np
 
 from imagemap.align import aligned_source, paste_aligned
-from imagemap.blend import copy_through
+from imagemap.blend import copy_through, fill_background
 from imagemap.colorization import PRESETS, ColorizeParams, colorize, select_examples
 from imagemap.database import Database, Example
 from imagemap.io import InputError
@@ -274,7 +274,11 @@ def _detail_metrics(
 ) -> ImageMetrics:
     """Add the measures that need the source map: part transfer (micro and macro), blur."""
     covered = mask & (source[..., 0] >= 0)
-    copy = copy_through([e.image for e in examples], source).astype(np.float32)
+    # Copied from the examples as the synthesis sees them (object colours continued
+    # past their outlines): a source pixel at an example's edge would otherwise bring
+    # background into the reference and count as detail.
+    filled = [fill_background(e.image, e.mask) for e in examples]
+    copy = copy_through(filled, source).astype(np.float32)
     copy[~mask] = 0.0  # as the map's own background
     blur = blur_ratio(image, copy, covered)
     example_labels = _example_labels(examples)
