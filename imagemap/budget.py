@@ -115,6 +115,7 @@ def estimate_colorize(
     exemplars: Sequence[tuple[tuple[int, int], int, int]],
     patch_sizes: Sequence[int],
     pca_fraction: float = 0.2,
+    guide_bands: int = 2,
 ) -> Estimate:
     """Estimate peak memory and time of a colorization from sizes alone.
 
@@ -130,6 +131,8 @@ def estimate_colorize(
         Window width per level, fine to coarse (as many as the run's levels).
     pca_fraction : float
         Fraction of the PCA basis kept.
+    guide_bands : int
+        Guide bands per pixel (depth, its detail, and the silhouette band if on).
     """
     height, width = shape
     n_ex = len(exemplars)
@@ -141,7 +144,7 @@ def estimate_colorize(
     for level, k in enumerate(patch_sizes):
         scale = 2**level
         r = k // 2
-        dims = _feature_dims(k, pca_fraction)
+        dims = _feature_dims(k, pca_fraction, guide_bands)
         pixels = (height / scale + 2 * r) * (width / scale + 2 * r)
         centres = min(pixels, foreground / scale**2 + r * boundary / scale)
         candidates = sum(f / scale**2 + r * b / scale for _, f, b in exemplars)
@@ -217,7 +220,8 @@ def _resolve_params(preset, m):
     else:
         params = ColorizeParams()
     n = m if m is not None else getattr(params, "m", 2)
-    return n, tuple(params.patch_sizes), float(getattr(params, "pca_fraction", 0.2))
+    guide_bands = 2 + (1 if getattr(params, "silhouette_weight", 0) else 0)
+    return n, tuple(params.patch_sizes), float(getattr(params, "pca_fraction", 0.2)), guide_bands
 
 
 def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples=None) -> Estimate:
@@ -226,9 +230,9 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
     Without ``examples`` the ``m`` largest examples stand for the automatic selection
     (an upper bound).
     """
-    from imagemap.colorization import pyramid_levels
+    from imagemap.colorization import level_patch_sizes, pyramid_levels
 
-    n, patch_sizes, pca_fraction = _resolve_params(preset, m)
+    n, patch_sizes, pca_fraction, guide_bands = _resolve_params(preset, m)
     mask = np.asarray(depth) > 0
     levels = pyramid_levels(mask, patch_sizes)
     if examples:
@@ -243,8 +247,9 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
         int(mask.sum()),
         _boundary(mask),
         exemplars,
-        patch_sizes[:levels],
+        level_patch_sizes(patch_sizes, levels),
         pca_fraction,
+        guide_bands,
     )
 
 
