@@ -155,3 +155,23 @@ def test_release_search_keeps_what_votes_and_dense_maps_need():
     solver.vote(matches, padded)
     assert np.isfinite(padded).all() and padded.any()
     assert engine._FEATURE_RANGE == np.iinfo(np.int16).max
+
+
+def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
+    from dataclasses import replace
+
+    from imagemap import budget
+    from imagemap.colorization import PRESETS
+    from imagemap.database import Database, Example
+
+    rng = np.random.default_rng(0)
+    depth = np.zeros((600, 800), np.float32)
+    depth[100:500, 100:700] = 0.5 + 0.1 * rng.random((400, 600))
+    database = Database([Example.from_arrays("a", depth, np.zeros((600, 800, 3), np.float32))])
+    with_band = PRESETS["fish"]
+    assert with_band.silhouette_weight > 0
+    without = replace(with_band, silhouette_weight=0.0)
+    more = budget.colorize_estimate(depth, database, with_band)
+    fewer = budget.colorize_estimate(depth, database, without)
+    assert more.bytes > fewer.bytes and more.seconds > fewer.seconds
+    assert more.levels == 5  # the pyramid grown for a large object, each level estimated
