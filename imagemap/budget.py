@@ -46,14 +46,17 @@ log = logging.getLogger("imagemap")
 
 # Bytes per item beside the features (see the module docstring), and the measured
 # factors. CALIBRATION: fitted on fish runs (queries 150x200 to 2400x3200, examples
-# 150x200 and 360x480, m = 2, patchmatch) against VmHWM - VmRSS before the call.
+# 150x200 and 360x480, m = 2, patchmatch) against VmHWM - VmRSS before the call; refitted
+# for int16 features and one packed copy of the exemplar bands: -1 % to +15 % from 300x400
+# to 2400x3200 (1820 MB measured, 1807 MB estimated), -7 % at 150x200. Examples as large as
+# the query (1024^2 to 4096^2 fish) are overestimated by 15-25 %.
 _QUERY_CENTRE_BYTES = 70  # coordinates, positions, matches, candidates, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
-_QUERY_PIXEL_BYTES = 150  # padded bands, lookup, vote buffers, dense source map temporaries
+_QUERY_PIXEL_BYTES = 100  # padded bands, lookup, vote buffers, dense source map temporaries
 _FEATURE_BYTES = 2  # per feature dimension: int16 (EngineParams.quantize_features)
-_EXEMPLAR_PIXEL_BYTES = 98  # packed bands, lookups, the example's own pyramids
-_OVERHEAD_BYTES = 100 * 2**20  # numba kernels and lazily imported modules on first use
-_MEMORY_FACTOR = 0.75
+_EXEMPLAR_PIXEL_BYTES = 40  # packed bands, lookups, the example's own pyramids
+_OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
+_MEMORY_FACTOR = 0.95
 _SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
 _SECONDS_OVERHEAD = 0.3
 
