@@ -11,7 +11,13 @@ from scipy import ndimage
 from imagemap import ColorizeParams, Database, Example, colorize
 from imagemap.blend import coherent_edges, copy_through, seamless_copy
 from imagemap.colorization import PRESETS, level_patch_sizes, pyramid_levels
-from imagemap.metrics import blur_ratio, feature_components, features_drawn, macro_part_transfer
+from imagemap.metrics import (
+    blur_ratio,
+    feature_components,
+    features_drawn,
+    macro_part_transfer,
+    source_labels,
+)
 
 
 def identity_source(shape, exemplar=0):
@@ -171,3 +177,68 @@ def test_a_missing_feature_at_the_silhouette_is_not_counted_as_drawn():
     plain = np.repeat(np.where(mask, 0.6, 0.0)[..., None], 3, axis=2).astype(np.float32)
     assert features_drawn(truth, truth, labels, mask) == (1, 1)
     assert features_drawn(plain, truth, labels, mask) == (0, 1)
+
+
+def domed_fish(shape=(64, 96), centre=(32, 48), radii=(20, 36), eye=(26, 26), palette=0):
+    """A domed ellipsoid with stripes and a bulging eye (a dark ring on a small bump)."""
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    u = ((yy - centre[0]) / radii[0]) ** 2 + ((xx - centre[1]) / radii[1]) ** 2
+    mask = u < 1
+    ring = np.hypot(yy - eye[0], xx - eye[1])
+    bump = 0.08 * np.sqrt(np.clip(1 - (ring / 3.5) ** 2, 0, 1))
+    depth = np.where(mask, 0.3 + 0.3 * np.sqrt(np.clip(1 - u, 0, 1)) + bump, 0)
+    colours = [((0.85, 0.6, 0.2), (0.35, 0.2, 0.1)), ((0.3, 0.7, 0.8), (0.1, 0.25, 0.4))][palette]
+    stripes = ((xx - centre[1] + radii[1]) / (2 * radii[1]) * 6).astype(int) % 2 == 1
+    image = np.where(stripes[..., None], colours[1], colours[0]).astype(np.float32)
+    labels = np.where(mask, 1, 0)
+    eye_mask = mask & (ring < 3)
+    image[eye_mask] = (0.95, 0.95, 0.9)
+    image[mask & (ring < 1.5)] = (0.02, 0.02, 0.02)
+    labels[eye_mask] = 2
+    image[~mask] = 0
+    return depth.astype(np.float32), image, labels
+
+
+def test_an_eye_next_to_the_outline_is_copied_from_the_examples_eyes():
+    """The query's eye sits 3 px from its outline, the examples' well inside theirs.
+
+    With the paper's bands the outline's jump to background outweighs the eye's
+    bulge and the eye is copied from plain body; the silhouette band (depth
+    continued past the outline) and the guide reseed copy it from the eyes.
+    """
+    d1, i1, l1 = domed_fish(centre=(30, 46), radii=(19, 35), eye=(24, 24), palette=0)
+    d2, i2, l2 = domed_fish(centre=(33, 50), radii=(21, 37), eye=(27, 28), palette=1)
+    db = Database(
+        [Example.from_arrays("a", d1, i1, labels=l1), Example.from_arrays("b", d2, i2, labels=l2)]
+    )
+    depth, _, labels = domed_fish(centre=(32, 48), radii=(16, 36), eye=(24, 24))
+    mask, eye = depth > 0, labels == 2
+    assert ndimage.distance_transform_edt(mask)[eye].min() <= 2  # the eye touches the edge
+
+    def eye_copied_from_eyes(**overrides):
+        result = colorize(depth, db, replace(PRESETS["fish"], m=2, **overrides), seed=0)
+        by_name = {"a": l1, "b": l2}
+        example_labels = [by_name[name] for name in result.example_names]
+        return np.mean(source_labels(result.source, example_labels, mask)[eye] == 2)
+
+    assert eye_copied_from_eyes() >= 0.9
+    assert eye_copied_from_eyes(silhouette_weight=0.0, guide_reseed=0.0) <= 0.1
+
+
+def test_silhouette_band_is_a_clipped_signed_distance():
+    from imagemap.colorization import SILHOUETTE_RANGE, _silhouette_band
+
+    mask = np.zeros((20, 20), bool)
+    mask[5:15, 5:15] = True
+    band = _silhouette_band(mask)
+    assert band[10, 10] == 1.0 and band[0, 0] == -1.0  # saturated far inside and outside
+    assert band[5, 10] == pytest.approx(1 / SILHOUETTE_RANGE)  # first row inside
+    assert band[4, 10] == pytest.approx(-1 / SILHOUETTE_RANGE)  # first row outside
+
+
+def test_guide_reseed_must_be_a_fraction():
+    from imagemap.engine import EngineParams
+
+    with pytest.raises(ValueError, match="guide_reseed"):
+        EngineParams(guide_reseed=1.5)
