@@ -494,8 +494,48 @@ _CLI_WRAPPER = (
 )
 
 
+#: The floor of a fresh synthesis process: what ``imagemap synthesize`` imports, and numba
+#: loading one cached kernel (LLVM and numba's typing set up), no synthesis.
+_FLOOR_CHILD = (
+    "import re, sys, time\n"
+    "start = time.perf_counter()\n"
+    "import numpy as np\n"
+    "import imagemap.cli, imagemap.colorization\n"
+    "imported = time.perf_counter()\n"
+    "from imagemap import _kernels\n"
+    "z = np.zeros((2, 3), np.float32)\n"
+    "_kernels.feature_distances(z, z, np.zeros(2, np.int64), 3)\n"
+    "loaded = time.perf_counter()\n"
+    "text = open('/proc/self/status').read()\n"
+    "hwm = re.search(r'^VmHWM:\\s+(\\d+) kB', text, re.M)\n"
+    "print(f'FLOOR {imported - start} {loaded - imported} {int(hwm.group(1)) if hwm else -1}')\n"
+)
+
+
+def run_floor() -> dict:
+    """One fresh process that only imports and loads one cached kernel: the part of a
+    fresh synthesis that does not depend on the map (seconds from the interpreter's start)."""
+    start = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, "-c", _FLOOR_CHILD], capture_output=True, text=True, env=_child_env()
+    )
+    seconds = time.perf_counter() - start
+    found = re.search(r"FLOOR (\S+) (\S+) (-?\d+)", done.stdout)
+    if done.returncode != 0 or not found:
+        raise RuntimeError(f"floor process failed: {done.stderr.strip()}")
+    figures = {
+        "seconds": seconds,
+        "rss_peak_mb": int(found.group(3)) / 1024.0,
+        "rss_method": "VmHWM of the child process at exit",
+        "import_seconds": float(found.group(1)),
+        "kernel_load_seconds": float(found.group(2)),
+    }
+    return _row("cli", "floor: imports + numba cache load (fresh process)", "-", figures)
+
+
 def run_cli(data_dir: Path, settings: Settings, out_dir: Path) -> list[dict]:
-    """Two fresh ``imagemap synthesize`` processes: what a command-line user waits."""
+    """Two fresh ``imagemap synthesize`` processes: what a command-line user waits; and
+    the floor of such a process (imports and numba's cache load, no synthesis)."""
     class_dir = fish_class(data_dir, settings.cli_size)
     out_dir.mkdir(parents=True, exist_ok=True)
     command = [
@@ -522,6 +562,8 @@ def run_cli(data_dir: Path, settings: Settings, out_dir: Path) -> list[dict]:
                  size=size)
         )  # fmt: skip
         _progress(rows[-1])
+    rows.append(run_floor())
+    _progress(rows[-1])
     return rows
 
 

@@ -115,7 +115,7 @@ def _random_below(seed, a, b, c, n):
 def _sq_dist(a, b, ndims):
     s = np.float32(0.0)
     for i in range(ndims):
-        d = a[i] - b[i]
+        d = np.float32(a[i]) - np.float32(b[i])  # float32 or quantized (int16) features
         s += d * d
     return s
 
@@ -289,7 +289,10 @@ def _window_costs(
     stop,
     out,
     query_bands,
-    exemplar_bands,
+    exemplar_guide,
+    exemplar_appearance,
+    appearance_channels,
+    appearance_scale,
     window_weights,
     query_y,
     query_x,
@@ -304,7 +307,8 @@ def _window_costs(
 ):
     """Window distances of query centres [start, stop) (see :func:`window_costs`)."""
     k = window_weights.shape[0]
-    channels = query_bands.shape[2]
+    n_guide = exemplar_guide.shape[3]
+    n_appearance = appearance_channels.shape[0]
     for m in range(start, stop):
         c = matches[m]
         e = cand_e[c]
@@ -317,8 +321,12 @@ def _window_costs(
             for ox in range(k):
                 w = window_weights[oy, ox]
                 acc = 0.0
-                for ch in range(channels):
-                    d = query_bands[qy + oy, qx + ox, ch] - exemplar_bands[e, ey + oy, ex + ox, ch]
+                for ch in range(n_guide):
+                    d = query_bands[qy + oy, qx + ox, ch] - exemplar_guide[e, ey + oy, ex + ox, ch]
+                    acc += d * d
+                for j in range(n_appearance):
+                    a = exemplar_appearance[e, ey + oy, ex + ox, appearance_channels[j]]
+                    d = query_bands[qy + oy, qx + ox, n_guide + j] - a * appearance_scale[j]
                     acc += d * d
                 s += w * acc
         dy = query_position[m, 0] - cand_position[c, 0]
@@ -329,7 +337,10 @@ def _window_costs(
 
 def window_costs(
     query_bands,
-    exemplar_bands,
+    exemplar_guide,
+    exemplar_appearance,
+    appearance_channels,
+    appearance_scale,
     window_weights,
     query_y,
     query_x,
@@ -344,8 +355,12 @@ def window_costs(
 ):
     """Exact weighted window distance for each query centre and its match.
 
-    ``query_bands`` (Hq + 2r, Wq + 2r, C) and ``exemplar_bands`` (E, Hmax + 2r,
-    Wmax + 2r, C) hold the matched bands already multiplied by their weights;
+    ``query_bands`` (Hq + 2r, Wq + 2r, Cg + Ca) holds the matched bands already
+    multiplied by their weights: Cg guide bands, then Ca appearance bands;
+    ``exemplar_guide`` (E, Hmax + 2r, Wmax + 2r, Cg) the exemplars' guide bands,
+    weighted; ``exemplar_appearance`` (E, Hmax + 2r, Wmax + 2r, A) their appearance
+    bands unweighted, of which ``appearance_channels`` (Ca,) are matched with the
+    weights ``appearance_scale`` (Ca,), applied here (one copy of the bands);
     ``window_weights`` (k, k) is the Gaussian window, summing to one;
     ``cand_bias`` (N,) an additive cost per candidate (exemplar preference).
     """
@@ -356,7 +371,10 @@ def window_costs(
             b,
             out,
             query_bands,
-            exemplar_bands,
+            exemplar_guide,
+            exemplar_appearance,
+            appearance_channels,
+            appearance_scale,
             window_weights,
             query_y,
             query_x,

@@ -1,8 +1,8 @@
 """Memory and time of a colorization, estimated from the sizes before it starts.
 
 The engine's memory at a pyramid level is dominated by the PCA window features of
-every query window centre and every exemplar candidate (``4 * D`` bytes each, D
-the feature dimension: a fifth of the 2 k^2 guide and 3 k^2 appearance window
+every query window centre and every exemplar candidate (``2 * D`` bytes each: int16,
+D the feature dimension: a fifth of the 2 k^2 guide and 3 k^2 appearance window
 values, plus position and exemplar cost), by the per-pixel arrays of the query
 (padded bands, lookup tables, vote buffers, the dense source map) and of the
 exemplars, and by the previous (coarser) level's solver, still alive while the
@@ -46,13 +46,17 @@ log = logging.getLogger("imagemap")
 
 # Bytes per item beside the features (see the module docstring), and the measured
 # factors. CALIBRATION: fitted on fish runs (queries 150x200 to 2400x3200, examples
-# 150x200 and 360x480, m = 2, patchmatch) against VmHWM - VmRSS before the call.
+# 150x200 and 360x480, m = 2, patchmatch) against VmHWM - VmRSS before the call; refitted
+# for int16 features and one packed copy of the exemplar bands: -1 % to +15 % from 300x400
+# to 2400x3200 (1820 MB measured, 1807 MB estimated), -7 % at 150x200. Examples as large as
+# the query (1024^2 to 4096^2 fish) are overestimated by 15-25 %.
 _QUERY_CENTRE_BYTES = 70  # coordinates, positions, matches, candidates, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
-_QUERY_PIXEL_BYTES = 150  # padded bands, lookup, vote buffers, dense source map temporaries
-_EXEMPLAR_PIXEL_BYTES = 110  # packed bands, lookups, the example's own pyramids
-_OVERHEAD_BYTES = 100 * 2**20  # numba kernels and lazily imported modules on first use
-_MEMORY_FACTOR = 0.75
+_QUERY_PIXEL_BYTES = 100  # padded bands, lookup, vote buffers, dense source map temporaries
+_FEATURE_BYTES = 2  # per feature dimension: int16 (EngineParams.quantize_features)
+_EXEMPLAR_PIXEL_BYTES = 40  # packed bands, lookups, the example's own pyramids
+_OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
+_MEMORY_FACTOR = 0.95
 _SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
 _SECONDS_OVERHEAD = 0.3
 
@@ -114,6 +118,7 @@ def estimate_colorize(
     exemplars: Sequence[tuple[tuple[int, int], int, int]],
     patch_sizes: Sequence[int],
     pca_fraction: float = 0.2,
+    guide_bands: int = 2,
 ) -> Estimate:
     """Estimate peak memory and time of a colorization from sizes alone.
 
@@ -129,6 +134,8 @@ def estimate_colorize(
         Window width per level, fine to coarse (as many as the run's levels).
     pca_fraction : float
         Fraction of the PCA basis kept.
+    guide_bands : int
+        Guide bands per pixel (depth, its detail, and the silhouette band if on).
     """
     height, width = shape
     n_ex = len(exemplars)
@@ -140,14 +147,14 @@ def estimate_colorize(
     for level, k in enumerate(patch_sizes):
         scale = 2**level
         r = k // 2
-        dims = _feature_dims(k, pca_fraction)
+        dims = _feature_dims(k, pca_fraction, guide_bands)
         pixels = (height / scale + 2 * r) * (width / scale + 2 * r)
         centres = min(pixels, foreground / scale**2 + r * boundary / scale)
         candidates = sum(f / scale**2 + r * b / scale for _, f, b in exemplars)
         ex_pixels = n_ex * (ex_h / scale + 2 * r) * (ex_w / scale + 2 * r)
         solver = (
-            centres * (4 * dims + _QUERY_CENTRE_BYTES)
-            + candidates * (4 * dims + _CANDIDATE_BYTES)
+            centres * (_FEATURE_BYTES * dims + _QUERY_CENTRE_BYTES)
+            + candidates * (_FEATURE_BYTES * dims + _CANDIDATE_BYTES)
             + pixels * _QUERY_PIXEL_BYTES
             + ex_pixels * _EXEMPLAR_PIXEL_BYTES
         )
@@ -216,7 +223,8 @@ def _resolve_params(preset, m):
     else:
         params = ColorizeParams()
     n = m if m is not None else getattr(params, "m", 2)
-    return n, tuple(params.patch_sizes), float(getattr(params, "pca_fraction", 0.2))
+    guide_bands = 2 + (1 if getattr(params, "silhouette_weight", 0) else 0)
+    return n, tuple(params.patch_sizes), float(getattr(params, "pca_fraction", 0.2)), guide_bands
 
 
 def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples=None) -> Estimate:
@@ -225,9 +233,9 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
     Without ``examples`` the ``m`` largest examples stand for the automatic selection
     (an upper bound).
     """
-    from imagemap.colorization import pyramid_levels
+    from imagemap.colorization import level_patch_sizes, pyramid_levels
 
-    n, patch_sizes, pca_fraction = _resolve_params(preset, m)
+    n, patch_sizes, pca_fraction, guide_bands = _resolve_params(preset, m)
     mask = np.asarray(depth) > 0
     levels = pyramid_levels(mask, patch_sizes)
     if examples:
@@ -242,8 +250,9 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
         int(mask.sum()),
         _boundary(mask),
         exemplars,
-        patch_sizes[:levels],
+        level_patch_sizes(patch_sizes, levels),
         pca_fraction,
+        guide_bands,
     )
 
 

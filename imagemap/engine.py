@@ -62,6 +62,10 @@ _MAX_BANDS = 8
 _EXACT_START_FLOPS = 2e9
 _BAND_ROWS = 64
 _SOURCE_ROWS = 256  # rows per block when the dense source map is made
+#: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
+#: margin of that largest magnitude over the largest value in the PCA samples.
+_FEATURE_RANGE = 32767
+_FEATURE_MARGIN = 2.0
 #: Share of a level's windows, the worst fits of the guide after propagation, that
 #: ``EngineParams.guide_reseed`` may give a match on guide and position only.
 RESEED_WORST = 0.1
@@ -173,6 +177,12 @@ class EngineParams:
         (Gaussian-weighted) agree on, so the output is made of exemplar pixels and
         small features survive; a mode M-step that would raise the target is
         refused (the level then stops), so the target still never increases.
+    quantize_features : bool
+        Store the PCA window features as 16-bit integers in one unit per level
+        (``_FEATURE_RANGE`` steps cover twice the largest value seen in the PCA
+        samples) instead of float32: half the engine's largest arrays. The search
+        proposes candidates on them; every accepted match is decided on the exact
+        float window distance, so the target still never increases.
     """
 
     patch_sizes: tuple[int, ...] = (7, 11, 9)
@@ -193,6 +203,7 @@ class EngineParams:
     window_sigma: float = 1.0 / 3.0
     exemplar_costs: tuple[float, ...] = ()
     vote: str = "mean"
+    quantize_features: bool = True
     guide_reseed: float = 0.0
 
     def __post_init__(self) -> None:
@@ -280,8 +291,38 @@ def _positions(ys: np.ndarray, xs: np.ndarray, frame: np.ndarray) -> np.ndarray:
     )
 
 
-def _pad(array: np.ndarray, r: int, mode: str) -> np.ndarray:
-    return np.pad(array, ((r, r), (r, r), (0, 0)), mode=mode)
+def _pad_into(out: np.ndarray, array: np.ndarray, r: int, mode: str, scale=None) -> None:
+    """``np.pad(array * scale, r, mode)`` written into ``out`` ((H + 2r, W + 2r, C), a view
+    into a larger array): no padded or scaled temporary of the whole image."""
+    h, w = array.shape[:2]
+    inner = out[r : r + h, r : r + w]
+    if scale is None:
+        inner[...] = array
+    else:
+        np.multiply(array, scale, out=inner)
+    if r == 0:
+        return
+    if mode == "reflect" and (r >= h or r >= w):  # reflected more than once: numpy's rule
+        out[...] = np.pad(inner, ((r, r), (r, r), (0, 0)), mode=mode)
+        return
+    for axis, n in ((0, h), (1, w)):
+        lead = out if axis == 0 else out.swapaxes(0, 1)  # pad rows, then columns (all rows)
+        if mode == "constant":
+            lead[:r] = 0
+            lead[r + n :] = 0
+        elif mode == "edge":
+            lead[:r] = lead[r]
+            lead[r + n :] = lead[r + n - 1]
+        else:  # reflect (the edge pixel not repeated)
+            lead[:r] = lead[2 * r : r : -1]
+            lead[r + n :] = lead[r + n - 2 : n - 2 : -1] if n >= 2 else lead[r]
+
+
+def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
+    """``array[..., channels]`` without a copy when ``channels`` are all of them, in order."""
+    if np.array_equal(channels, np.arange(array.shape[-1])):
+        return array
+    return array[..., channels]
 
 
 def _fit_pca(
@@ -307,12 +348,40 @@ def _fit_pca(
     return mean.astype(np.float32), np.ascontiguousarray(basis, dtype=np.float32)
 
 
-class _Projection:
-    """Weighted window -> PCA coordinates, for one channel range of a band stack."""
+class _Windows:
+    """Flattened k x k windows of some channels of a band stack, optionally scaled.
 
-    def __init__(self, channels: slice, window: np.ndarray) -> None:
+    ``view`` is a sliding-window view, (..., C, k, k); ``channels`` a slice (free on
+    the view) or an index array (applied after the gather), None for all; ``scale``
+    one factor per selected channel (the exemplars' appearance is stored unscaled,
+    once, and scaled per block of windows: the same float32 products as a scaled
+    copy, without the copy).
+    """
+
+    def __init__(self, view: np.ndarray, channels=None, scale: np.ndarray | None = None) -> None:
+        self.view = view
         self.channels = channels
-        n_channels = channels.stop - channels.start
+        k = view.shape[-1]
+        self.scale = None if scale is None else np.repeat(scale.astype(np.float32), k * k)
+
+    def __call__(self, index: tuple[np.ndarray, ...]) -> np.ndarray:
+        view = self.view
+        if isinstance(self.channels, slice):
+            view = view[..., self.channels, :, :]
+        block = view[index]
+        if self.channels is not None and not isinstance(self.channels, slice):
+            block = block[:, self.channels]
+        block = block.reshape(block.shape[0], -1)
+        if self.scale is not None:
+            block *= self.scale
+        return block
+
+
+class _Projection:
+    """Weighted window -> PCA coordinates, for one part (guide or appearance) of the bands."""
+
+    def __init__(self, n_channels: int, window: np.ndarray) -> None:
+        self.n_channels = n_channels
         # Window order of sliding_window_view: (channel, ky, kx).
         self.sqrt_weights = np.tile(np.sqrt(window).ravel(), n_channels).astype(np.float32)
         self.matrix: np.ndarray | None = None
@@ -321,11 +390,6 @@ class _Projection:
     @property
     def n_components(self) -> int:
         return 0 if self.matrix is None else self.matrix.shape[1]
-
-    def windows(self, view: np.ndarray, index: tuple[np.ndarray, ...]) -> np.ndarray:
-        # Slice the channels first (free on a view), then gather: one copy only.
-        block = view[..., self.channels, :, :][index]
-        return block.reshape(block.shape[0], -1)
 
     def fit(self, samples: np.ndarray, fraction: float, cap: int | None, rng) -> None:
         weighted = samples * self.sqrt_weights
@@ -337,17 +401,36 @@ class _Projection:
         self.offset = mean @ basis
 
     def project(
-        self, view: np.ndarray, index: tuple[np.ndarray, ...], out: np.ndarray | None = None
+        self,
+        windows: _Windows,
+        index: tuple[np.ndarray, ...],
+        out: np.ndarray | None = None,
+        inverse_unit: float | None = None,
     ) -> np.ndarray:
         """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
-        which may be a column slice of a larger array), in blocks of windows."""
+        which may be a column slice of a larger array), in blocks of windows; with
+        ``inverse_unit``, quantized (see :func:`_store`)."""
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
-            out[start : start + _CHUNK] = self.windows(view, sub) @ self.matrix - self.offset
+            _store(
+                out[start : start + _CHUNK], windows(sub) @ self.matrix - self.offset, inverse_unit
+            )
         return out
+
+
+def _store(out: np.ndarray, values: np.ndarray, inverse_unit: float | None) -> None:
+    """``out[...] = values``, or the nearest integer multiples of the unit, clipped to
+    +-_FEATURE_RANGE, when ``inverse_unit`` is given (``values`` is overwritten)."""
+    if inverse_unit is None:
+        out[...] = values
+        return
+    np.multiply(values, np.float32(inverse_unit), out=values)
+    np.rint(values, out=values)
+    np.clip(values, -_FEATURE_RANGE, _FEATURE_RANGE, out=values)
+    out[...] = values
 
 
 class _LevelSolver:
@@ -392,7 +475,9 @@ class _LevelSolver:
         widths = [e.shape[1] for e in exemplars]
         n_ex = len(exemplars)
         hp, wp = max(heights) + 2 * r, max(widths) + 2 * r
-        self.exemplar_active = np.zeros((n_ex, hp, wp, n_ga + n_aa), dtype=np.float32)
+        # Guide bands scaled; appearance bands once, unscaled (the matched ones are scaled
+        # where they are read: kernels and feature blocks).
+        self.exemplar_guide = np.zeros((n_ex, hp, wp, n_ga), dtype=np.float32)
         self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
         self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         cand_e, cand_y, cand_x, positions = [], [], [], []
@@ -401,20 +486,15 @@ class _LevelSolver:
         n_cand = 0
         for e, ex in enumerate(exemplars):
             h, w = ex.shape
-            active = np.concatenate(
-                [
-                    ex.guide[..., self.guide_active] * guide_scale,
-                    ex.appearance[..., self.appearance_active] * appearance_scale,
-                ],
-                axis=2,
+            _pad_into(
+                self.exemplar_guide[e, : h + 2 * r, : w + 2 * r],
+                _channels(ex.guide, self.guide_active),
+                r,
+                params.guide_padding,
+                guide_scale,
             )
-            guide_part = _pad(active[..., :n_ga], r, params.guide_padding)
-            appearance_part = _pad(active[..., n_ga:], r, "reflect")
-            self.exemplar_active[e, : h + 2 * r, : w + 2 * r] = np.concatenate(
-                [guide_part, appearance_part], axis=2
-            )
-            self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r] = _pad(
-                ex.appearance, r, "reflect"
+            _pad_into(
+                self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r], ex.appearance, r, "reflect"
             )
             valid = self._region(ex.mask, (h, w), r)
             ys, xs = np.nonzero(valid)
@@ -456,23 +536,50 @@ class _LevelSolver:
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
         )
         self.query_active = np.zeros((h + 2 * r, w + 2 * r, n_ga + n_aa), dtype=np.float32)
-        self.query_active[..., :n_ga] = _pad(
-            query.guide[..., self.guide_active] * guide_scale, r, params.guide_padding
+        _pad_into(
+            self.query_active[..., :n_ga],
+            _channels(query.guide, self.guide_active),
+            r,
+            params.guide_padding,
+            guide_scale,
         )
         timer.add("setup", start)
 
         # PCA, learned on exemplar windows, separately for guide and appearance.
         start = time.perf_counter()
-        self.exemplar_view = sliding_window_view(self.exemplar_active, (k, k), axis=(1, 2))
-        self.guide_projection = _Projection(slice(0, n_ga), self.window)
-        self.appearance_projection = _Projection(slice(n_ga, n_ga + n_aa), self.window)
+        all_appearance = np.array_equal(self.appearance_active, np.arange(n_appearance))
+        self.exemplar_windows = (
+            _Windows(sliding_window_view(self.exemplar_guide, (k, k), axis=(1, 2))),
+            _Windows(
+                sliding_window_view(self.exemplar_appearance, (k, k), axis=(1, 2)),
+                None if all_appearance else self.appearance_active,
+                self.appearance_scale,
+            ),
+        )
+        self.guide_projection = _Projection(n_ga, self.window)
+        self.appearance_projection = _Projection(n_aa, self.window)
         n_samples = min(params.pca_samples, len(self.cand_e))
         pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
         sample_index = (self.cand_e[pick], self.cand_y[pick], self.cand_x[pick])
-        for projection in (self.guide_projection, self.appearance_projection):
-            if projection.channels.stop > projection.channels.start:
-                samples = projection.windows(self.exemplar_view, sample_index)
+        projections = (self.guide_projection, self.appearance_projection)
+        largest = 0.0
+        for projection, windows in zip(projections, self.exemplar_windows, strict=True):
+            if projection.n_channels:
+                samples = windows(sample_index)
                 projection.fit(samples, params.pca_fraction, params.pca_max_components, rng)
+                if params.quantize_features:
+                    largest = max(
+                        largest, float(np.abs(projection.project(windows, sample_index)).max())
+                    )
+        if params.quantize_features:
+            position = np.float32(params.position_weight)
+            for values in (self.cand_position, self.query_position):
+                largest = max(largest, float(np.abs(values).max(initial=0.0)) * position)
+            largest = max(largest, float(np.sqrt(self.cand_bias.max(initial=0.0))), 1e-30)
+            # Features in steps of one unit, to _FEATURE_MARGIN times the largest value seen.
+            self.inverse_unit: float | None = _FEATURE_RANGE / (_FEATURE_MARGIN * largest)
+        else:
+            self.inverse_unit = None
         timer.add("pca", start)
 
         # Features: [guide PCA | weighted position | exemplar cost | appearance PCA].
@@ -480,12 +587,16 @@ class _LevelSolver:
         index = (self.cand_e, self.cand_y, self.cand_x)
         # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
         self.n_init_dims = self.guide_projection.n_components + 3
-        self.candidate_features = self._features(self.exemplar_view, index, self.cand_position)
-        self.query_view = sliding_window_view(self.query_active, (k, k), axis=(0, 1))
+        self.candidate_features = self._features(
+            self.exemplar_windows, index, self.cand_position, np.sqrt(self.cand_bias)
+        )
+        query_view = sliding_window_view(self.query_active, (k, k), axis=(0, 1))
+        self.query_windows = (
+            _Windows(query_view, slice(0, n_ga)),
+            _Windows(query_view, slice(n_ga, n_ga + n_aa)),
+        )
         self.query_features = self._features(
-            self.query_view,
-            (self.query_y, self.query_x),
-            self.query_position,
+            self.query_windows, (self.query_y, self.query_x), self.query_position, 0.0
         )
         ys = self.query_y
         n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
@@ -515,21 +626,27 @@ class _LevelSolver:
             return np.ones(shape, dtype=bool)
         return ndimage.binary_dilation(mask, iterations=max(r, 1))
 
-    def _features(self, view, index, position) -> np.ndarray:
-        # Each part is written in place into one (N, D) array: no per-part copies.
+    def _features(self, windows, index, position, bias) -> np.ndarray:
+        """(N, D) features [guide PCA | weighted position | sqrt of the exemplar cost
+        (candidates; 0 for the query) | appearance PCA], made in blocks of windows and
+        stored as float32 or quantized (int16)."""
         n_guide = self.guide_projection.n_components
         n_dims = self.n_init_dims + self.appearance_projection.n_components
-        out = np.empty((len(position), n_dims), dtype=np.float32)
-        if n_guide:
-            self.guide_projection.project(view, index, out[:, :n_guide])
-        out[:, n_guide : n_guide + 2] = position * np.float32(self.params.position_weight)
-        # sqrt of the exemplar cost for candidates, 0 for the query: adds the cost.
-        if view is self.exemplar_view:
-            out[:, n_guide + 2] = np.sqrt(self.cand_bias).astype(np.float32)
-        else:
-            out[:, n_guide + 2] = 0.0
-        if self.appearance_projection.n_components:
-            self.appearance_projection.project(view, index, out[:, self.n_init_dims :])
+        dtype = np.float32 if self.inverse_unit is None else np.int16
+        out = np.empty((len(position), n_dims), dtype=dtype)
+        block = np.empty((min(_CHUNK, len(position)), n_dims), dtype=np.float32)
+        weight = np.float32(self.params.position_weight)
+        for start in range(0, len(position), _CHUNK):
+            stop = min(start + _CHUNK, len(position))
+            sub = tuple(i[start:stop] for i in index)
+            values = block[: stop - start]
+            if n_guide:
+                self.guide_projection.project(windows[0], sub, values[:, :n_guide])
+            values[:, n_guide : n_guide + 2] = position[start:stop] * weight
+            values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
+            if self.appearance_projection.n_components:
+                self.appearance_projection.project(windows[1], sub, values[:, self.n_init_dims :])
+            _store(out[start:stop], values, self.inverse_unit)
         return out
 
     # -- the two steps ---------------------------------------------------------
@@ -539,14 +656,18 @@ class _LevelSolver:
         too unless ``project`` is False (exact costs need only the bands)."""
         start = time.perf_counter()
         n_ga = self.n_guide_active
-        self.query_active[..., n_ga:] = (
-            appearance_padded[..., self.appearance_active] * self.appearance_scale
+        # No temporaries: the product is written into the query's band stack.
+        np.multiply(
+            _channels(appearance_padded, self.appearance_active),
+            self.appearance_scale,
+            out=self.query_active[..., n_ga:],
         )
         if project and self.appearance_projection.n_components:
             self.appearance_projection.project(
-                self.query_view,
+                self.query_windows[1],
                 (self.query_y, self.query_x),
                 self.query_features[:, self.n_init_dims :],
+                self.inverse_unit,
             )
         self.timer.add("features", start)
 
@@ -561,7 +682,10 @@ class _LevelSolver:
             positions = self.query_position[subset]
         out = _kernels.window_costs(
             self.query_active,
-            self.exemplar_active,
+            self.exemplar_guide,
+            self.exemplar_appearance,
+            self.appearance_active,
+            self.appearance_scale,
             self.window,
             centres_y,
             centres_x,
@@ -611,8 +735,11 @@ class _LevelSolver:
                 n_query, n_cand = len(self.query_y), len(self.cand_e)
                 if n_query * n_cand * ndims <= _EXACT_START_FLOPS:
                     # A small (coarsest) level: an exact global start costs little.
-                    start_index = make_index("exact", self.candidate_features[:, :ndims])
-                    matches, _ = start_index.query(self.query_features[:, :ndims])
+                    data = self.candidate_features[:, :ndims].astype(np.float32)
+                    start_index = make_index("exact", data)
+                    matches, _ = start_index.query(
+                        self.query_features[:, :ndims].astype(np.float32)
+                    )
                 else:
                     matches = rng.integers(0, n_cand, size=n_query)
                     passes *= 2
@@ -644,14 +771,31 @@ class _LevelSolver:
         key = "init" if init else "full"
         if key not in self.indexes:
             start = time.perf_counter()
-            data = np.ascontiguousarray(self.candidate_features[:, :ndims])
+            data = np.ascontiguousarray(self.candidate_features[:, :ndims], dtype=np.float32)
             self.indexes[key] = make_index(backend, data, seed=seed)
             self.timer.add("index", start)
         start = time.perf_counter()
-        queries = np.ascontiguousarray(self.query_features[:, :ndims])
+        queries = np.ascontiguousarray(self.query_features[:, :ndims], dtype=np.float32)
         new, _ = self.indexes[key].query(queries)
         self.timer.add("search", start)
         return new.astype(np.int64)
+
+    def release_search(self) -> None:
+        """Free what only the E-step and the exact costs need (features, guide and query
+        bands, exemplar lookups): the votes and the dense source maps do not."""
+        for name in (
+            "candidate_features",
+            "query_features",
+            "exemplar_guide",
+            "exemplar_windows",
+            "query_active",
+            "query_windows",
+            "exemplar_lookup",
+            "exemplar_valid",
+            "cand_position",
+            "indexes",
+        ):
+            setattr(self, name, None)
 
     def reseed(self, matches: np.ndarray, ratio: float, seed: int, rng) -> np.ndarray:
         """Propagated matches, some replaced by matches on guide and position only.
@@ -867,15 +1011,22 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             previous = value
         r = solver.r
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
+        if level == 0:  # the finest level's exact costs, while the bands are there
+            solver.set_appearance(appearance, project=False)
+            final_cost = solver.costs(matches)
+        solver.release_search()  # what only the E-step needs, before the dense maps
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
     if params.vote == "mode":
         copy_source = coarse_source
     else:  # the mode of the final matches' sources, for front ends that copy
-        solver.vote(matches, appearance.copy(), kind="mode")
+        # The padded estimate is not needed any more (its interior was copied into
+        # appearance_levels, unless there is no padding): the mode vote may overwrite it.
+        scratch = appearance if solver.r > 0 else appearance.copy()
+        solver.vote(matches, scratch, kind="mode")
+        appearance = scratch = None  # freed before the dense map is made
         copy_source = solver.dense_source(matches, copied=True)
-    solver.set_appearance(appearance, project=False)
-    final_cost = solver.costs(matches)
+    solver.chosen = None
     cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
     cost[solver.query_y, solver.query_x] = final_cost
     return EngineResult(

@@ -334,34 +334,29 @@ def run_synthesize(args: argparse.Namespace) -> int:
 
 def _synthesize_one(args, job, depth, database, examples, background, batch) -> dict:
     """One map: synthesize, build every output, write them all-or-nothing."""
-    import tracemalloc
-
     from imagemap.budget import memory_check
     from imagemap.colorization import colorize
     from imagemap.io import image_writer
     from imagemap.outputs import write_all
 
     interactive = not args.quiet and sys.stderr.isatty()
-    tracemalloc.start()
     start = time.perf_counter()
-    try:
-        with memory_check(False):  # checked before any work, for every map
-            result = colorize(
-                depth,
-                database,
-                preset=args.preset,
-                m=args.m,
-                examples=examples,
-                backend=args.backend,
-                example_preference=args.example_preference,
-                vote=args.vote,
-                seed=args.seed,
-                quiet=batch or not interactive,
-            )
-        seconds = time.perf_counter() - start
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
+    # No tracemalloc here: tracing every allocation (numba loading its cached kernels
+    # makes many) cost about 1.5 s and 16 MB of a 200x150 run.
+    with memory_check(False):  # checked before any work, for every map
+        result = colorize(
+            depth,
+            database,
+            preset=args.preset,
+            m=args.m,
+            examples=examples,
+            backend=args.backend,
+            example_preference=args.example_preference,
+            vote=args.vote,
+            seed=args.seed,
+            quiet=batch or not interactive,
+        )
+    seconds = time.perf_counter() - start
     # Every output of a map is made before any is written, and written as a set:
     # a failure leaves none of them.
     picture = result.rgba if background is None else result.on_background(background)
@@ -375,7 +370,7 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
         "output": str(job["output"]),
         "examples": result.example_names,
         "seconds": seconds,
-        "peak_traced_memory_mb": peak / 2**20,
+        "peak_rss_mb": _peak_rss_mb(),
         "timings": result.timings,
         "objective": result.objective,
         "preset": args.preset,
@@ -391,6 +386,24 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
             file=sys.stderr,
         )
     return report
+
+
+def _peak_rss_mb() -> float | None:
+    """The process's peak resident memory so far (MB; None where it cannot be read)."""
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    try:
+        import resource
+
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return peak / 2**20 if sys.platform == "darwin" else peak / 1024.0  # bytes / KiB
+    except (ImportError, OSError):
+        return None
 
 
 def _json_writer(content):

@@ -1,0 +1,177 @@
+"""The engine's memory layout: in-place padding, quantized features, state freed early."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from imagemap import engine
+from imagemap.engine import EngineParams, Mapping, _LevelSolver, _pad_into, _Timer, synthesize
+
+
+@pytest.mark.parametrize("mode", ["constant", "reflect", "edge"])
+@pytest.mark.parametrize(
+    "h, w, r", [(5, 7, 2), (2, 5, 1), (10, 12, 4), (3, 9, 3), (1, 4, 2), (6, 6, 0)]
+)
+def test_pad_into_equals_numpy_pad_of_the_scaled_bands(mode, h, w, r):
+    rng = np.random.default_rng(h * 100 + w * 10 + r)
+    bands = rng.random((h, w, 3)).astype(np.float32)
+    scale = rng.random(3).astype(np.float32)
+    outer = np.full((h + 2 * r + 2, w + 2 * r + 3, 3), 7.0, np.float32)
+    target = outer[1 : 1 + h + 2 * r, 2 : 2 + w + 2 * r]
+    _pad_into(target, bands, r, mode, scale)
+    assert np.array_equal(target, np.pad(bands * scale, ((r, r), (r, r), (0, 0)), mode=mode))
+    outside = np.ones(outer.shape[:2], bool)
+    outside[1 : 1 + h + 2 * r, 2 : 2 + w + 2 * r] = False
+    assert np.all(outer[outside] == 7.0)  # nothing written beyond the target
+
+
+def _scene(size=48, seed=0):
+    rng = np.random.default_rng(seed)
+    guide = rng.random((size, size, 2)).astype(np.float32)
+    appearance = rng.random((size, size, 3)).astype(np.float32)
+    mask = np.zeros((size, size), bool)
+    mask[4:-4, 6:-6] = True
+    exemplar = Mapping(guide=guide, appearance=appearance, mask=mask)
+    query = Mapping(guide=np.roll(guide, 3, axis=1), mask=np.roll(mask, 3, axis=1))
+    return query, exemplar
+
+
+def _solver(quantize: bool, appearance_weights=(1.0, 0.5, 0.5)):
+    query, exemplar = _scene()
+    params = EngineParams(
+        patch_sizes=(7,),
+        guide_weights=(1.0, 2.0),
+        appearance_weights=appearance_weights,
+        position_weight=0.5,
+        quantize_features=quantize,
+    )
+    rng = np.random.default_rng(0)
+    return _LevelSolver(query, [exemplar, exemplar], 7, params, rng, _Timer())
+
+
+def test_quantized_features_are_the_float_features_to_half_a_unit():
+    exact, quantized = _solver(False), _solver(True)
+    assert exact.candidate_features.dtype == np.float32
+    assert quantized.candidate_features.dtype == np.int16
+    unit = 1.0 / quantized.inverse_unit  # half a unit of rounding, plus float32 products
+    for name in ("candidate_features", "query_features"):
+        values = getattr(exact, name)
+        restored = getattr(quantized, name).astype(np.float64) * unit
+        assert np.abs(values).max() > 100 * unit  # the unit resolves the features
+        assert np.abs(restored - values).max() <= 0.51 * unit, name
+    # The appearance part is re-projected from a new estimate the same way.
+    estimate = np.random.default_rng(1).random(quantized.query_active.shape[:2] + (3,))
+    estimate = estimate.astype(np.float32)
+    exact.set_appearance(estimate)
+    quantized.set_appearance(estimate)
+    restored = quantized.query_features.astype(np.float64) * unit
+    assert np.abs(restored - exact.query_features).max() <= 0.51 * unit
+
+
+def test_exemplar_bands_are_stored_once_and_unmatched_bands_are_not_scaled():
+    """The matched appearance bands are scaled where they are read, so exact costs agree
+    with a scaled copy, including when a band is carried without being matched."""
+    solver = _solver(False, appearance_weights=(1.0, 0.0, 0.5))
+    assert not hasattr(solver, "exemplar_active")
+    assert solver.exemplar_appearance.shape[-1] == 3 and solver.exemplar_guide.shape[-1] == 2
+    rng = np.random.default_rng(2)
+    matches = rng.integers(0, len(solver.cand_e), size=len(solver.query_y))
+    solver.set_appearance(rng.random(solver.query_active.shape[:2] + (3,)).astype(np.float32))
+    costs = solver.costs(matches)
+    # The same distance from explicit scaled windows.
+    r, k = solver.r, 2 * solver.r + 1
+    scaled = np.concatenate(
+        [
+            solver.exemplar_guide,
+            solver.exemplar_appearance[..., solver.appearance_active] * solver.appearance_scale,
+        ],
+        axis=-1,
+    )
+    for m in rng.choice(len(matches), size=20, replace=False):
+        c = matches[m]
+        e, ey, ex = solver.cand_e[c], solver.cand_y[c], solver.cand_x[c]
+        qy, qx = solver.query_y[m], solver.query_x[m]
+        diff = solver.query_active[qy : qy + k, qx : qx + k] - scaled[e, ey : ey + k, ex : ex + k]
+        expected = float((solver.window[..., None] * diff.astype(np.float64) ** 2).sum())
+        d = solver.query_position[m] - solver.cand_position[c]
+        expected += 0.25 * float(d @ d)
+        assert costs[m] == pytest.approx(expected, rel=1e-5), (m, r)
+
+
+def _traced_peak(quantize: bool) -> int:
+    query, exemplar = _scene(160)
+    params = EngineParams(
+        patch_sizes=(7,),
+        guide_weights=(1.0, 2.0),
+        appearance_weights=(1.0, 0.5, 0.5),
+        position_weight=0.5,
+        max_iterations=2,
+        quantize_features=quantize,
+    )
+    synthesize([query], [[exemplar]] * 2, params)  # kernels loaded first
+    tracemalloc.start()
+    try:
+        synthesize([query], [[exemplar]] * 2, params)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_quantized_features_lower_the_peak_by_about_their_saving():
+    """Peak of traced (NumPy) memory: int16 features save 2 bytes per feature of every
+    window centre, and that shows in the peak (nothing else holds a float32 copy)."""
+    solver = _solver(True)
+    dims = solver.candidate_features.shape[1]
+    del solver
+    query, exemplar = _scene(160)
+    probe = _LevelSolver(
+        query,
+        [exemplar, exemplar],
+        7,
+        EngineParams(
+            patch_sizes=(7,), guide_weights=(1.0, 2.0), appearance_weights=(1.0, 0.5, 0.5)
+        ),
+        np.random.default_rng(0),
+        _Timer(),
+    )
+    saving = 2 * dims * (len(probe.cand_e) + len(probe.query_y))
+    del probe
+    float_peak, int_peak = _traced_peak(False), _traced_peak(True)
+    assert float_peak - int_peak > 0.8 * saving, (float_peak, int_peak, saving)
+
+
+def test_release_search_keeps_what_votes_and_dense_maps_need():
+    solver = _solver(True)
+    matches = np.zeros(len(solver.query_y), dtype=np.int64)
+    before = solver.dense_source(matches)
+    solver.release_search()
+    assert solver.candidate_features is None and solver.query_active is None
+    assert np.array_equal(solver.dense_source(matches), before)
+    padded = np.zeros(
+        (solver.query_shape[0] + 2 * solver.r, solver.query_shape[1] + 2 * solver.r, 3),
+        np.float32,
+    )
+    solver.vote(matches, padded)
+    assert np.isfinite(padded).all() and padded.any()
+    assert engine._FEATURE_RANGE == np.iinfo(np.int16).max
+
+
+def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
+    from dataclasses import replace
+
+    from imagemap import budget
+    from imagemap.colorization import PRESETS
+    from imagemap.database import Database, Example
+
+    rng = np.random.default_rng(0)
+    depth = np.zeros((600, 800), np.float32)
+    depth[100:500, 100:700] = 0.5 + 0.1 * rng.random((400, 600))
+    database = Database([Example.from_arrays("a", depth, np.zeros((600, 800, 3), np.float32))])
+    with_band = PRESETS["fish"]
+    assert with_band.silhouette_weight > 0
+    without = replace(with_band, silhouette_weight=0.0)
+    more = budget.colorize_estimate(depth, database, with_band)
+    fewer = budget.colorize_estimate(depth, database, without)
+    assert more.bytes > fewer.bytes and more.seconds > fewer.seconds
+    assert more.levels == 5  # the pyramid grown for a large object, each level estimated
