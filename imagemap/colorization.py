@@ -564,6 +564,9 @@ def colorize(
     result: EngineResult = synthesize(
         query, exemplar_levels, params.engine_params(len(chosen)), seed=seed, quiet=quiet
     )
+    # The pyramids are done with: freed before the copy finish, whose DCTs and
+    # remade examples are the peak of a large map.
+    del query, exemplar_levels
     start = time.perf_counter()
     if params.use_pyramid:
         ycbcr = collapse_laplacian(result.appearance)
