@@ -84,8 +84,15 @@ class ColorizeParams:
         Synthesise YCbCr Laplacian bands (the paper) or plain YCbCr at every level.
     example_preference : float
         Extra window cost per rank of an example in the selection (the nearest
-        example costs nothing, the second this much...): fewer seams between
-        examples of different colours.
+        example costs nothing, the second this much...), at every level but the
+        finest unless ``preference_at_finest``: the coarse levels then take each
+        region of the object from one example where it fits nearly as well (no
+        patch of the second example's palette in the middle of a shirt or a flank),
+        and the finest level still takes a small feature from whichever example
+        draws it. 0 is the paper's method.
+    preference_at_finest : bool
+        Apply the preference at the finest level too: fewer and smaller seams
+        (crisper), fewer small features.
     vote : {"copy", "mean", "mode"}
         How the matched windows make the map. ``"mean"``: the paper's M-step, every
         pixel the Gaussian-weighted mean of its windows' estimates (smooth, and
@@ -138,7 +145,8 @@ class ColorizeParams:
     max_iterations: int = 8
     tolerance: float = 2e-3
     use_pyramid: bool = True
-    example_preference: float = 0.0
+    example_preference: float = 0.3
+    preference_at_finest: bool = False
     vote: str = "copy"
     blend_scale: float = 0.1
     seam_smoothness: float = 1.0
@@ -159,6 +167,7 @@ class ColorizeParams:
         costs = tuple(self.example_preference * rank for rank in range(n_examples))
         return EngineParams(
             exemplar_costs=costs if self.example_preference else (),
+            exemplar_costs_at_finest=self.preference_at_finest,
             patch_sizes=self.patch_sizes,
             guide_weights=(self.depth_weight, self.depth_detail_weight)
             + ((self.silhouette_weight,) if self.silhouette_weight else ()),

@@ -37,7 +37,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -162,6 +162,10 @@ class EngineParams:
     exemplar_costs : tuple of float
         Additive cost of matching into each exemplar (empty: none), in the units of
         the window distance: a preference for some exemplars over others.
+    exemplar_costs_at_finest : bool
+        Apply ``exemplar_costs`` at the finest level too. False: the coarser levels
+        settle which exemplar each region comes from, and the finest level may take
+        a small feature from any exemplar.
     guide_reseed : float
         At every level but the coarsest, after the coarser level's matches are
         propagated, also match on guide and position only, and take that match
@@ -202,6 +206,7 @@ class EngineParams:
     init_from_guide: bool = True
     window_sigma: float = 1.0 / 3.0
     exemplar_costs: tuple[float, ...] = ()
+    exemplar_costs_at_finest: bool = True
     vote: str = "mean"
     quantize_features: bool = True
     guide_reseed: float = 0.0
@@ -956,7 +961,10 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         smallest = min(min(e.shape) for e in exemplars)
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
-        solver = _LevelSolver(query_levels[level], exemplars, k, params, rng, timer)
+        level_params = params
+        if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
+            level_params = replace(params, exemplar_costs=())
+        solver = _LevelSolver(query_levels[level], exemplars, k, level_params, rng, timer)
         level_seed = int(rng.integers(0, 2**62))
         h, w = query_levels[level].shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)

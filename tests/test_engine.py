@@ -1,10 +1,13 @@
 """The engine's properties: hard-EM descent, reproduction, non-stationarity, determinism."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import ndimage
 
 from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap.colorization import PRESETS
 from imagemap.engine import EngineParams, Mapping, synthesize
 
 
@@ -150,10 +153,15 @@ def test_bad_engine_input():
 def test_exemplar_costs_steer_the_source(blob_database, query_blob):
     """A large cost on every example but one leaves that one as the only source."""
     depth, _ = query_blob
-    free = colorize(depth, blob_database, "busts", m=2)
+    free = colorize(depth, blob_database, "busts", m=2, example_preference=0.0)
     assert len(set(np.unique(free.source[..., 0][depth > 0]))) == 2
-    steered = colorize(depth, blob_database, "busts", m=2, example_preference=100.0)
+    everywhere = replace(PRESETS["busts"], example_preference=100.0, preference_at_finest=True)
+    steered = colorize(depth, blob_database, everywhere, m=2)
     assert set(np.unique(steered.source[..., 0][depth > 0])) == {0}
+    # By default the finest level is free: the coarse levels' choice, mostly kept.
+    coarse = colorize(depth, blob_database, "busts", m=2, example_preference=100.0)
+    share = np.mean(coarse.source[..., 0][depth > 0] == 0)
+    assert share > np.mean(free.source[..., 0][depth > 0] == 0)
     with pytest.raises(ValueError, match="exemplar_costs"):
         rng = np.random.default_rng(0)
         exemplar = Mapping(guide=rng.random((20, 20)), appearance=rng.random((20, 20)))

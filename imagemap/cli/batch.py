@@ -201,7 +201,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--m", type=int, help="number of examples to select automatically")
     p.add_argument("--backend", choices=BACKEND_NAMES, help="nearest-neighbour search")
-    p.add_argument("--example-preference", type=float, help="extra cost per example rank")
+    p.add_argument(
+        "--example-preference",
+        type=float,
+        help="extra cost per example rank at the coarser levels (default 0.3; 0: the paper)",
+    )
     p.add_argument(
         "--format", choices=("glb", "obj"), default="glb", help="textured mesh format (glb)"
     )

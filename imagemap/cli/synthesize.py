@@ -77,9 +77,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--example-preference",
         type=non_negative_float,
-        help="extra cost per rank of a selected example (e.g. 0.3): one coherent source "
-        "per region instead of seams between examples of different colours (busts: faulty "
-        "maps 25%% -> 8%%, but mean colour error up; default 0 as in the paper)",
+        help="extra cost per rank of a selected example at the coarser levels (default "
+        "0.3): each region of the object from one example where it fits nearly as well, "
+        "instead of patches of two palettes; 0 is the paper's method",
     )
     p.add_argument(
         "--vote",
