@@ -158,6 +158,10 @@ class ColorizeParams:
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
             raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
+        if not self.silhouette_weight >= 0:  # also refuses NaN
+            raise InputError(f"silhouette_weight must be >= 0, got {self.silhouette_weight}")
+        if not 0 <= self.guide_reseed < 1:
+            raise InputError(f"guide_reseed must be in [0, 1), got {self.guide_reseed}")
 
     @property
     def levels(self) -> int:

@@ -243,3 +243,14 @@ def test_guide_reseed_must_be_a_fraction():
 
     with pytest.raises(ValueError, match="guide_reseed"):
         EngineParams(guide_reseed=1.5)
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("silhouette_weight", -0.5), ("silhouette_weight", float("nan")), ("guide_reseed", 1.0)],
+)
+def test_new_colorize_settings_are_checked(field, value):
+    from imagemap.io import InputError
+
+    with pytest.raises(InputError, match=field):
+        ColorizeParams(**{field: value})
