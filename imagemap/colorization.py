@@ -32,7 +32,7 @@ from imagemap.database import Database, Example
 from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
 from imagemap.io import InputError, validate_depth
 from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
-from imagemap.validate import check_colorize_arguments, check_int
+from imagemap.validate import check_colorize_arguments, check_float, check_int
 
 __all__ = [
     "PRESETS",
@@ -158,10 +158,9 @@ class ColorizeParams:
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
             raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
-        if not self.silhouette_weight >= 0:  # also refuses NaN
-            raise InputError(f"silhouette_weight must be >= 0, got {self.silhouette_weight}")
-        if not 0 <= self.guide_reseed < 1:
-            raise InputError(f"guide_reseed must be in [0, 1), got {self.guide_reseed}")
+        check_float("silhouette_weight", self.silhouette_weight, minimum=0.0)
+        if check_float("guide_reseed", self.guide_reseed, minimum=0.0, maximum=1.0) == 1.0:
+            raise InputError("guide_reseed: must be below 1 (a fraction of the distance)")
 
     @property
     def levels(self) -> int:
@@ -332,14 +331,14 @@ def _silhouette_band(mask: np.ndarray) -> np.ndarray:
 
 
 def _depth_guides(
-    depth: np.ndarray, levels: int, clip: float | None = None, silhouette: bool = False
+    depth: np.ndarray, masks: list[np.ndarray], clip: float | None = None, silhouette: bool = False
 ) -> list[np.ndarray]:
-    """Per level: (H_l, W_l, B) depth Gaussian level, its Laplacian (detail) band and,
-    with ``silhouette``, the silhouette band (the depth then extended past the outline)."""
-    mask = depth > 0
-    masks = mask_pyramid(mask, levels)
+    """Per level of ``masks`` (the object's mask pyramid): (H_l, W_l, B) depth Gaussian
+    level, its Laplacian (detail) band and, with ``silhouette``, the silhouette band (the
+    depth then extended past the outline)."""
+    levels = len(masks)
     if silhouette:
-        depth = _extend_depth(depth, mask)
+        depth = _extend_depth(depth, masks[0])
     gaussian = gaussian_pyramid(depth, levels)
     # One level more, so that even the coarsest level has a true band-pass detail band.
     detail = laplacian_pyramid(depth, levels + 1)[:levels]
@@ -364,7 +363,7 @@ def depth_mappings(
     masks = mask_pyramid(depth > 0, levels)
     return [
         Mapping(guide=guide, mask=mask if mask.any() else None)
-        for guide, mask in zip(_depth_guides(depth, levels, clip, silhouette), masks, strict=True)
+        for guide, mask in zip(_depth_guides(depth, masks, clip, silhouette), masks, strict=True)
     ]
 
 
@@ -407,7 +406,7 @@ def example_mappings(
     return [
         Mapping(guide=guide, appearance=bands, mask=level_mask if level_mask.any() else None)
         for guide, bands, level_mask in zip(
-            _depth_guides(example.depth, levels, clip, silhouette), appearance, masks, strict=True
+            _depth_guides(example.depth, masks, clip, silhouette), appearance, masks, strict=True
         )
     ]
 
