@@ -193,7 +193,11 @@ def _correlate(reference, moving, window, upsample: int, normalization: str | No
 
 
 def _best_angle(reference, moving, window, max_rotation: float, step: float, normalization):
-    """Angle (degrees) and shift aligning ``moving`` to ``reference``: grid, grid, parabola."""
+    """Angle (degrees), shift and error aligning ``moving`` to ``reference``: grid, grid,
+    parabola; with ``max_rotation`` 0 the shift alone (angle 0)."""
+    if max_rotation <= 0:
+        shift, error = _correlate(reference, moving, window, 20, normalization)
+        return 0.0, shift, error
     margin = int(np.ceil(reference.shape[0] * (1 - np.cos(np.deg2rad(max_rotation))) / 2))
     inner = slice(margin, reference.shape[0] - margin)
 
@@ -246,13 +250,9 @@ def _align(references, movings, window, margin, max_rotation, step):
     proposals = []
     for kind, reference, moving in zip(_KINDS, references, movings, strict=True):
         for normalization in ("phase", None):
-            if max_rotation > 0:
-                angle, shift, _ = _best_angle(
-                    reference, moving, window, max_rotation, step, normalization
-                )
-            else:
-                angle = 0.0
-                shift, _ = _correlate(reference, moving, window, 20, normalization)
+            angle, shift, _ = _best_angle(
+                reference, moving, window, max_rotation, step, normalization
+            )
             score = _agreement(references, movings, angle, shift, margin)
             label = f"{kind}, {normalization or 'plain'}"
             proposals.append((score, angle, (float(shift[0]), float(shift[1])), label))
@@ -350,13 +350,9 @@ def register_scans(
                 ]
                 t = int(np.argmin(by_turn))
                 moving = _centre_crop(np.rot90(values[i], -t), side)
-                if max_rotation > 0:
-                    angle, shift, error = _best_angle(
-                        reference, moving, window, max_rotation, angle_step, normalization
-                    )
-                else:
-                    angle = 0.0
-                    shift, error = _correlate(reference, moving, window, 20, normalization)
+                angle, shift, error = _best_angle(
+                    reference, moving, window, max_rotation, angle_step, normalization
+                )
                 movings = [_centre_crop(np.rot90(v[i], -t), side) for v in kinds.values()]
                 score = _agreement(references, movings, angle, shift, margin)
                 proposals.append((score, t, angle, tuple(shift), error, kind, normalization))
