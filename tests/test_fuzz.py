@@ -37,26 +37,25 @@ def time_limit(seconds: int = SECONDS):
         signal.signal(signal.SIGALRM, previous)
 
 
-def _labels_reader(path: Path):
-    """Part labels are read through the database, beside a valid depth and image."""
+def _example_with(path: Path, name: str):
+    """Example ``x`` read through the database: a valid depth and image, and the damaged
+    file at ``path`` moved in as its ``name``."""
     folder = path.parent
     depth = np.zeros((16, 16), np.uint16)
     depth[4:12, 4:12] = 40000
     write_image(folder / "x_depth.png", depth)
     write_image(folder / "x_image.png", np.zeros((16, 16, 3)))
-    target = folder / "x_labels.png"
-    path.replace(target)
-    return Database.from_directory(folder)["x"].labels
+    path.replace(folder / name)
+    return Database.from_directory(folder)["x"]
+
+
+def _labels_reader(path: Path):
+    """Part labels are read through the database, beside a valid depth and image."""
+    return _example_with(path, "x_labels.png").labels
 
 
 def _json_reader(path: Path):
-    folder = path.parent
-    depth = np.zeros((16, 16), np.uint16)
-    depth[4:12, 4:12] = 40000
-    write_image(folder / "x_depth.png", depth)
-    write_image(folder / "x_image.png", np.zeros((16, 16, 3)))
-    path.replace(folder / "x.json")
-    return Database.from_directory(folder)["x"].info
+    return _example_with(path, "x.json").info
 
 
 def _btf_reader(path: Path):
