@@ -43,6 +43,7 @@ __all__ = [
     "depth_mappings",
     "example_mappings",
     "pyramid_levels",
+    "context_levels",
     "select_examples",
     "translate",
     "centroid_shift",
@@ -131,6 +132,13 @@ class ColorizeParams:
         depth and position alone replace them when they fit in less than this
         fraction of the distance (the engine's ``guide_reseed``; 0: off). Features
         that only the finer levels resolve are then drawn.
+    context_weight : float
+        Weight of the coarser levels' colours as extra guide bands (times the Y and
+        the Cb, Cr weights; the engine's ``context_weights``) at the levels whose
+        window spans less than ``CONTEXT_FRACTION`` of the object's size (see
+        :func:`context_levels`): on a large map the fine levels then keep the eyes,
+        lips and palette the coarser levels chose instead of matching their own thin
+        band alone (0: off). At the paper's 200x150 no level is that fine.
     """
 
     m: int = 2
@@ -154,10 +162,12 @@ class ColorizeParams:
     grow_pyramid: bool = True
     silhouette_weight: float = 0.5
     guide_reseed: float = 0.5
+    context_weight: float = 1.0
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
             raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
+        check_float("context_weight", self.context_weight, minimum=0.0)
         check_float("silhouette_weight", self.silhouette_weight, minimum=0.0)
         if check_float("guide_reseed", self.guide_reseed, minimum=0.0, maximum=1.0) == 1.0:
             raise InputError("guide_reseed: must be below 1 (a fraction of the distance)")
@@ -166,7 +176,7 @@ class ColorizeParams:
     def levels(self) -> int:
         return len(self.patch_sizes)
 
-    def engine_params(self, n_examples: int = 0) -> EngineParams:
+    def engine_params(self, n_examples: int = 0, context_levels: int = 0) -> EngineParams:
         costs = tuple(self.example_preference * rank for rank in range(n_examples))
         return EngineParams(
             exemplar_costs=costs if self.example_preference else (),
@@ -183,6 +193,14 @@ class ColorizeParams:
             guide_padding="constant",
             vote="mode" if self.vote == "mode" else "mean",
             guide_reseed=self.guide_reseed,
+            context_weights=(
+                (self.context_weight * self.luma_weight,)
+                + (self.context_weight * self.chroma_weight,) * 2
+                if self.context_weight and context_levels
+                else ()
+            ),
+            context_levels=context_levels,
+            appearance_pyramid="laplacian" if self.use_pyramid else "gaussian",
         )
 
 
@@ -253,6 +271,30 @@ MIN_WINDOWS_ACROSS = 1.25
 #: its coarsest level): large maps get the pyramid their size calls for. At 2, busts
 #: at 4x (5 levels) lost most eyes, brows and lips to the coarse levels' layout.
 ADD_WINDOWS_ACROSS = 3.5
+
+
+#: A level whose window spans less than this fraction of the object's size (square
+#: root of its area) gets the coarser levels' colours as context. At 200x150 (objects
+#: 70-130 px) the finest window spans 0.05-0.1: no context, the paper's levels; at
+#: 800x600 the two finest levels of a bust (0.014, 0.045) and the finest of a fish.
+CONTEXT_FRACTION = 0.05
+
+
+def context_levels(mask: np.ndarray, patch_sizes: tuple[int, ...]) -> int:
+    """How many of the finest levels see the coarser levels' colours (see ``CONTEXT_FRACTION``).
+
+    Examples
+    --------
+    >>> small = np.zeros((150, 200), bool); small[30:120, 50:150] = True
+    >>> context_levels(small, (7, 11, 9))
+    0
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> context_levels(big, (7, 11, 9, 9))
+    2
+    """
+    size = float(np.sqrt(mask.sum()))
+    spans = [k * 2**level / size for level, k in enumerate(patch_sizes[:-1])]
+    return sum(1 for span in spans if span < CONTEXT_FRACTION)
 
 
 def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = True) -> int:
@@ -574,7 +616,11 @@ def colorize(
     pyramid_seconds = time.perf_counter() - start
 
     result: EngineResult = synthesize(
-        query, exemplar_levels, params.engine_params(len(chosen)), seed=seed, quiet=quiet
+        query,
+        exemplar_levels,
+        params.engine_params(len(chosen), context_levels(depth > 0, params.patch_sizes)),
+        seed=seed,
+        quiet=quiet,
     )
     # The pyramids are done with: freed before the copy finish, whose DCTs and
     # remade examples are the peak of a large map.

@@ -173,6 +173,23 @@ class EngineParams:
         (``RESEED_WORST``) and the new one fits in less than this fraction of its
         distance (0: off). Without it a feature that only the finer level's guide
         resolves is voted away by the coarser level's appearance.
+    context_weights : tuple of float
+        At every level but the coarsest, the coarser levels' result as extra guide
+        bands, one weight per appearance band (empty: off). The query's context is
+        its own synthesised coarser levels, an exemplar's its own coarser bands,
+        both brought to the level's grid (collapsed, for Laplacian bands, see
+        ``appearance_pyramid``). A level's appearance is only its own band, so
+        without context a finer level sees nothing of the colours the coarser
+        levels chose: it may swap an eye for skin or one example's palette for
+        another's wherever the fine band alone fits (the multiresolution
+        neighbourhoods of Wei & Levoy 2000 and Hertzmann et al. 2001's image
+        analogies).
+    context_levels : int, optional
+        Give context to the finest this many levels only (None: every level but the
+        coarsest).
+    appearance_pyramid : {"laplacian", "gaussian"}
+        What the appearance levels are: Laplacian bands (a level's colours are the
+        sum of it and every coarser level) or Gaussian levels. Only the context uses it.
     vote : {"mean", "mode"}
         The M-step. ``"mean"`` (the paper): every pixel becomes the Gaussian-weighted
         mean of the estimates of the windows that cover it, the exact minimiser of
@@ -210,6 +227,9 @@ class EngineParams:
     vote: str = "mean"
     quantize_features: bool = True
     guide_reseed: float = 0.0
+    context_weights: tuple[float, ...] = ()
+    context_levels: int | None = None
+    appearance_pyramid: str = "laplacian"
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
@@ -226,6 +246,8 @@ class EngineParams:
             raise ValueError("guide_reseed must be in [0, 1)")
         if self.stride < 1 or self.max_iterations < 0:
             raise ValueError("stride must be at least 1 and max_iterations at least 0")
+        if self.appearance_pyramid not in ("laplacian", "gaussian"):
+            raise ValueError("appearance_pyramid must be 'laplacian' or 'gaussian'")
 
 
 @dataclass
@@ -879,6 +901,31 @@ class _LevelSolver:
         return out
 
 
+def _low_pass(coarser: Sequence[np.ndarray], shape: tuple[int, int], kind: str) -> np.ndarray:
+    """The colours of the coarser levels on a finer level's grid."""
+    from imagemap.pyramid import collapse_laplacian, expand
+
+    low = collapse_laplacian(list(coarser)) if kind == "laplacian" else coarser[0]
+    return expand(low, shape)
+
+
+def _with_context(query, exemplars, query_coarser, exemplar_coarser, kind):
+    """Query and exemplar mappings of one level with the coarser levels' colours as guide."""
+    query = Mapping(
+        guide=np.concatenate([query.guide, _low_pass(query_coarser, query.shape, kind)], axis=2),
+        mask=query.mask,
+    )
+    exemplars = [
+        Mapping(
+            guide=np.concatenate([ex.guide, _low_pass(coarser, ex.shape, kind)], axis=2),
+            appearance=ex.appearance,
+            mask=ex.mask,
+        )
+        for ex, coarser in zip(exemplars, exemplar_coarser, strict=True)
+    ]
+    return query, exemplars
+
+
 def _validate(query_levels, exemplar_levels, params) -> None:
     n_levels = len(query_levels)
     if n_levels == 0:
@@ -905,6 +952,8 @@ def _validate(query_levels, exemplar_levels, params) -> None:
     n_appearance = exemplar_levels[0][0].appearance.shape[2]
     if len(params.appearance_weights) != n_appearance:
         raise ValueError(f"{n_appearance} appearance bands need as many appearance weights")
+    if params.context_weights and len(params.context_weights) != n_appearance:
+        raise ValueError(f"{n_appearance} appearance bands need as many context weights")
     for level in range(1, n_levels):
         fine, coarse = query_levels[level - 1].shape, query_levels[level].shape
         if coarse != ((fine[0] + 1) // 2, (fine[1] + 1) // 2):
@@ -964,7 +1013,24 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         level_params = params
         if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
-        solver = _LevelSolver(query_levels[level], exemplars, k, level_params, rng, timer)
+        query = query_levels[level]
+        if (
+            params.context_weights
+            and level < n_levels - 1
+            and (params.context_levels is None or level < params.context_levels)
+        ):
+            query, exemplars = _with_context(
+                query,
+                exemplars,
+                appearance_levels[level + 1 :],
+                [[e.appearance for e in levels[level + 1 :]] for levels in exemplar_levels],
+                params.appearance_pyramid,
+            )
+            level_params = replace(
+                level_params, guide_weights=params.guide_weights + params.context_weights
+            )
+        solver = _LevelSolver(query, exemplars, k, level_params, rng, timer)
+        del query
         level_seed = int(rng.integers(0, 2**62))
         h, w = query_levels[level].shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)

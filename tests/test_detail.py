@@ -247,10 +247,71 @@ def test_guide_reseed_must_be_a_fraction():
 
 @pytest.mark.parametrize(
     "field, value",
-    [("silhouette_weight", -0.5), ("silhouette_weight", float("nan")), ("guide_reseed", 1.0)],
+    [
+        ("silhouette_weight", -0.5),
+        ("silhouette_weight", float("nan")),
+        ("guide_reseed", 1.0),
+        ("context_weight", -1.0),
+    ],
 )
 def test_new_colorize_settings_are_checked(field, value):
     from imagemap.io import InputError
 
     with pytest.raises(InputError, match=field):
         ColorizeParams(**{field: value})
+
+
+def test_context_is_the_coarser_levels_colours_on_the_finer_grid():
+    """For Laplacian bands the context of level l is what the coarser levels sum to
+    there: the Gaussian level l minus its own band (known answer, up to rounding)."""
+    from imagemap.engine import _low_pass
+    from imagemap.pyramid import gaussian_pyramid, laplacian_pyramid
+
+    image = np.random.default_rng(0).random((37, 50, 3)).astype(np.float32)
+    bands, gaussians = laplacian_pyramid(image, 4), gaussian_pyramid(image, 4)
+    for level in range(3):
+        low = _low_pass(bands[level + 1 :], bands[level].shape[:2], "laplacian")
+        np.testing.assert_allclose(low, gaussians[level] - bands[level], atol=1e-5)
+    # Gaussian levels: the next coarser level brought up.
+    low = _low_pass(gaussians[1:], gaussians[0].shape[:2], "gaussian")
+    assert low.shape == image.shape and abs(low.mean() - image.mean()) < 0.01
+
+
+def test_only_fine_levels_of_large_objects_get_context():
+    from imagemap.colorization import context_levels
+
+    small = np.zeros((150, 200), bool)
+    small[40:110, 60:140] = True  # a 75 px object, the paper's scale
+    assert context_levels(small, (7, 11, 9)) == 0
+    assert ColorizeParams().engine_params(2, 0).context_weights == ()
+    big = np.kron(small, np.ones((4, 4), bool))
+    assert context_levels(big, (7, 11, 9, 9)) == 1
+    params = ColorizeParams().engine_params(2, 1)
+    assert params.context_levels == 1 and len(params.context_weights) == 3
+
+
+def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_blob):
+    """With context on every fine level the EM still never raises its target, and the
+    same seed gives the same bytes; without it the map differs (it is used)."""
+    from imagemap.colorization import depth_mappings, example_mappings
+    from imagemap.engine import synthesize
+
+    depth, _ = query_blob
+    params = PRESETS["busts"]
+    query = depth_mappings(depth, 3, params.detail_clip, True)
+    exemplars = [
+        example_mappings(e, 3, True, params.detail_clip, True) for e in blob_database.examples[:2]
+    ]
+    on = replace(params.engine_params(2, 2), max_iterations=4)
+    off = replace(on, context_weights=())
+    first, again = (
+        synthesize(query, exemplars, on, seed=1),
+        synthesize(query, exemplars, on, seed=1),
+    )
+    assert first.appearance[0].tobytes() == again.appearance[0].tobytes()
+    for values in first.objective:
+        assert np.all(np.diff(values) <= 1e-6 * np.abs(np.asarray(values[:-1])))
+    plain = synthesize(query, exemplars, off, seed=1)
+    assert plain.appearance[0].tobytes() != first.appearance[0].tobytes()
+    with pytest.raises(ValueError, match="context weights"):
+        synthesize(query, exemplars, replace(on, context_weights=(1.0,)), seed=1)
