@@ -901,29 +901,25 @@ class _LevelSolver:
         return out
 
 
-def _low_pass(coarser: Sequence[np.ndarray], shape: tuple[int, int], kind: str) -> np.ndarray:
-    """The colours of the coarser levels on a finer level's grid."""
-    from imagemap.pyramid import collapse_laplacian, expand
+def _coarse_colours(coarser: np.ndarray | None, band: np.ndarray, kind: str) -> np.ndarray:
+    """A level's colours from its band and the coarser level's colours (running collapse)."""
+    from imagemap.pyramid import expand
 
-    low = collapse_laplacian(list(coarser)) if kind == "laplacian" else coarser[0]
-    return expand(low, shape)
+    if kind == "gaussian" or coarser is None:
+        return np.asarray(band, dtype=np.float32)
+    return band + expand(coarser, band.shape[:2])
 
 
-def _with_context(query, exemplars, query_coarser, exemplar_coarser, kind):
-    """Query and exemplar mappings of one level with the coarser levels' colours as guide."""
-    query = Mapping(
-        guide=np.concatenate([query.guide, _low_pass(query_coarser, query.shape, kind)], axis=2),
-        mask=query.mask,
+def _with_context(mapping: Mapping, coarser_colours: np.ndarray) -> Mapping:
+    """A level's mapping with the coarser level's colours, brought to its grid, as guide."""
+    from imagemap.pyramid import expand
+
+    context = expand(coarser_colours, mapping.shape)
+    return Mapping(
+        guide=np.concatenate([mapping.guide, context], axis=2),
+        appearance=mapping.appearance,
+        mask=mapping.mask,
     )
-    exemplars = [
-        Mapping(
-            guide=np.concatenate([ex.guide, _low_pass(coarser, ex.shape, kind)], axis=2),
-            appearance=ex.appearance,
-            mask=ex.mask,
-        )
-        for ex, coarser in zip(exemplars, exemplar_coarser, strict=True)
-    ]
-    return query, exemplars
 
 
 def _validate(query_levels, exemplar_levels, params) -> None:
@@ -1005,8 +1001,24 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
     coarse_source = None
     solver = None
     matches = None
+    # Levels below context_from get the coarser levels' colours as context.
+    context_from = 0
+    if params.context_weights:
+        context_from = n_levels - 1
+        if params.context_levels is not None:
+            context_from = min(context_from, params.context_levels)
+    kind = params.appearance_pyramid
+    query_colours = exemplar_colours = None
     for level in progress(range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet):
         exemplars = [levels[level] for levels in exemplar_levels]
+        level_colours = None
+        if context_from > 0 and level > 0:  # this level's colours: the next finer's context
+            level_colours = [
+                _coarse_colours(colours, ex.appearance, kind)
+                for ex, colours in zip(
+                    exemplars, exemplar_colours or [None] * len(exemplars), strict=True
+                )
+            ]
         smallest = min(min(e.shape) for e in exemplars)
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
@@ -1014,23 +1026,20 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
         query = query_levels[level]
-        if (
-            params.context_weights
-            and level < n_levels - 1
-            and (params.context_levels is None or level < params.context_levels)
-        ):
-            query, exemplars = _with_context(
-                query,
-                exemplars,
-                appearance_levels[level + 1 :],
-                [[e.appearance for e in levels[level + 1 :]] for levels in exemplar_levels],
-                params.appearance_pyramid,
-            )
+        if context_from > level:
+            # The coarser level's colours (kept as a running collapse, so that no
+            # coarser band has to stay alive) as extra guide bands.
+            query = _with_context(query, query_colours)
+            exemplars = [
+                _with_context(ex, colours)
+                for ex, colours in zip(exemplars, exemplar_colours, strict=True)
+            ]
             level_params = replace(
                 level_params, guide_weights=params.guide_weights + params.context_weights
             )
         solver = _LevelSolver(query, exemplars, k, level_params, rng, timer)
         del query
+        exemplar_colours = level_colours
         level_seed = int(rng.integers(0, 2**62))
         h, w = query_levels[level].shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
@@ -1085,6 +1094,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             previous = value
         r = solver.r
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
+        if context_from > 0 and level > 0:
+            query_colours = _coarse_colours(query_colours, appearance_levels[level], kind)
         if level == 0:  # the finest level's exact costs, while the bands are there
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)

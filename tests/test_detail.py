@@ -262,19 +262,22 @@ def test_new_colorize_settings_are_checked(field, value):
 
 
 def test_context_is_the_coarser_levels_colours_on_the_finer_grid():
-    """For Laplacian bands the context of level l is what the coarser levels sum to
-    there: the Gaussian level l minus its own band (known answer, up to rounding)."""
-    from imagemap.engine import _low_pass
+    """For Laplacian bands the running collapse gives each level's Gaussian level
+    (known answer, up to rounding), and brought to the finer grid it is what the
+    coarser levels sum to there: the finer Gaussian level minus its own band."""
+    from imagemap.engine import Mapping, _coarse_colours, _with_context
     from imagemap.pyramid import gaussian_pyramid, laplacian_pyramid
 
     image = np.random.default_rng(0).random((37, 50, 3)).astype(np.float32)
     bands, gaussians = laplacian_pyramid(image, 4), gaussian_pyramid(image, 4)
-    for level in range(3):
-        low = _low_pass(bands[level + 1 :], bands[level].shape[:2], "laplacian")
-        np.testing.assert_allclose(low, gaussians[level] - bands[level], atol=1e-5)
-    # Gaussian levels: the next coarser level brought up.
-    low = _low_pass(gaussians[1:], gaussians[0].shape[:2], "gaussian")
-    assert low.shape == image.shape and abs(low.mean() - image.mean()) < 0.01
+    colours = None
+    for level in range(3, 0, -1):
+        colours = _coarse_colours(colours, bands[level], "laplacian")
+        np.testing.assert_allclose(colours, gaussians[level], atol=1e-5)
+        finer = Mapping(guide=np.zeros(bands[level - 1].shape[:2]), appearance=bands[level - 1])
+        context = _with_context(finer, colours).guide[..., 1:]
+        np.testing.assert_allclose(context, gaussians[level - 1] - bands[level - 1], atol=1e-5)
+    assert _coarse_colours(colours, gaussians[0], "gaussian") is not colours
 
 
 def test_only_fine_levels_of_large_objects_get_context():
