@@ -133,8 +133,9 @@ class ColorizeParams:
         fraction of the distance (the engine's ``guide_reseed``; 0: off). Features
         that only the finer levels resolve are then drawn.
     context_weight : float
-        Weight of the coarser levels' colours as extra guide bands (times the Y and
-        the Cb, Cr weights; the engine's ``context_weights``) at the levels whose
+        Weight of the coarser levels' luminance as an extra guide band (times the Y
+        weight; the engine's ``context_weights``; Cb and Cr too cost a third more
+        memory at 1024² for the same maps) at the levels whose
         window spans less than ``CONTEXT_FRACTION`` of the object's size (see
         :func:`context_levels`): on a large map the fine levels then keep the eyes,
         lips and palette the coarser levels chose instead of matching their own thin
@@ -194,8 +195,7 @@ class ColorizeParams:
             vote="mode" if self.vote == "mode" else "mean",
             guide_reseed=self.guide_reseed,
             context_weights=(
-                (self.context_weight * self.luma_weight,)
-                + (self.context_weight * self.chroma_weight,) * 2
+                (self.context_weight * self.luma_weight, 0.0, 0.0)
                 if self.context_weight and context_levels
                 else ()
             ),

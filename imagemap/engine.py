@@ -175,7 +175,8 @@ class EngineParams:
         resolves is voted away by the coarser level's appearance.
     context_weights : tuple of float
         At every level but the coarsest, the coarser levels' result as extra guide
-        bands, one weight per appearance band (empty: off). The query's context is
+        bands, one weight per appearance band (empty or all 0: off; a band weighted 0
+        is left out). The query's context is
         its own synthesised coarser levels, an exemplar's its own coarser bands,
         both brought to the level's grid (collapsed, for Laplacian bands, see
         ``appearance_pyramid``). A level's appearance is only its own band, so
@@ -1008,13 +1009,19 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         if params.context_levels is not None:
             context_from = min(context_from, params.context_levels)
     kind = params.appearance_pyramid
+    # Only the bands with a context weight are collapsed and matched (luma alone by
+    # default in colorize: a third of the cost of all three).
+    context_bands = np.flatnonzero(np.asarray(params.context_weights or (0.0,)))
+    context_weights = tuple(float(params.context_weights[b]) for b in context_bands)
+    if not context_weights:
+        context_from = 0
     query_colours = exemplar_colours = None
     for level in progress(range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet):
         exemplars = [levels[level] for levels in exemplar_levels]
         level_colours = None
         if context_from > 0 and level > 0:  # this level's colours: the next finer's context
             level_colours = [
-                _coarse_colours(colours, ex.appearance, kind)
+                _coarse_colours(colours, ex.appearance[..., context_bands], kind)
                 for ex, colours in zip(
                     exemplars, exemplar_colours or [None] * len(exemplars), strict=True
                 )
@@ -1035,7 +1042,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 for ex, colours in zip(exemplars, exemplar_colours, strict=True)
             ]
             level_params = replace(
-                level_params, guide_weights=params.guide_weights + params.context_weights
+                level_params, guide_weights=params.guide_weights + context_weights
             )
         solver = _LevelSolver(query, exemplars, k, level_params, rng, timer)
         del query
@@ -1095,7 +1102,9 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         r = solver.r
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         if context_from > 0 and level > 0:
-            query_colours = _coarse_colours(query_colours, appearance_levels[level], kind)
+            query_colours = _coarse_colours(
+                query_colours, appearance_levels[level][..., context_bands], kind
+            )
         if level == 0:  # the finest level's exact costs, while the bands are there
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)
