@@ -29,7 +29,7 @@ from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import fill_background, place_seams, seamless_copy
 from imagemap.database import Database, Example
-from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
+from imagemap.engine import EngineParams, EngineResult, Mapping, ReleasableLevels, synthesize
 from imagemap.io import InputError, validate_depth
 from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
 from imagemap.validate import check_colorize_arguments, check_float, check_int
@@ -385,7 +385,14 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
 
 
 def _example_ycbcr(example: Example) -> np.ndarray:
-    return to_ycbcr(fill_background(example.image, example.mask))
+    # The image read from disk is not left cached on the example: the synthesis keeps
+    # only its colour bands, and the finish reads it again (a full-size float32 image
+    # per example less through the synthesis).
+    cached = "image" in vars(example)
+    image = example.image
+    if not cached:
+        del example.image
+    return to_ycbcr(fill_background(image, example.mask))
 
 
 def example_mappings(
@@ -567,9 +574,11 @@ def colorize(
         params = replace(params, patch_sizes=level_patch_sizes(params.patch_sizes, levels))
     clip = params.detail_clip or None
     outline = bool(params.silhouette_weight)
-    query = depth_mappings(depth, levels, clip, outline)
+    # Handed over to the engine, which drops each level once it has packed its bands.
+    query = ReleasableLevels(depth_mappings(depth, levels, clip, outline))
     exemplar_levels = [
-        example_mappings(e, levels, params.use_pyramid, clip, outline) for e in chosen
+        ReleasableLevels(example_mappings(e, levels, params.use_pyramid, clip, outline))
+        for e in chosen
     ]
     pyramid_seconds = time.perf_counter() - start
 

@@ -48,7 +48,15 @@ from imagemap import _kernels
 from imagemap.progress import progress
 from imagemap.search import make_index
 
-__all__ = ["BACKENDS", "VOTES", "EngineParams", "EngineResult", "Mapping", "synthesize"]
+__all__ = [
+    "BACKENDS",
+    "VOTES",
+    "EngineParams",
+    "EngineResult",
+    "Mapping",
+    "ReleasableLevels",
+    "synthesize",
+]
 
 log = logging.getLogger("imagemap")
 
@@ -116,6 +124,16 @@ class Mapping:
     @property
     def shape(self) -> tuple[int, int]:
         return self.guide.shape[:2]
+
+
+class ReleasableLevels(list):
+    """A pyramid (list of :class:`Mapping`, finest first) handed over to :func:`synthesize`:
+    once the engine has packed a level's bands it calls :meth:`release`, which drops the
+    level from the list, so that its arrays are freed during the synthesis if nothing
+    else holds them. A plain list is left as it is."""
+
+    def release(self, level: int) -> None:
+        self[level] = None
 
 
 @dataclass(frozen=True)
@@ -449,7 +467,11 @@ class _LevelSolver:
         params: EngineParams,
         rng: np.random.Generator,
         timer: _Timer,
+        prepare: bool = True,
     ) -> None:
+        """Pack the bands of ``query`` and ``exemplars`` (nothing of the mappings is kept),
+        then, unless ``prepare`` is False, learn the PCA and make the features
+        (:meth:`prepare`): with False the caller may free the mappings first."""
         start = time.perf_counter()
         self.params = params
         self.r = r = k // 2
@@ -549,6 +571,16 @@ class _LevelSolver:
             guide_scale,
         )
         timer.add("setup", start)
+        if prepare:
+            self.prepare(rng)
+
+    def prepare(self, rng: np.random.Generator) -> None:
+        """PCA learned on exemplar windows, and the features of candidates and query
+        windows: from the packed bands alone."""
+        k, timer, params = 2 * self.r + 1, self.timer, self.params
+        n_ga, n_aa = self.n_guide_active, len(self.appearance_active)
+        n_appearance = self.exemplar_appearance.shape[-1]
+        h = self.query_shape[0]
 
         # PCA, learned on exemplar windows, separately for guide and appearance.
         start = time.perf_counter()
@@ -926,7 +958,9 @@ def synthesize(
     query_levels : sequence of Mapping
         Query pyramid, finest first; appearance is ignored.
     exemplar_levels : sequence of sequence of Mapping
-        One pyramid (finest first, same level count) per exemplar.
+        One pyramid (finest first, same level count) per exemplar. A pyramid given as
+        :class:`ReleasableLevels` is handed over: each level is dropped from it once its
+        bands are packed (a front end's pyramids then do not add to the peak memory).
     params : EngineParams, optional
     seed : int
         Seeds every random choice; the same seed gives the same bytes.
@@ -964,9 +998,18 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         level_params = params
         if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
-        solver = _LevelSolver(query_levels[level], exemplars, k, level_params, rng, timer)
+        solver = _LevelSolver(
+            query_levels[level], exemplars, k, level_params, rng, timer, prepare=False
+        )
+        # The bands are packed: the level's mappings are not needed any more. Pyramids
+        # handed over (ReleasableLevels) drop them now, before the features are made.
+        del exemplars
+        for pyramid in (query_levels, *exemplar_levels):
+            if isinstance(pyramid, ReleasableLevels):
+                pyramid.release(level)
+        solver.prepare(rng)
         level_seed = int(rng.integers(0, 2**62))
-        h, w = query_levels[level].shape
+        h, w = solver.query_shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
         if coarse_source is None and params.init_from_guide:
             # The appearance is unknown yet: match on guide and position only.
@@ -1017,12 +1060,12 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             if not better.any() or previous - value < params.tolerance * abs(previous):
                 break
             previous = value
-        r = solver.r
-        appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         if level == 0:  # the finest level's exact costs, while the bands are there
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)
         solver.release_search()  # what only the E-step needs, before the dense maps
+        r = solver.r  # the level's estimate copied out once the E-step's state is freed
+        appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
     if params.vote == "mode":
