@@ -593,6 +593,7 @@ def colorize(
         ycbcr = collapse_laplacian(result.appearance)
     else:
         ycbcr = result.appearance[0]
+    result.appearance = None  # collapsed: not held through the finish
     mask = depth > 0
     source = result.source
     if params.vote in ("copy", "mode"):
@@ -602,6 +603,7 @@ def colorize(
         # the synthesis would add to its peak memory, and they cost little to remake.
         exemplars = [_example_ycbcr(example) for example in chosen]
         source = result.copy_source
+        result.source = result.copy_source = None  # `source` holds what is still needed
         if params.seam_smoothness > 0:
             source = place_seams(exemplars, source, ycbcr, smoothness=params.seam_smoothness)
         size = float(np.sqrt(mask.sum()))

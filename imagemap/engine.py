@@ -34,7 +34,10 @@ A single-level guided synthesis: the query guide is a shifted exemplar guide.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import logging
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -279,6 +282,24 @@ class EngineResult:
     timings: dict[str, float] = field(default_factory=dict)
     backend: str = ""
     copy_source: np.ndarray | None = None
+
+
+def _trim_heap() -> None:
+    """Give the C heap's free pages back to the system (glibc ``malloc_trim``; elsewhere
+    nothing). Freed NumPy arrays below glibc's mmap threshold stay in the heap, resident,
+    and the next phase's larger arrays are mapped beside them: trimmed between phases,
+    the peak is what is alive, not what was once allocated."""
+    global _MALLOC_TRIM
+    if _MALLOC_TRIM is None:
+        _MALLOC_TRIM = False
+        if sys.platform.startswith("linux"):
+            with contextlib.suppress(OSError, AttributeError):
+                _MALLOC_TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+    if _MALLOC_TRIM:
+        _MALLOC_TRIM(0)
+
+
+_MALLOC_TRIM = None
 
 
 class _Timer:
@@ -975,6 +996,7 @@ def synthesize(
     _validate(query_levels, exemplar_levels, params)
     # One BLAS thread: the numba kernels own the cores, and a multithreaded
     # OpenBLAS on a busy machine spins (a 363x363 eigh measured 300x slower).
+    _trim_heap()  # the front end's temporaries: freed, not yet given back
     with threadpool_limits(limits=1, user_api="blas"):
         return _synthesize(query_levels, exemplar_levels, params, seed, quiet)
 
@@ -1007,6 +1029,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         for pyramid in (query_levels, *exemplar_levels):
             if isinstance(pyramid, ReleasableLevels):
                 pyramid.release(level)
+        _trim_heap()
         solver.prepare(rng)
         level_seed = int(rng.integers(0, 2**62))
         h, w = solver.query_shape
@@ -1064,6 +1087,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)
         solver.release_search()  # what only the E-step needs, before the dense maps
+        _trim_heap()
         r = solver.r  # the level's estimate copied out once the E-step's state is freed
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         coarse_source = solver.dense_source(matches)
