@@ -412,9 +412,16 @@ class _Windows:
         view = self.view
         if isinstance(self.channels, slice):
             view = view[..., self.channels, :, :]
-        block = view[index]
+        channels = range(view.shape[-3])
         if self.channels is not None and not isinstance(self.channels, slice):
-            block = block[:, self.channels]
+            channels = self.channels
+        # Gathered one channel at a time into the (N, C, k, k) block: the gather of all
+        # channels at once comes out in the view's memory order (not C-contiguous), and
+        # flattening it copied the whole block a second time.
+        k = view.shape[-1]
+        block = np.empty((index[0].shape[0], len(channels), k, k), dtype=view.dtype)
+        for i, channel in enumerate(channels):
+            block[:, i] = view[..., channel, :, :][index]
         block = block.reshape(block.shape[0], -1)
         if self.scale is not None:
             block *= self.scale
