@@ -374,7 +374,7 @@ def _fit_pca(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows."""
     mean = samples.mean(axis=0)
-    centered = (samples - mean).astype(np.float32)
+    centered = (samples - mean).astype(np.float32, copy=False)
     dim = centered.shape[1]
     if dim <= 1024 or 4 * n_keep > dim:
         cov = (centered.T @ centered).astype(np.float64)
@@ -900,10 +900,10 @@ class _LevelSolver:
             ny, nx = ndimage.distance_transform_edt(
                 ~valid, return_distances=False, return_indices=True
             )
-            nearest = self.exemplar_lookup[ex, ny, nx]
-            del ny, nx
             sel = e == ex
-            matches[sel] = nearest[sy[sel], sx[sel]]
+            at = (sy[sel], sx[sel])  # the nearest candidate read where it is needed only
+            matches[sel] = self.exemplar_lookup[ex, ny[at], nx[at]]
+            del ny, nx
         return matches
 
     def dense_source(self, matches: np.ndarray, copied: bool | None = None) -> np.ndarray:
@@ -1036,18 +1036,22 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         for pyramid in (query_levels, *exemplar_levels):
             if isinstance(pyramid, ReleasableLevels):
                 pyramid.release(level)
+        # The coarser level's matches propagated from the packed lookups alone (no random
+        # number drawn): before the features, so that its transients do not add to them.
+        propagated = None if coarse_source is None else solver.propagate(coarse_source)
+        coarse_source = solver.exemplar_valid = None  # what only propagate needed
         _trim_heap()
         solver.prepare(rng)
         level_seed = int(rng.integers(0, 2**62))
         h, w = solver.query_shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
-        if coarse_source is None and params.init_from_guide:
+        if propagated is None and params.init_from_guide:
             # The appearance is unknown yet: match on guide and position only.
             matches = solver.search(None, init=True, seed=level_seed, rng=rng)
-        elif coarse_source is None:
+        elif propagated is None:
             matches = rng.integers(0, len(solver.cand_e), size=len(solver.query_y))
         else:
-            matches = solver.propagate(coarse_source)
+            matches, propagated = propagated, None
             if params.guide_reseed > 0:
                 matches = solver.reseed(matches, params.guide_reseed, level_seed, rng)
         appearance = solver.vote(matches, appearance)
