@@ -388,10 +388,11 @@ def _example_ycbcr(example: Example) -> np.ndarray:
     # The image read from disk is not left cached on the example: the synthesis keeps
     # only its colour bands, and the finish reads it again (a full-size float32 image
     # per example less through the synthesis).
-    cached = "image" in vars(example)
+    cache = getattr(example, "__dict__", {})
+    cached = "image" in cache
     image = example.image
-    if not cached:
-        del example.image
+    if not cached and "image" in cache:  # filled just now (a cached_property): emptied
+        del cache["image"]
     return to_ycbcr(fill_background(image, example.mask))
 
 
