@@ -370,11 +370,15 @@ def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
 
 
 def _fit_pca(
-    samples: np.ndarray, n_keep: int, rng: np.random.Generator
+    samples: np.ndarray, n_keep: int, rng: np.random.Generator, overwrite: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows."""
+    """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows
+    (``overwrite``: float32 ``samples`` are centred in place, not copied)."""
     mean = samples.mean(axis=0)
-    centered = (samples - mean).astype(np.float32, copy=False)
+    if overwrite and samples.dtype == np.float32:
+        centered = np.subtract(samples, mean, out=samples)
+    else:
+        centered = (samples - mean).astype(np.float32, copy=False)
     dim = centered.shape[1]
     if dim <= 1024 or 4 * n_keep > dim:
         cov = (centered.T @ centered).astype(np.float64)
@@ -443,11 +447,13 @@ class _Projection:
         return 0 if self.matrix is None else self.matrix.shape[1]
 
     def fit(self, samples: np.ndarray, fraction: float, cap: int | None, rng) -> None:
-        weighted = samples * self.sqrt_weights
+        """Learn the projection from window ``samples`` (float32, overwritten: weighted
+        and centred in place, no copies of the samples)."""
+        weighted = np.multiply(samples, self.sqrt_weights, out=samples)
         n_keep = max(1, int(round(fraction * weighted.shape[1])))
         if cap is not None:
             n_keep = min(n_keep, cap)
-        mean, basis = _fit_pca(weighted, n_keep, rng)
+        mean, basis = _fit_pca(weighted, n_keep, rng, overwrite=True)
         self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
         self.offset = mean @ basis
 
@@ -630,8 +636,10 @@ class _LevelSolver:
         largest = 0.0
         for projection, windows in zip(projections, self.exemplar_windows, strict=True):
             if projection.n_channels:
-                samples = windows(sample_index)
-                projection.fit(samples, params.pca_fraction, params.pca_max_components, rng)
+                # The samples are consumed by the fit (weighted and centred in place).
+                projection.fit(
+                    windows(sample_index), params.pca_fraction, params.pca_max_components, rng
+                )
                 if params.quantize_features:
                     largest = max(
                         largest, float(np.abs(projection.project(windows, sample_index)).max())
