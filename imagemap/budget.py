@@ -49,14 +49,21 @@ log = logging.getLogger("imagemap")
 # 150x200 and 360x480, m = 2, patchmatch) against VmHWM - VmRSS before the call; refitted
 # for int16 features and one packed copy of the exemplar bands: -1 % to +15 % from 300x400
 # to 2400x3200 (1820 MB measured, 1807 MB estimated), -7 % at 150x200. Examples as large as
-# the query (1024^2 to 4096^2 fish) are overestimated by 15-25 %.
-_QUERY_CENTRE_BYTES = 70  # coordinates, positions, matches, candidates, costs
+# the query (1024^2 to 4096^2 fish) are overestimated by 15-25 %. Refitted (issue 14, round
+# two) once the front end's pyramid levels were freed as the engine packs them: in-process
+# VmHWM - VmRSS before the call, fish, m = 2 unless said: 200x150 91 MB measured / 87
+# estimated, 512^2 156 / 135, 1024^2 260 / 295 (m = 1: 244 / 281), 2048^2 789 / 930, a
+# 2000x1500 query with 200x150 examples 572 / 627 (-14 % to +18 %).
+_QUERY_CENTRE_BYTES = 40  # coordinates, positions, matches, candidates, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
-_QUERY_PIXEL_BYTES = 100  # padded bands, lookup, vote buffers, dense source map temporaries
+_QUERY_PIXEL_BYTES = 220  # padded bands, lookup, vote buffers, dense maps, the copy finish
 _FEATURE_BYTES = 2  # per feature dimension: int16 (EngineParams.quantize_features)
-_EXEMPLAR_PIXEL_BYTES = 40  # packed bands, lookups, the example's own pyramids
+# Packed bands, lookups, valid masks: the fit puts them in the candidate and pyramid terms.
+_EXEMPLAR_PIXEL_BYTES = 0
+_QUERY_LEVEL_BYTES = 13  # a level of the query's pyramid: guide bands, mask
+_EXEMPLAR_LEVEL_BYTES = 25  # a level of an example's pyramid: guide and colour bands, mask
 _OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
-_MEMORY_FACTOR = 0.95
+_MEMORY_FACTOR = 0.6
 _SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
 _SECONDS_OVERHEAD = 0.3
 
@@ -158,13 +165,17 @@ def estimate_colorize(
             + pixels * _QUERY_PIXEL_BYTES
             + ex_pixels * _EXEMPLAR_PIXEL_BYTES
         )
-        per_level.append((solver, centres, candidates))
+        # The front end's pyramid level, alive until the engine has packed it.
+        pyramid = (
+            height * width * _QUERY_LEVEL_BYTES + n_ex * ex_h * ex_w * _EXEMPLAR_LEVEL_BYTES
+        ) / scale**2
+        per_level.append((solver, centres, candidates, pyramid))
         work += centres * dims
         persistent += 40 * height * width / scale**2
-    # Building level l keeps level l + 1's solver alive.
+    # At level l the finer levels of the pyramids are still held (each is dropped once
+    # packed); the coarser level's solver is freed before this one is built.
     peak = max(
-        per_level[i][0] + (per_level[i + 1][0] if i + 1 < len(per_level) else 0.0)
-        for i in range(len(per_level))
+        per_level[i][0] + sum(level[3] for level in per_level[:i]) for i in range(len(per_level))
     )
     total = _OVERHEAD_BYTES + _MEMORY_FACTOR * (peak + persistent)
     return Estimate(

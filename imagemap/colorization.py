@@ -29,7 +29,7 @@ from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import fill_background, place_seams, seamless_copy
 from imagemap.database import Database, Example
-from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
+from imagemap.engine import EngineParams, EngineResult, Mapping, ReleasableLevels, synthesize
 from imagemap.io import InputError, validate_depth
 from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
 from imagemap.validate import check_colorize_arguments, check_float, check_int
@@ -427,7 +427,15 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
 
 
 def _example_ycbcr(example: Example) -> np.ndarray:
-    return to_ycbcr(fill_background(example.image, example.mask))
+    # The image read from disk is not left cached on the example: the synthesis keeps
+    # only its colour bands, and the finish reads it again (a full-size float32 image
+    # per example less through the synthesis).
+    cache = getattr(example, "__dict__", {})
+    cached = "image" in cache
+    image = example.image
+    if not cached and "image" in cache:  # filled just now (a cached_property): emptied
+        del cache["image"]
+    return to_ycbcr(fill_background(image, example.mask))
 
 
 def example_mappings(
@@ -609,9 +617,11 @@ def colorize(
         params = replace(params, patch_sizes=level_patch_sizes(params.patch_sizes, levels))
     clip = params.detail_clip or None
     outline = bool(params.silhouette_weight)
-    query = depth_mappings(depth, levels, clip, outline)
+    # Handed over to the engine, which drops each level once it has packed its bands.
+    query = ReleasableLevels(depth_mappings(depth, levels, clip, outline))
     exemplar_levels = [
-        example_mappings(e, levels, params.use_pyramid, clip, outline) for e in chosen
+        ReleasableLevels(example_mappings(e, levels, params.use_pyramid, clip, outline))
+        for e in chosen
     ]
     pyramid_seconds = time.perf_counter() - start
 
@@ -630,6 +640,7 @@ def colorize(
         ycbcr = collapse_laplacian(result.appearance)
     else:
         ycbcr = result.appearance[0]
+    result.appearance = None  # collapsed: not held through the finish
     mask = depth > 0
     source = result.source
     if params.vote in ("copy", "mode"):
@@ -639,6 +650,7 @@ def colorize(
         # the synthesis would add to its peak memory, and they cost little to remake.
         exemplars = [_example_ycbcr(example) for example in chosen]
         source = result.copy_source
+        result.source = result.copy_source = None  # `source` holds what is still needed
         if params.seam_smoothness > 0:
             source = place_seams(exemplars, source, ycbcr, smoothness=params.seam_smoothness)
         size = float(np.sqrt(mask.sum()))

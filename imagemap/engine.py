@@ -34,7 +34,10 @@ A single-level guided synthesis: the query guide is a shifted exemplar guide.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import logging
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -48,7 +51,15 @@ from imagemap import _kernels
 from imagemap.progress import progress
 from imagemap.search import make_index
 
-__all__ = ["BACKENDS", "VOTES", "EngineParams", "EngineResult", "Mapping", "synthesize"]
+__all__ = [
+    "BACKENDS",
+    "VOTES",
+    "EngineParams",
+    "EngineResult",
+    "Mapping",
+    "ReleasableLevels",
+    "synthesize",
+]
 
 log = logging.getLogger("imagemap")
 
@@ -116,6 +127,16 @@ class Mapping:
     @property
     def shape(self) -> tuple[int, int]:
         return self.guide.shape[:2]
+
+
+class ReleasableLevels(list):
+    """A pyramid (list of :class:`Mapping`, finest first) handed over to :func:`synthesize`:
+    once the engine has packed a level's bands it calls :meth:`release`, which drops the
+    level from the list, so that its arrays are freed during the synthesis if nothing
+    else holds them. A plain list is left as it is."""
+
+    def release(self, level: int) -> None:
+        self[level] = None
 
 
 @dataclass(frozen=True)
@@ -286,6 +307,24 @@ class EngineResult:
     copy_source: np.ndarray | None = None
 
 
+def _trim_heap() -> None:
+    """Give the C heap's free pages back to the system (glibc ``malloc_trim``; elsewhere
+    nothing). Freed NumPy arrays below glibc's mmap threshold stay in the heap, resident,
+    and the next phase's larger arrays are mapped beside them: trimmed between phases,
+    the peak is what is alive, not what was once allocated."""
+    global _MALLOC_TRIM
+    if _MALLOC_TRIM is None:
+        _MALLOC_TRIM = False
+        if sys.platform.startswith("linux"):
+            with contextlib.suppress(OSError, AttributeError):
+                _MALLOC_TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+    if _MALLOC_TRIM:
+        _MALLOC_TRIM(0)
+
+
+_MALLOC_TRIM = None
+
+
 class _Timer:
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
@@ -354,11 +393,15 @@ def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
 
 
 def _fit_pca(
-    samples: np.ndarray, n_keep: int, rng: np.random.Generator
+    samples: np.ndarray, n_keep: int, rng: np.random.Generator, overwrite: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows."""
+    """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows
+    (``overwrite``: float32 ``samples`` are centred in place, not copied)."""
     mean = samples.mean(axis=0)
-    centered = (samples - mean).astype(np.float32)
+    if overwrite and samples.dtype == np.float32:
+        centered = np.subtract(samples, mean, out=samples)
+    else:
+        centered = (samples - mean).astype(np.float32, copy=False)
     dim = centered.shape[1]
     if dim <= 1024 or 4 * n_keep > dim:
         cov = (centered.T @ centered).astype(np.float64)
@@ -396,9 +439,16 @@ class _Windows:
         view = self.view
         if isinstance(self.channels, slice):
             view = view[..., self.channels, :, :]
-        block = view[index]
+        channels = range(view.shape[-3])
         if self.channels is not None and not isinstance(self.channels, slice):
-            block = block[:, self.channels]
+            channels = self.channels
+        # Gathered one channel at a time into the (N, C, k, k) block: the gather of all
+        # channels at once comes out in the view's memory order (not C-contiguous), and
+        # flattening it copied the whole block a second time.
+        k = view.shape[-1]
+        block = np.empty((index[0].shape[0], len(channels), k, k), dtype=view.dtype)
+        for i, channel in enumerate(channels):
+            block[:, i] = view[..., channel, :, :][index]
         block = block.reshape(block.shape[0], -1)
         if self.scale is not None:
             block *= self.scale
@@ -420,11 +470,13 @@ class _Projection:
         return 0 if self.matrix is None else self.matrix.shape[1]
 
     def fit(self, samples: np.ndarray, fraction: float, cap: int | None, rng) -> None:
-        weighted = samples * self.sqrt_weights
+        """Learn the projection from window ``samples`` (float32, overwritten: weighted
+        and centred in place, no copies of the samples)."""
+        weighted = np.multiply(samples, self.sqrt_weights, out=samples)
         n_keep = max(1, int(round(fraction * weighted.shape[1])))
         if cap is not None:
             n_keep = min(n_keep, cap)
-        mean, basis = _fit_pca(weighted, n_keep, rng)
+        mean, basis = _fit_pca(weighted, n_keep, rng, overwrite=True)
         self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
         self.offset = mean @ basis
 
@@ -472,7 +524,11 @@ class _LevelSolver:
         params: EngineParams,
         rng: np.random.Generator,
         timer: _Timer,
+        prepare: bool = True,
     ) -> None:
+        """Pack the bands of ``query`` and ``exemplars`` (nothing of the mappings is kept),
+        then, unless ``prepare`` is False, learn the PCA and make the features
+        (:meth:`prepare`): with False the caller may free the mappings first."""
         start = time.perf_counter()
         self.params = params
         self.r = r = k // 2
@@ -572,6 +628,16 @@ class _LevelSolver:
             guide_scale,
         )
         timer.add("setup", start)
+        if prepare:
+            self.prepare(rng)
+
+    def prepare(self, rng: np.random.Generator) -> None:
+        """PCA learned on exemplar windows, and the features of candidates and query
+        windows: from the packed bands alone."""
+        k, timer, params = 2 * self.r + 1, self.timer, self.params
+        n_ga, n_aa = self.n_guide_active, len(self.appearance_active)
+        n_appearance = self.exemplar_appearance.shape[-1]
+        h = self.query_shape[0]
 
         # PCA, learned on exemplar windows, separately for guide and appearance.
         start = time.perf_counter()
@@ -593,8 +659,10 @@ class _LevelSolver:
         largest = 0.0
         for projection, windows in zip(projections, self.exemplar_windows, strict=True):
             if projection.n_channels:
-                samples = windows(sample_index)
-                projection.fit(samples, params.pca_fraction, params.pca_max_components, rng)
+                # The samples are consumed by the fit (weighted and centred in place).
+                projection.fit(
+                    windows(sample_index), params.pca_fraction, params.pca_max_components, rng
+                )
                 if params.quantize_features:
                     largest = max(
                         largest, float(np.abs(projection.project(windows, sample_index)).max())
@@ -863,10 +931,10 @@ class _LevelSolver:
             ny, nx = ndimage.distance_transform_edt(
                 ~valid, return_distances=False, return_indices=True
             )
-            nearest = self.exemplar_lookup[ex, ny, nx]
-            del ny, nx
             sel = e == ex
-            matches[sel] = nearest[sy[sel], sx[sel]]
+            at = (sy[sel], sx[sel])  # the nearest candidate read where it is needed only
+            matches[sel] = self.exemplar_lookup[ex, ny[at], nx[at]]
+            del ny, nx
         return matches
 
     def dense_source(self, matches: np.ndarray, copied: bool | None = None) -> np.ndarray:
@@ -972,7 +1040,9 @@ def synthesize(
     query_levels : sequence of Mapping
         Query pyramid, finest first; appearance is ignored.
     exemplar_levels : sequence of sequence of Mapping
-        One pyramid (finest first, same level count) per exemplar.
+        One pyramid (finest first, same level count) per exemplar. A pyramid given as
+        :class:`ReleasableLevels` is handed over: each level is dropped from it once its
+        bands are packed (a front end's pyramids then do not add to the peak memory).
     params : EngineParams, optional
     seed : int
         Seeds every random choice; the same seed gives the same bytes.
@@ -987,6 +1057,7 @@ def synthesize(
     _validate(query_levels, exemplar_levels, params)
     # One BLAS thread: the numba kernels own the cores, and a multithreaded
     # OpenBLAS on a busy machine spins (a 363x363 eigh measured 300x slower).
+    _trim_heap()  # the front end's temporaries: freed, not yet given back
     with threadpool_limits(limits=1, user_api="blas"):
         return _synthesize(query_levels, exemplar_levels, params, seed, quiet)
 
@@ -1044,19 +1115,31 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             level_params = replace(
                 level_params, guide_weights=params.guide_weights + context_weights
             )
-        solver = _LevelSolver(query, exemplars, k, level_params, rng, timer)
-        del query
+        solver = _LevelSolver(query, exemplars, k, level_params, rng, timer, prepare=False)
+        # The bands are packed: the level's mappings (and their context copies) are not
+        # needed any more. Pyramids handed over (ReleasableLevels) drop them now, before
+        # the features are made.
+        del query, exemplars
         exemplar_colours = level_colours
+        for pyramid in (query_levels, *exemplar_levels):
+            if isinstance(pyramid, ReleasableLevels):
+                pyramid.release(level)
+        # The coarser level's matches propagated from the packed lookups alone (no random
+        # number drawn): before the features, so that its transients do not add to them.
+        propagated = None if coarse_source is None else solver.propagate(coarse_source)
+        coarse_source = solver.exemplar_valid = None  # what only propagate needed
+        _trim_heap()
+        solver.prepare(rng)
         level_seed = int(rng.integers(0, 2**62))
-        h, w = query_levels[level].shape
+        h, w = solver.query_shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
-        if coarse_source is None and params.init_from_guide:
+        if propagated is None and params.init_from_guide:
             # The appearance is unknown yet: match on guide and position only.
             matches = solver.search(None, init=True, seed=level_seed, rng=rng)
-        elif coarse_source is None:
+        elif propagated is None:
             matches = rng.integers(0, len(solver.cand_e), size=len(solver.query_y))
         else:
-            matches = solver.propagate(coarse_source)
+            matches, propagated = propagated, None
             if params.guide_reseed > 0:
                 matches = solver.reseed(matches, params.guide_reseed, level_seed, rng)
         appearance = solver.vote(matches, appearance)
@@ -1099,16 +1182,17 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             if not better.any() or previous - value < params.tolerance * abs(previous):
                 break
             previous = value
-        r = solver.r
+        if level == 0:  # the finest level's exact costs, while the bands are there
+            solver.set_appearance(appearance, project=False)
+            final_cost = solver.costs(matches)
+        solver.release_search()  # what only the E-step needs, before the dense maps
+        _trim_heap()
+        r = solver.r  # the level's estimate copied out once the E-step's state is freed
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         if context_from > 0 and level > 0:
             query_colours = _coarse_colours(
                 query_colours, appearance_levels[level][..., context_bands], kind
             )
-        if level == 0:  # the finest level's exact costs, while the bands are there
-            solver.set_appearance(appearance, project=False)
-            final_cost = solver.costs(matches)
-        solver.release_search()  # what only the E-step needs, before the dense maps
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
     if params.vote == "mode":

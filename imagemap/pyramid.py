@@ -28,6 +28,7 @@ __all__ = [
 
 #: Standard deviation (pixels) of the smoothing before each 2x subsampling.
 REDUCE_SIGMA = 1.0
+_EXPAND_ROWS = 128  # rows per block of expand()
 
 
 def _spatial_sigma(image: np.ndarray, sigma: float) -> tuple[float, ...]:
@@ -57,9 +58,16 @@ def expand(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     x1 = np.minimum(x0 + 1, image.shape[1] - 1)
     fy = (ys - y0).reshape((-1, 1) + (1,) * (image.ndim - 2))
     fx = (xs - x0).reshape((1, -1) + (1,) * (image.ndim - 2))
-    top = image[y0][:, x0] * (1 - fx) + image[y0][:, x1] * fx
-    bottom = image[y1][:, x0] * (1 - fx) + image[y1][:, x1] * fx
-    return (top * (1 - fy) + bottom * fy).astype(np.float32)
+    # In blocks of rows (the same per-pixel float64 arithmetic, rounded to float32 on
+    # storing): a full-size map's float64 temporaries would be several times its size.
+    out = np.empty((height, width) + image.shape[2:], dtype=np.float32)
+    for r0 in range(0, height, _EXPAND_ROWS):
+        rows = slice(r0, r0 + _EXPAND_ROWS)
+        upper, lower = image[y0[rows]], image[y1[rows]]
+        top = upper[:, x0] * (1 - fx) + upper[:, x1] * fx
+        bottom = lower[:, x0] * (1 - fx) + lower[:, x1] * fx
+        out[rows] = top * (1 - fy[rows]) + bottom * fy[rows]
+    return out
 
 
 def level_shapes(shape: tuple[int, int], levels: int) -> list[tuple[int, int]]:
@@ -118,9 +126,13 @@ def laplacian_pyramid(image: np.ndarray, levels: int = 3) -> list[np.ndarray]:
 def collapse_laplacian(pyramid: list[np.ndarray]) -> np.ndarray:
     """Sum a Laplacian pyramid back into the finest image (inverse of :func:`laplacian_pyramid`)."""
     image = np.asarray(pyramid[-1], dtype=np.float32)
+    if len(pyramid) == 1:
+        return image.copy()
     for band in reversed(pyramid[:-1]):
-        image = band + expand(image, band.shape[:2])
-    return image.astype(np.float32)
+        expanded = expand(image, band.shape[:2])
+        expanded += band  # band + expanded, without a third full-size array
+        image = expanded
+    return image.astype(np.float32, copy=False)
 
 
 def mask_pyramid(mask: np.ndarray, levels: int = 3) -> list[np.ndarray]:

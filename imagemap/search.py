@@ -91,7 +91,11 @@ class ExactIndex:
             best_index = np.zeros(q.shape[0], dtype=np.int64)
             for d0 in range(0, n_data, data_block):
                 block = self.data[d0 : d0 + data_block]
-                dist = self.data_norms[None, d0 : d0 + data_block] - 2.0 * (q @ block.T)
+                # |d|^2 - 2 q.d, in place: one block-sized array, not three (the same
+                # float32 operations as ``norms - 2.0 * (q @ block.T)``).
+                dist = q @ block.T
+                np.multiply(dist, np.float32(2.0), out=dist)
+                np.subtract(self.data_norms[None, d0 : d0 + data_block], dist, out=dist)
                 local = np.argmin(dist, axis=1)
                 local_best = dist[np.arange(q.shape[0]), local] + q_norms
                 better = local_best < best

@@ -176,3 +176,105 @@ def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
     assert more.bytes > fewer.bytes and more.seconds > fewer.seconds
     # The pyramid grown for a large object, each level estimated.
     assert more.levels == pyramid_levels(depth > 0, with_band.patch_sizes) > with_band.levels
+
+
+def _pyramid_scene(size, seed, n_levels=2):
+    """A query pyramid and two exemplar pyramids (fresh arrays, held by the lists alone)."""
+    from imagemap.pyramid import gaussian_pyramid
+
+    def pyramid(seed, appearance):
+        rng = np.random.default_rng(seed)
+        guide = gaussian_pyramid(rng.random((size, size, 2)).astype(np.float32), n_levels)
+        bands = gaussian_pyramid(rng.random((size, size, 3)).astype(np.float32), n_levels)
+        masks = [np.zeros(g.shape[:2], bool) for g in guide]
+        for m in masks:
+            m[2:-2, 3:-3] = True
+        return [
+            Mapping(guide=g, appearance=a if appearance else None, mask=m)
+            for g, a, m in zip(guide, bands, masks, strict=True)
+        ]
+
+    return pyramid(seed, False), [pyramid(seed + 1, True), pyramid(seed + 2, True)]
+
+
+def _synthesis_peak(levels_type):
+    params = EngineParams(
+        patch_sizes=(5, 5),
+        guide_weights=(1.0, 2.0),
+        appearance_weights=(1.0, 0.5, 0.5),
+        position_weight=0.5,
+        max_iterations=2,
+        init_from_guide=False,  # no exact search at the coarsest level: its block is the peak
+    )
+    tracemalloc.start()  # before the pyramids are made: their release shows in the peak
+    try:
+        query, exemplars = _pyramid_scene(200, 0)
+        finest = query[0].guide.nbytes + sum(
+            e[0].guide.nbytes + e[0].appearance.nbytes + e[0].mask.nbytes for e in exemplars
+        )
+        query, exemplars = levels_type(query), [levels_type(e) for e in exemplars]
+        result = synthesize(query, exemplars, params, seed=3)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return result, peak, finest, query, exemplars
+
+
+def test_handed_over_pyramids_are_freed_level_by_level_with_the_same_result():
+    """ReleasableLevels: each level is dropped once packed, so the finest level's mappings
+    are not alive while its features are made; a plain list is left whole. Same bytes."""
+    _synthesis_peak(list)  # kernels loaded first
+    kept, kept_peak, finest, query, exemplars = _synthesis_peak(list)
+    assert all(m is not None for m in query) and all(m is not None for e in exemplars for m in e)
+    released, released_peak, _, query, exemplars = _synthesis_peak(engine.ReleasableLevels)
+    assert all(m is None for m in query) and all(m is None for e in exemplars for m in e)
+    for a, b in zip(kept.appearance, released.appearance, strict=True):
+        assert np.array_equal(a, b)
+    assert np.array_equal(kept.source, released.source)
+    assert kept_peak - released_peak > 0.8 * finest, (kept_peak, released_peak, finest)
+
+
+def test_exact_index_makes_its_distance_block_in_place():
+    """One block-sized float32 array (not the product, its double and their difference)."""
+    from imagemap.search import ExactIndex
+
+    rng = np.random.default_rng(0)
+    data = rng.standard_normal((2000, 8)).astype(np.float32)
+    queries = rng.standard_normal((3000, 8)).astype(np.float32)
+    index = ExactIndex(data)
+    tracemalloc.start()
+    try:
+        found, distances = index.query(queries)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    block = 4 * len(queries) * len(data)
+    assert peak < 1.3 * block, (peak, block)
+    expected = index.data_norms[None] - 2.0 * (queries @ data.T)
+    assert np.array_equal(found, np.argmin(expected, axis=1))
+
+
+def test_window_blocks_are_gathered_without_a_second_copy():
+    """_Windows gathers the same values as flattening the sliding-window gather, into
+    one block (the all-channel gather is not C-contiguous: flattening it copied it)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    rng = np.random.default_rng(0)
+    bands = rng.random((2, 300, 300, 3)).astype(np.float32)
+    view = sliding_window_view(bands, (11, 11), axis=(1, 2))
+    n = 16384
+    index = (rng.integers(0, 2, n), rng.integers(0, 290, n), rng.integers(0, 290, n))
+    expected = view[index].reshape(n, -1)
+    for channels, scale in ((None, None), (np.array([2, 0]), np.array([0.5, 2.0]))):
+        windows = engine._Windows(view, channels, scale)
+        tracemalloc.start()
+        try:
+            block = windows(index)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        want = expected if channels is None else view[index][:, channels].reshape(n, -1)
+        if scale is not None:
+            want = want * np.repeat(scale.astype(np.float32), 121)
+        assert np.array_equal(block, want)
+        assert peak < 1.75 * block.nbytes, (peak, block.nbytes)  # was 2 to 2.5 blocks
