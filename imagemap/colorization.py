@@ -134,8 +134,8 @@ class ColorizeParams:
         that only the finer levels resolve are then drawn.
     context_weight : float
         Weight of the coarser levels' luminance as an extra guide band (times the Y
-        weight; the engine's ``context_weights``; Cb and Cr too cost a third more
-        memory at 1024² for the same maps) at the levels whose
+        weight; the engine's ``context_weights``; Cb and Cr too gave the same maps
+        for about 10 % more peak memory at 1024²) at the levels whose
         window spans less than ``CONTEXT_FRACTION`` of the object's size (see
         :func:`context_levels`): on a large map the fine levels then keep the eyes,
         lips and palette the coarser levels chose instead of matching their own thin
@@ -611,7 +611,8 @@ def colorize(
     selection_seconds = time.perf_counter() - start
 
     start = time.perf_counter()
-    levels = pyramid_levels(depth > 0, params.patch_sizes, grow=params.grow_pyramid)
+    mask = depth > 0
+    levels = pyramid_levels(mask, params.patch_sizes, grow=params.grow_pyramid)
     if levels != params.levels:
         log.info("object size calls for %d pyramid levels (preset: %d)", levels, params.levels)
         params = replace(params, patch_sizes=level_patch_sizes(params.patch_sizes, levels))
@@ -628,7 +629,7 @@ def colorize(
     result: EngineResult = synthesize(
         query,
         exemplar_levels,
-        params.engine_params(len(chosen), context_levels(depth > 0, params.patch_sizes)),
+        params.engine_params(len(chosen), context_levels(mask, params.patch_sizes)),
         seed=seed,
         quiet=quiet,
     )
@@ -641,7 +642,6 @@ def colorize(
     else:
         ycbcr = result.appearance[0]
     result.appearance = None  # collapsed: not held through the finish
-    mask = depth > 0
     source = result.source
     if params.vote in ("copy", "mode"):
         # Every pixel copied from the exemplar pixel its windows agree on, the seams

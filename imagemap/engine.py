@@ -49,6 +49,7 @@ from threadpoolctl import threadpool_limits
 
 from imagemap import _kernels
 from imagemap.progress import progress
+from imagemap.pyramid import collapse_laplacian, expand
 from imagemap.search import make_index
 
 __all__ = [
@@ -972,17 +973,13 @@ class _LevelSolver:
 
 def _coarse_colours(coarser: np.ndarray | None, band: np.ndarray, kind: str) -> np.ndarray:
     """A level's colours from its band and the coarser level's colours (running collapse)."""
-    from imagemap.pyramid import expand
-
     if kind == "gaussian" or coarser is None:
         return np.asarray(band, dtype=np.float32)
-    return band + expand(coarser, band.shape[:2])
+    return collapse_laplacian([band, coarser])  # one step of the collapse
 
 
 def _with_context(mapping: Mapping, coarser_colours: np.ndarray) -> Mapping:
     """A level's mapping with the coarser level's colours, brought to its grid, as guide."""
-    from imagemap.pyramid import expand
-
     context = expand(coarser_colours, mapping.shape)
     return Mapping(
         guide=np.concatenate([mapping.guide, context], axis=2),
@@ -1073,19 +1070,16 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
     coarse_source = None
     solver = None
     matches = None
+    # Only the bands with a context weight are collapsed and matched (luma alone by
+    # default in colorize: one band of three).
+    context_bands = np.flatnonzero(np.asarray(params.context_weights, dtype=np.float64))
+    context_weights = tuple(float(params.context_weights[b]) for b in context_bands)
     # Levels below context_from get the coarser levels' colours as context.
     context_from = 0
-    if params.context_weights:
-        context_from = n_levels - 1
-        if params.context_levels is not None:
-            context_from = min(context_from, params.context_levels)
+    if context_weights:
+        limit = n_levels - 1 if params.context_levels is None else params.context_levels
+        context_from = min(n_levels - 1, limit)
     kind = params.appearance_pyramid
-    # Only the bands with a context weight are collapsed and matched (luma alone by
-    # default in colorize: a third of the cost of all three).
-    context_bands = np.flatnonzero(np.asarray(params.context_weights or (0.0,)))
-    context_weights = tuple(float(params.context_weights[b]) for b in context_bands)
-    if not context_weights:
-        context_from = 0
     query_colours = exemplar_colours = None
     for level in progress(range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet):
         exemplars = [levels[level] for levels in exemplar_levels]
