@@ -713,3 +713,231 @@ def seam_sweeps(exemplars, shapes, reference, label_e, label_y, label_x, smooth,
                 height,
                 8,
             )
+
+
+# -- region moves on a source map (imagemap.blend.merge_regions) -------------------
+
+
+@njit(cache=True, nogil=True)
+def _find_root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]  # path halving
+        i = parent[i]
+    return i
+
+
+@njit(cache=True, nogil=True)
+def label_regions(label_e, label_y, label_x):
+    """4-connected regions of equal labels (exemplar, offset), numbered 0..n-1 in
+    raster order of their first pixel; -1 where there is no label. Returns (region, n)."""
+    height, width = label_e.shape
+    parent = np.arange(height * width)
+    for y in range(height):
+        for x in range(width):
+            if label_e[y, x] < 0:
+                continue
+            p = y * width + x
+            if (
+                x + 1 < width
+                and label_e[y, x + 1] == label_e[y, x]
+                and label_y[y, x + 1] == label_y[y, x]
+                and label_x[y, x + 1] == label_x[y, x]
+            ):
+                a, b = _find_root(parent, p), _find_root(parent, p + 1)
+                parent[max(a, b)] = min(a, b)
+            if (
+                y + 1 < height
+                and label_e[y + 1, x] == label_e[y, x]
+                and label_y[y + 1, x] == label_y[y, x]
+                and label_x[y + 1, x] == label_x[y, x]
+            ):
+                a, b = _find_root(parent, p), _find_root(parent, p + width)
+                parent[max(a, b)] = min(a, b)
+    region = np.full((height, width), -1, np.int64)
+    number = np.full(height * width, -1, np.int64)
+    n = 0
+    for y in range(height):
+        for x in range(width):
+            if label_e[y, x] < 0:
+                continue
+            root = _find_root(parent, y * width + x)
+            if number[root] < 0:
+                number[root] = n
+                n += 1
+            region[y, x] = number[root]
+    return region, n
+
+
+@njit(cache=True, nogil=True)
+def _pair_seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx):
+    """Kwatra et al.'s seam cost between pixel (y, x) labelled (e, oy, ox) and its
+    neighbour (ny, nx) labelled (f, fy, fx): the two sources' disagreement on both."""
+    if e == f and oy == fy and ox == fx:
+        return 0.0
+    seam = 1e-3
+    for py, px in ((y, x), (ny, nx)):
+        a, b, c, d = py + oy, px + ox, py + fy, px + fx
+        if (
+            0 <= a < shapes[e, 0]
+            and 0 <= b < shapes[e, 1]
+            and 0 <= c < shapes[f, 0]
+            and 0 <= d < shapes[f, 1]
+        ):
+            seam += _label_colour_distance(exemplars, e, a, b, f, c, d)
+        else:
+            seam += 1.0
+    return seam
+
+
+@njit(cache=True, nogil=True)
+def _region_cost(
+    exemplars, inside, shapes, reference, label_e, label_y, label_x, region, pixels, r, e, oy, ox,
+    smooth,
+):  # fmt: skip
+    """Data + seam cost and luminance detail of region ``r`` (its ``pixels``) under the
+    label (e, oy, ox), its other neighbours' labels fixed; cost inf when a source
+    falls outside the exemplar's object (``inside``)."""
+    height, width = label_e.shape
+    cost = 0.0
+    detail = 0.0
+    for p in pixels:
+        y, x = p // width, p % width
+        sy, sx = y + oy, x + ox
+        if sy < 0 or sx < 0 or sy >= shapes[e, 0] or sx >= shapes[e, 1] or not inside[e, sy, sx]:
+            return np.inf, 0.0
+        for ch in range(exemplars.shape[3]):
+            d = exemplars[e, sy, sx, ch] - reference[y, x, ch]
+            cost += d * d
+        for k in range(4):
+            dy = 1 if k == 0 else -1 if k == 1 else 0
+            dx = 1 if k == 2 else -1 if k == 3 else 0
+            # The source's own luminance gradients: the detail the region shows.
+            ty, tx = sy + dy, sx + dx
+            if 0 <= ty < shapes[e, 0] and 0 <= tx < shapes[e, 1]:
+                g = exemplars[e, ty, tx, 0] - exemplars[e, sy, sx, 0]
+                detail += g * g
+            ny, nx = y + dy, x + dx
+            if ny < 0 or nx < 0 or ny >= height or nx >= width:
+                continue
+            if region[ny, nx] == r or label_e[ny, nx] < 0:
+                continue
+            cost += smooth * _pair_seam(
+                exemplars,
+                shapes,
+                e,
+                oy,
+                ox,
+                label_e[ny, nx],
+                label_y[ny, nx],
+                label_x[ny, nx],
+                y,
+                x,
+                ny,
+                nx,
+            )
+    return cost, detail
+
+
+@njit(cache=True, nogil=True)
+def _is_palette_patch(exemplars, reference, label_e, label_y, label_x, pixels):
+    """Whether a region's copied colours sit off the reference as a whole: the norm
+    of their mean offset exceeds their own spread (the texture) around their mean."""
+    width = label_e.shape[1]
+    n_channels = exemplars.shape[3]
+    offset = np.zeros(n_channels)
+    total = np.zeros(n_channels)
+    square = np.zeros(n_channels)
+    for p in pixels:
+        y, x = p // width, p % width
+        e, sy, sx = label_e[y, x], y + label_y[y, x], x + label_x[y, x]
+        for ch in range(n_channels):
+            v = exemplars[e, sy, sx, ch]
+            offset[ch] += v - reference[y, x, ch]
+            total[ch] += v
+            square[ch] += v * v
+    n = pixels.shape[0]
+    shift = 0.0
+    spread = 0.0
+    for ch in range(n_channels):
+        shift += (offset[ch] / n) ** 2
+        spread += max(square[ch] / n - (total[ch] / n) ** 2, 0.0)
+    return shift > spread
+
+
+@njit(cache=True, nogil=True)
+def region_moves(
+    exemplars,
+    inside,
+    shapes,
+    reference,
+    label_e,
+    label_y,
+    label_x,
+    region,
+    n_regions,
+    order,
+    starts,
+    cand_region,
+    cand_donor,
+    smooth,
+    keep_detail,
+    palette_only,
+):
+    """One round of region moves (see :func:`imagemap.blend.merge_regions`), in place.
+
+    ``order[starts[r]:starts[r + 1]]`` are region r's flat pixel indices;
+    candidate c proposes that region ``cand_region[c]`` take the label of the
+    touching region ``cand_donor[c]``. Each region takes its best candidate that
+    lowers the data + seam cost and keeps at least ``keep_detail`` of its
+    luminance detail; moves are applied by decreasing gain, a region moving only
+    if neither it nor its donor has moved this round. Returns the moves made.
+    """
+    width = label_e.shape[1]
+    best_gain = np.zeros(n_regions)
+    best_donor = np.full(n_regions, -1, np.int64)
+    last = -1
+    old_cost = 0.0
+    old_detail = 0.0
+    movable = False
+    for c in range(cand_region.shape[0]):
+        r, s = cand_region[c], cand_donor[c]
+        pixels = order[starts[r] : starts[r + 1]]
+        p, q = pixels[0], order[starts[s]]
+        e, oy, ox = label_e.flat[p], label_y.flat[p], label_x.flat[p]
+        if r != last:
+            last = r
+            movable = not palette_only or _is_palette_patch(
+                exemplars, reference, label_e, label_y, label_x, pixels
+            )
+            if movable:
+                old_cost, old_detail = _region_cost(
+                    exemplars, inside, shapes, reference, label_e, label_y, label_x, region, pixels, r,
+                    e, oy, ox, smooth,
+                )  # fmt: skip
+        if not movable:
+            continue
+        f, fy, fx = label_e.flat[q], label_y.flat[q], label_x.flat[q]
+        new_cost, new_detail = _region_cost(
+            exemplars, inside, shapes, reference, label_e, label_y, label_x, region, pixels, r,
+            f, fy, fx, smooth,
+        )  # fmt: skip
+        gain = old_cost - new_cost
+        if gain > best_gain[r] and new_detail >= keep_detail * old_detail:
+            best_gain[r] = gain
+            best_donor[r] = s
+    state = np.zeros(n_regions, np.int8)  # 0 free, 1 moved, 2 donated
+    moves = 0
+    for r in np.argsort(-best_gain, kind="mergesort"):
+        s = best_donor[r]
+        if s < 0:
+            break
+        if state[r] != 0 or state[s] == 1:
+            continue
+        q = order[starts[s]]
+        f, fy, fx = label_e.flat[q], label_y.flat[q], label_x.flat[q]
+        for p in order[starts[r] : starts[r + 1]]:
+            y, x = p // width, p % width
+            label_e[y, x], label_y[y, x], label_x[y, x] = f, fy, fx
+        state[r], state[s] = 1, 2
+        moves += 1
+    return moves

@@ -9,7 +9,7 @@ import pytest
 from scipy import ndimage
 
 from imagemap import ColorizeParams, Database, Example, colorize
-from imagemap.blend import coherent_edges, copy_through, seamless_copy
+from imagemap.blend import coherent_edges, copy_through, merge_regions, seamless_copy
 from imagemap.colorization import PRESETS, level_patch_sizes, pyramid_levels
 from imagemap.metrics import (
     blur_ratio,
@@ -252,6 +252,8 @@ def test_guide_reseed_must_be_a_fraction():
         ("silhouette_weight", float("nan")),
         ("guide_reseed", 1.0),
         ("context_weight", -1.0),
+        ("keep_detail", 1.5),
+        ("keep_detail", -0.1),
     ],
 )
 def test_new_colorize_settings_are_checked(field, value):
@@ -318,3 +320,70 @@ def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_bl
     assert plain.appearance[0].tobytes() != first.appearance[0].tobytes()
     with pytest.raises(ValueError, match="context weights"):
         synthesize(query, exemplars, replace(on, context_weights=(1.0,)), seed=1)
+
+
+def _skin_and_shirt_with_an_eye():
+    """Exemplar 0: bright skin; exemplar 1: dark cloth with an eye (a ring) at (30, 30)."""
+    rng = np.random.default_rng(3)
+    texture = ndimage.gaussian_filter(rng.standard_normal((48, 48, 1)), (1, 1, 0))
+    skin = 0.7 + 0.03 * texture
+    cloth = 0.2 + 0.03 * texture[::-1]
+    yy, xx = np.mgrid[0:48, 0:48]
+    ring = np.abs(np.hypot(yy - 30, xx - 30) - 2.5) < 1.0
+    cloth[ring] = 0.95
+    return skin, cloth
+
+
+def test_region_merge_takes_stray_patches_but_keeps_an_eye():
+    skin, cloth = _skin_and_shirt_with_an_eye()
+    source = identity_source((48, 48))
+    source[4:20, 4:20, 0] = 1  # a stray patch of plain cloth
+    source[26:35, 26:35, 0] = 1  # the eye, copied from where exemplar 1 has it
+    reference = np.full((48, 48, 1), 0.7)  # a voted map: skin, the eye averaged away
+    merged = merge_regions([skin, cloth], source, reference)
+    assert (merged[4:20, 4:20, 0] == 0).all()  # the patch takes the surrounding skin
+    assert (merged[26:35, 26:35, 0] == 1).all()  # the eye stays
+    np.testing.assert_array_equal(merged[..., 1:], source[..., 1:])  # offsets were equal
+    # Without the palette and detail conditions the same energy merges the eye away too.
+    greedy = merge_regions([skin, cloth], source, reference, keep_detail=0, palette_only=False)
+    assert (greedy[..., 0] == 0).all()
+    # Only the detail condition: the eye, no palette patch, stays again.
+    detail_only = merge_regions([skin, cloth], source, reference, palette_only=False)
+    assert (detail_only[26:35, 26:35, 0] == 1).all() and (detail_only[4:20, 4:20, 0] == 0).all()
+    # A move may not take a source outside its exemplar's object.
+    masks = [np.ones((48, 48), bool), np.ones((48, 48), bool)]
+    masks[0][:24, :24] = False
+    fenced = merge_regions([skin, cloth], source, reference, masks=masks)
+    assert (fenced[4:20, 4:20, 0] == 1).all()
+    # Deterministic, and pixels without a source are left alone.
+    none = source.copy()
+    none[:2] = -1
+    again = merge_regions([skin, cloth], none, reference)
+    assert (again[:2] == -1).all()
+    np.testing.assert_array_equal(again, merge_regions([skin, cloth], none, reference))
+
+
+def test_region_merge_follows_the_reference_to_a_better_offset():
+    # Two regions of one exemplar at different offsets; the reference is the
+    # exemplar itself, so the shifted region moves back to the identity offset
+    # (a palette patch: it copies the exemplar's dark half onto its bright half).
+    rng = np.random.default_rng(4)
+    exemplar = 0.05 * ndimage.gaussian_filter(rng.random((40, 40, 1)), (2, 2, 0))
+    exemplar[20:] += 0.5
+    source = identity_source((40, 40))
+    source[22:30, 10:30, 1] -= 12
+    merged = merge_regions([exemplar], source, exemplar)
+    np.testing.assert_array_equal(merged, identity_source((40, 40)))
+    # A region that fits as well as its texture allows is not a palette patch: kept.
+    textured = ndimage.gaussian_filter(rng.random((40, 40, 1)), (2, 2, 0))
+    shifted = identity_source((40, 40))
+    shifted[10:30, 10:30, 1] += 1
+    np.testing.assert_array_equal(merge_regions([textured], shifted, textured), shifted)
+
+
+def test_colorize_with_region_merge_is_deterministic(blob_database, query_blob):
+    depth, _ = query_blob
+    params = replace(PRESETS["busts"], merge_regions=True, max_iterations=3)
+    first = colorize(depth, blob_database, preset=params, seed=2)
+    again = colorize(depth, blob_database, preset=params, seed=2)
+    assert first.image.tobytes() == again.image.tobytes()
