@@ -911,15 +911,15 @@ def region_moves(
             )
             if movable:
                 old_cost, old_detail = _region_cost(
-                    exemplars, inside, shapes, reference, label_e, label_y, label_x, region, pixels, r,
-                    e, oy, ox, smooth,
+                    exemplars, inside, shapes, reference, label_e, label_y, label_x, region,
+                    pixels, r, e, oy, ox, smooth,
                 )  # fmt: skip
         if not movable:
             continue
         f, fy, fx = label_e.flat[q], label_y.flat[q], label_x.flat[q]
         new_cost, new_detail = _region_cost(
-            exemplars, inside, shapes, reference, label_e, label_y, label_x, region, pixels, r,
-            f, fy, fx, smooth,
+            exemplars, inside, shapes, reference, label_e, label_y, label_x, region,
+            pixels, r, f, fy, fx, smooth,
         )  # fmt: skip
         gain = old_cost - new_cost
         if gain > best_gain[r] and new_detail >= keep_detail * old_detail:
