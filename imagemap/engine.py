@@ -210,6 +210,9 @@ class EngineParams:
     context_levels : int, optional
         Give context to the finest this many levels only (None: every level but the
         coarsest).
+    context_level_weights : tuple of float
+        Per level (finest first), a factor on ``context_weights`` there (empty: 1 at
+        every level with context; 0: no context at that level).
     appearance_pyramid : {"laplacian", "gaussian"}
         What the appearance levels are: Laplacian bands (a level's colours are the
         sum of it and every coarser level) or Gaussian levels. Only the context uses it.
@@ -252,6 +255,7 @@ class EngineParams:
     guide_reseed: float = 0.0
     context_weights: tuple[float, ...] = ()
     context_levels: int | None = None
+    context_level_weights: tuple[float, ...] = ()
     appearance_pyramid: str = "laplacian"
 
     def __post_init__(self) -> None:
@@ -1016,6 +1020,9 @@ def _validate(query_levels, exemplar_levels, params) -> None:
         raise ValueError(f"{n_appearance} appearance bands need as many appearance weights")
     if params.context_weights and len(params.context_weights) != n_appearance:
         raise ValueError(f"{n_appearance} appearance bands need as many context weights")
+    level_weights = params.context_level_weights
+    if level_weights and (len(level_weights) != n_levels or min(level_weights) < 0):
+        raise ValueError(f"{n_levels} levels need as many non-negative context level weights")
     for level in range(1, n_levels):
         fine, coarse = query_levels[level - 1].shape, query_levels[level].shape
         if coarse != ((fine[0] + 1) // 2, (fine[1] + 1) // 2):
@@ -1098,7 +1105,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
         query = query_levels[level]
-        if context_from > level:
+        scale = params.context_level_weights[level] if params.context_level_weights else 1.0
+        if context_from > level and scale > 0:
             # The coarser level's colours (kept as a running collapse, so that no
             # coarser band has to stay alive) as extra guide bands.
             query = _with_context(query, query_colours)
@@ -1107,7 +1115,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 for ex, colours in zip(exemplars, exemplar_colours, strict=True)
             ]
             level_params = replace(
-                level_params, guide_weights=params.guide_weights + context_weights
+                level_params,
+                guide_weights=params.guide_weights + tuple(scale * w for w in context_weights),
             )
         solver = _LevelSolver(query, exemplars, k, level_params, rng, timer, prepare=False)
         # The bands are packed: the level's mappings (and their context copies) are not

@@ -253,6 +253,7 @@ def test_guide_reseed_must_be_a_fraction():
         ("guide_reseed", 1.0),
         ("context_weight", -1.0),
         ("keep_detail", 1.5),
+        ("wide_context_weight", -0.25),
         ("keep_detail", -0.1),
     ],
 )
@@ -293,6 +294,34 @@ def test_only_fine_levels_of_large_objects_get_context():
     assert context_levels(big, (7, 11, 9, 9)) == 1
     params = ColorizeParams().engine_params(2, 1)
     assert params.context_levels == 1 and len(params.context_weights) == 3
+    # Every level but the coarsest gets the weak context; the fine ones the full one.
+    from imagemap.colorization import context_level_weights
+
+    assert context_level_weights(small, (7, 11, 9), 0.25) == (2, (0.25, 0.25, 0.0))
+    assert context_level_weights(big, (7, 11, 9, 9), 0.25) == (3, (1.0, 0.25, 0.25, 0.0))
+    assert context_level_weights(big, (7, 11, 9, 9)) == (1, (1.0, 0.0, 0.0, 0.0))
+
+
+def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
+    from imagemap.colorization import depth_mappings, example_mappings
+    from imagemap.engine import synthesize
+
+    depth, _ = query_blob
+    params = PRESETS["busts"]
+    query = depth_mappings(depth, 3, params.detail_clip, True)
+    exemplars = [
+        example_mappings(e, 3, True, params.detail_clip, True) for e in blob_database.examples[:2]
+    ]
+    finest = replace(params.engine_params(2, 1), max_iterations=3)
+    weighted = replace(finest, context_levels=2, context_level_weights=(1.0, 0.0, 0.0))
+    a = synthesize(query, exemplars, finest, seed=1)
+    b = synthesize(query, exemplars, weighted, seed=1)
+    assert a.appearance[0].tobytes() == b.appearance[0].tobytes()
+    weak = replace(weighted, context_level_weights=(0.25, 0.0, 0.0))
+    c = synthesize(query, exemplars, weak, seed=1)
+    assert c.appearance[0].tobytes() != a.appearance[0].tobytes()
+    with pytest.raises(ValueError, match="context level weights"):
+        synthesize(query, exemplars, replace(finest, context_level_weights=(1.0,)), seed=1)
 
 
 def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_blob):
