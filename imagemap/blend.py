@@ -193,6 +193,9 @@ def seamless_copy(
     -------
     ndarray, (H, W, C) float32
     """
+    from imagemap.engine import _trim_heap
+
+    _trim_heap()  # the caller's freed temporaries (seam placement): not kept resident
     reference = np.asarray(reference, dtype=np.float64)
     if reference.ndim != 3 or source.shape[:2] != reference.shape[:2] or source.shape[2] != 3:
         raise ValueError(f"reference {reference.shape} and source {source.shape} do not fit")
@@ -243,6 +246,8 @@ def seamless_copy(
         del rhs
         spectrum /= denominator
         out[..., channel] = fft.idctn(spectrum, type=2, axes=(0, 1), norm="ortho")
+    del spectrum, groups, reference, ref
+    _trim_heap()  # before the caller's colour conversion
     return out
 
 

@@ -526,10 +526,20 @@ class _LevelSolver:
         rng: np.random.Generator,
         timer: _Timer,
         prepare: bool = True,
+        context: tuple[np.ndarray, list[np.ndarray]] | None = None,
+        release=None,
     ) -> None:
         """Pack the bands of ``query`` and ``exemplars`` (nothing of the mappings is kept),
         then, unless ``prepare`` is False, learn the PCA and make the features
-        (:meth:`prepare`): with False the caller may free the mappings first."""
+        (:meth:`prepare`): with False the caller may free the mappings first.
+
+        ``context``: (query's, exemplars') extra guide bands, (H, W, Cc) each, that
+        follow the mappings' own guide bands (``params.guide_weights`` covers both):
+        packed from where they are, not concatenated into a copy of every guide.
+        ``release``: called with an exemplar's index once its bands are packed, so that
+        the caller may free its mapping (and context) before the next one is packed;
+        ``exemplars`` (a list) then loses that entry too.
+        """
         start = time.perf_counter()
         self.params = params
         self.r = r = k // 2
@@ -543,12 +553,16 @@ class _LevelSolver:
         self.appearance_active = np.flatnonzero(appearance_w != 0)
         n_ga, n_aa = len(self.guide_active), len(self.appearance_active)
         self.n_guide_active = n_ga
+        query_context, exemplar_context = context or (None, [None] * len(exemplars))
+        n_own = query.guide.shape[2]  # the mappings' own guide bands; context ones after
 
         # Band scales: weight per standard deviation over the exemplars' masks.
         guide_scale = guide_w[self.guide_active]
         appearance_scale = appearance_w[self.appearance_active]
         if params.normalize_bands:
-            guide_scale = guide_scale / self._band_std(exemplars, "guide", self.guide_active)
+            guide_scale = guide_scale / self._band_std(
+                exemplars, "guide", self.guide_active, exemplar_context, n_own
+            )
             appearance_scale = appearance_scale / self._band_std(
                 exemplars, "appearance", self.appearance_active
             )
@@ -569,13 +583,14 @@ class _LevelSolver:
         self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
         self.exemplar_valid: list[np.ndarray] = []
         n_cand = 0
-        for e, ex in enumerate(exemplars):
+        for e in range(n_ex):
+            ex = exemplars[e]
             h, w = ex.shape
-            _pad_into(
+            self._pad_guide(
                 self.exemplar_guide[e, : h + 2 * r, : w + 2 * r],
-                _channels(ex.guide, self.guide_active),
+                ex.guide,
+                exemplar_context[e],
                 r,
-                params.guide_padding,
                 guide_scale,
             )
             _pad_into(
@@ -590,6 +605,10 @@ class _LevelSolver:
             cand_y.append(ys.astype(np.int32))
             cand_x.append(xs.astype(np.int32))
             positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
+            del ex, valid
+            if release is not None:  # packed: the caller's mapping may go now
+                exemplars[e] = None
+                release(e)
         self.cand_e = np.concatenate(cand_e)
         self.cand_y = np.concatenate(cand_y)
         self.cand_x = np.concatenate(cand_x)
@@ -621,13 +640,7 @@ class _LevelSolver:
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
         )
         self.query_active = np.zeros((h + 2 * r, w + 2 * r, n_ga + n_aa), dtype=np.float32)
-        _pad_into(
-            self.query_active[..., :n_ga],
-            _channels(query.guide, self.guide_active),
-            r,
-            params.guide_padding,
-            guide_scale,
-        )
+        self._pad_guide(self.query_active[..., :n_ga], query.guide, query_context, r, guide_scale)
         timer.add("setup", start)
         if prepare:
             self.prepare(rng)
@@ -702,13 +715,41 @@ class _LevelSolver:
         timer.add("features", start)
         self.indexes: dict[str, object] = {}
 
+    def _pad_guide(self, out, guide, context, r, scale) -> None:
+        """The active guide channels, of the mapping's own bands then of the context
+        bands, scaled and padded into ``out`` (the channels written part by part: the
+        same float32 products as of one concatenated guide)."""
+        n = 0
+        for array, channels in _guide_parts(guide, context, self.guide_active):
+            m = n + len(channels)
+            _pad_into(
+                out[..., n:m],
+                _channels(array, channels),
+                r,
+                self.params.guide_padding,
+                scale[n:m],
+            )
+            n = m
+
     @staticmethod
-    def _band_std(exemplars: Sequence[Mapping], part: str, channels: np.ndarray) -> np.ndarray:
+    def _band_std(
+        exemplars: Sequence[Mapping],
+        part: str,
+        channels: np.ndarray,
+        context: Sequence[np.ndarray | None] | None = None,
+        n_own: int | None = None,
+    ) -> np.ndarray:
         if len(channels) == 0:
             return np.ones(0, dtype=np.float32)
         values = []
-        for ex in exemplars:
-            bands = getattr(ex, part)[..., channels]
+        for e, ex in enumerate(exemplars):
+            if part == "guide":  # own bands, then context bands: one (N, C) array
+                extra = None if context is None else context[e]
+                parts = _guide_parts(ex.guide, extra, channels, n_own)
+                picked = [array[..., c] for array, c in parts]
+                bands = picked[0] if len(picked) == 1 else np.concatenate(picked, axis=2)
+            else:
+                bands = getattr(ex, part)[..., channels]
             values.append(
                 bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels))
             )
@@ -971,11 +1012,29 @@ class _LevelSolver:
         return out
 
 
+def _guide_parts(guide, context, active, n_own=None):
+    """The ``active`` guide channels as (array, channel indices) parts: of the mapping's
+    own ``guide`` bands (the first ``n_own``, default all of them), then of the
+    ``context`` bands (None: none)."""
+    n_own = guide.shape[2] if n_own is None else n_own
+    parts = [(guide, active[active < n_own])]
+    if context is not None:
+        parts.append((context, active[active >= n_own] - n_own))
+    return [(array, channels) for array, channels in parts if len(channels)]
+
+
 def _coarse_colours(coarser: np.ndarray | None, band: np.ndarray, kind: str) -> np.ndarray:
     """A level's colours from its band and the coarser level's colours (running collapse)."""
     if kind == "gaussian" or coarser is None:
         return np.asarray(band, dtype=np.float32)
     return collapse_laplacian([band, coarser])  # one step of the collapse
+
+
+def _context(mapping: Mapping, coarser_colours: np.ndarray) -> np.ndarray:
+    """The coarser level's colours brought to a level's grid: its context guide bands,
+    (H, W, Cc) float32."""
+    context = np.asarray(expand(coarser_colours, mapping.shape), dtype=np.float32)
+    return context if context.ndim == 3 else context[..., None]
 
 
 def _with_context(mapping: Mapping, coarser_colours: np.ndarray) -> Mapping:
@@ -1098,32 +1157,46 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
         query = query_levels[level]
+        context = None
         if context_from > level:
             # The coarser level's colours (kept as a running collapse, so that no
-            # coarser band has to stay alive) as extra guide bands.
-            query = _with_context(query, query_colours)
-            exemplars = [
-                _with_context(ex, colours)
-                for ex, colours in zip(exemplars, exemplar_colours, strict=True)
-            ]
+            # coarser band has to stay alive) as extra guide bands, packed by the solver
+            # beside the own guide bands (no concatenated copy of every guide).
+            context = (
+                _context(query, query_colours),
+                [
+                    _context(ex, colours)
+                    for ex, colours in zip(exemplars, exemplar_colours, strict=True)
+                ],
+            )
             level_params = replace(
                 level_params, guide_weights=params.guide_weights + context_weights
             )
-        solver = _LevelSolver(query, exemplars, k, level_params, rng, timer, prepare=False)
-        # The bands are packed: the level's mappings (and their context copies) are not
-        # needed any more. Pyramids handed over (ReleasableLevels) drop them now, before
-        # the features are made.
-        del query, exemplars
+
+        def release(e: int, level: int = level, context=context) -> None:
+            # Exemplar e's bands are packed: its mapping and context are not needed any
+            # more. Pyramids handed over (ReleasableLevels) drop the level now, before
+            # the next exemplar is packed.
+            if context is not None:
+                context[1][e] = None
+            if isinstance(exemplar_levels[e], ReleasableLevels):
+                exemplar_levels[e].release(level)
+
+        solver = _LevelSolver(
+            query, exemplars, k, level_params, rng, timer, False, context, release
+        )
+        # The query's bands are packed too: the mapping goes before the features are made.
+        del query, exemplars, context
         exemplar_colours = level_colours
-        for pyramid in (query_levels, *exemplar_levels):
-            if isinstance(pyramid, ReleasableLevels):
-                pyramid.release(level)
+        if isinstance(query_levels, ReleasableLevels):
+            query_levels.release(level)
         # The coarser level's matches propagated from the packed lookups alone (no random
         # number drawn): before the features, so that its transients do not add to them.
         propagated = None if coarse_source is None else solver.propagate(coarse_source)
         coarse_source = solver.exemplar_valid = None  # what only propagate needed
         _trim_heap()
         solver.prepare(rng)
+        _trim_heap()  # the PCA's and the feature blocks' temporaries, before the E-steps
         level_seed = int(rng.integers(0, 2**62))
         h, w = solver.query_shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
