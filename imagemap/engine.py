@@ -386,6 +386,43 @@ def _pad_into(out: np.ndarray, array: np.ndarray, r: int, mode: str, scale=None)
             lead[r + n :] = lead[r + n - 2 : n - 2 : -1] if n >= 2 else lead[r]
 
 
+def _pad_index(n: int, r: int, mode: str) -> np.ndarray:
+    """Which source row (or column) each of the n + 2r of an axis padded by r on both
+    sides shows, by :func:`numpy.pad`'s rule for ``mode`` (-1: the constant 0)."""
+    index = np.arange(n, dtype=np.int64)
+    if mode == "constant":
+        return np.pad(index, r, mode="constant", constant_values=-1)
+    return np.pad(index, r, mode=mode)
+
+
+def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) -> None:
+    """``np.pad(array * scale, r, mode)[rows, cols]`` written into ``out`` (a view of a
+    larger array): the crop alone, without the padded whole. The padding modes are
+    separable (numpy pads axis by axis), so a crop is a gather of source rows and
+    columns; the products are the same float32 ones as of the padded whole."""
+    h, w = array.shape[:2]
+    if rows == slice(0, h + 2 * r) and cols == slice(0, w + 2 * r):  # the whole: in place
+        _pad_into(out, array, r, mode, scale)
+        return
+    row_index = _pad_index(h, r, mode)[rows]
+    col_index = _pad_index(w, r, mode)[cols]
+    inside_rows, inside_cols = row_index >= 0, col_index >= 0  # all but constant padding
+    block = array[row_index[inside_rows][:, None], col_index[inside_cols][None, :]]
+    if scale is not None:
+        np.multiply(block, scale, out=block)
+    if inside_rows.all() and inside_cols.all():
+        out[...] = block
+        return
+    out[...] = 0
+    out[np.ix_(inside_rows, inside_cols)] = block
+
+
+def _box(valid: np.ndarray) -> tuple[int, int, int, int]:
+    """Rows y0:y1 and columns x0:x1 of the bounding box of a non-empty boolean image."""
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
 def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
     """``array[..., channels]`` without a copy when ``channels`` are all of them, in order."""
     if np.array_equal(channels, np.arange(array.shape[-1])):
@@ -573,45 +610,58 @@ class _LevelSolver:
         heights = [e.shape[0] for e in exemplars]
         widths = [e.shape[1] for e in exemplars]
         n_ex = len(exemplars)
-        hp, wp = max(heights) + 2 * r, max(widths) + 2 * r
+        self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
+        # Candidates: window centres in the (dilated) mask. Only their windows are ever
+        # read, so the bands are packed for the box around them (an object often fills
+        # a third of its frame): band_origin is the box's top-left in frame coordinates,
+        # band_y, band_x a candidate's window's top-left in the packed bands.
+        self.exemplar_valid = [self._region(ex.mask, ex.shape, r) for ex in exemplars]
+        boxes = [_box(valid) for valid in self.exemplar_valid]
+        self.band_origin = np.array([box[::2] for box in boxes], dtype=np.int32).reshape(-1, 2)
+        hp = max(y1 - y0 for y0, y1, _, _ in boxes) + 2 * r
+        wp = max(x1 - x0 for _, _, x0, x1 in boxes) + 2 * r
         # Guide bands scaled; appearance bands once, unscaled (the matched ones are scaled
         # where they are read: kernels and feature blocks).
         self.exemplar_guide = np.zeros((n_ex, hp, wp, n_ga), dtype=np.float32)
         self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
-        self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         cand_e, cand_y, cand_x, positions = [], [], [], []
         self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
-        self.exemplar_valid: list[np.ndarray] = []
         n_cand = 0
         for e in range(n_ex):
             ex = exemplars[e]
             h, w = ex.shape
+            y0, y1, x0, x1 = boxes[e]
+            # The box's rows and columns of the padded frame (padded coordinates).
+            rows, cols = slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r)
+            crop = (slice(0, y1 - y0 + 2 * r), slice(0, x1 - x0 + 2 * r))
             self._pad_guide(
-                self.exemplar_guide[e, : h + 2 * r, : w + 2 * r],
+                self.exemplar_guide[e][crop],
                 ex.guide,
                 exemplar_context[e],
                 r,
                 guide_scale,
+                rows,
+                cols,
             )
-            _pad_into(
-                self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r], ex.appearance, r, "reflect"
+            _pad_crop_into(
+                self.exemplar_appearance[e][crop], ex.appearance, r, "reflect", rows, cols
             )
-            valid = self._region(ex.mask, (h, w), r)
-            ys, xs = np.nonzero(valid)
+            ys, xs = np.nonzero(self.exemplar_valid[e])
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
-            self.exemplar_valid.append(valid)  # for propagate()
             n_cand += len(ys)
             cand_e.append(np.full(len(ys), e, dtype=np.int32))
             cand_y.append(ys.astype(np.int32))
             cand_x.append(xs.astype(np.int32))
             positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
-            del ex, valid
+            del ex
             if release is not None:  # packed: the caller's mapping may go now
                 exemplars[e] = None
                 release(e)
         self.cand_e = np.concatenate(cand_e)
         self.cand_y = np.concatenate(cand_y)
         self.cand_x = np.concatenate(cand_x)
+        self.band_y = self.cand_y - self.band_origin[self.cand_e, 0]
+        self.band_x = self.cand_x - self.band_origin[self.cand_e, 1]
         self.cand_position = np.concatenate(positions)
         costs = np.zeros(n_ex, dtype=np.float32)
         if params.exemplar_costs:
@@ -640,7 +690,10 @@ class _LevelSolver:
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
         )
         self.query_active = np.zeros((h + 2 * r, w + 2 * r, n_ga + n_aa), dtype=np.float32)
-        self._pad_guide(self.query_active[..., :n_ga], query.guide, query_context, r, guide_scale)
+        rows, cols = slice(0, h + 2 * r), slice(0, w + 2 * r)
+        self._pad_guide(
+            self.query_active[..., :n_ga], query.guide, query_context, r, guide_scale, rows, cols
+        )
         timer.add("setup", start)
         if prepare:
             self.prepare(rng)
@@ -668,7 +721,7 @@ class _LevelSolver:
         self.appearance_projection = _Projection(n_aa, self.window)
         n_samples = min(params.pca_samples, len(self.cand_e))
         pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
-        sample_index = (self.cand_e[pick], self.cand_y[pick], self.cand_x[pick])
+        sample_index = (self.cand_e[pick], self.band_y[pick], self.band_x[pick])
         projections = (self.guide_projection, self.appearance_projection)
         largest = 0.0
         for projection, windows in zip(projections, self.exemplar_windows, strict=True):
@@ -694,7 +747,7 @@ class _LevelSolver:
 
         # Features: [guide PCA | weighted position | exemplar cost | appearance PCA].
         start = time.perf_counter()
-        index = (self.cand_e, self.cand_y, self.cand_x)
+        index = (self.cand_e, self.band_y, self.band_x)
         # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
         self.n_init_dims = self.guide_projection.n_components + 3
         self.candidate_features = self._features(
@@ -715,18 +768,21 @@ class _LevelSolver:
         timer.add("features", start)
         self.indexes: dict[str, object] = {}
 
-    def _pad_guide(self, out, guide, context, r, scale) -> None:
+    def _pad_guide(self, out, guide, context, r, scale, rows, cols) -> None:
         """The active guide channels, of the mapping's own bands then of the context
-        bands, scaled and padded into ``out`` (the channels written part by part: the
-        same float32 products as of one concatenated guide)."""
+        bands, scaled and padded, the crop ``rows``, ``cols`` of the padded frame into
+        ``out`` (the channels written part by part: the same float32 products as of
+        one concatenated guide)."""
         n = 0
         for array, channels in _guide_parts(guide, context, self.guide_active):
             m = n + len(channels)
-            _pad_into(
+            _pad_crop_into(
                 out[..., n:m],
                 _channels(array, channels),
                 r,
                 self.params.guide_padding,
+                rows,
+                cols,
                 scale[n:m],
             )
             n = m
@@ -828,8 +884,8 @@ class _LevelSolver:
             centres_y,
             centres_x,
             self.cand_e,
-            self.cand_y,
-            self.cand_x,
+            self.band_y,
+            self.band_x,
             np.ascontiguousarray(matches),
             positions,
             self.cand_position,
@@ -850,8 +906,8 @@ class _LevelSolver:
             self.window,
             self.query_lookup,
             self.cand_e,
-            self.cand_y,
-            self.cand_x,
+            self.band_y,
+            self.band_x,
             matches,
         )
         if (kind or self.params.vote) == "mode":
@@ -1004,8 +1060,10 @@ class _LevelSolver:
                 chosen = self.chosen[r + y0 : r + y1, r : r + w]
                 copied = chosen[..., 0] >= 0
                 e = np.where(copied, chosen[..., 0], e)
-                sy = np.where(copied, chosen[..., 1] - r, sy)
-                sx = np.where(copied, chosen[..., 2] - r, sx)
+                # The mode vote records padded coordinates in the packed bands.
+                origin = self.band_origin[e] - r
+                sy = np.where(copied, chosen[..., 1] + origin[..., 0], sy)
+                sx = np.where(copied, chosen[..., 2] + origin[..., 1], sx)
             out[y0:y1, :, 0] = e
             out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
             out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
@@ -1186,7 +1244,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             query, exemplars, k, level_params, rng, timer, False, context, release
         )
         # The query's bands are packed too: the mapping goes before the features are made.
-        del query, exemplars, context
+        del query, exemplars, context, release  # (release holds the context too)
         exemplar_colours = level_colours
         if isinstance(query_levels, ReleasableLevels):
             query_levels.release(level)
