@@ -689,10 +689,22 @@ class _LevelSolver:
         self.query_position = _positions(
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
         )
-        self.query_active = np.zeros((h + 2 * r, w + 2 * r, n_ga + n_aa), dtype=np.float32)
-        rows, cols = slice(0, h + 2 * r), slice(0, w + 2 * r)
+        # The query's matched bands, like the exemplars', for the box around its window
+        # centres only: query_band_y, query_band_x are a centre's window's top-left there,
+        # query_crop the box's rows and columns of the padded frame.
+        y0, y1, x0, x1 = _box(centres)
+        self.query_band_y, self.query_band_x = self.query_y - y0, self.query_x - x0
+        self.query_crop = (slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r))
+        self.query_active = np.zeros(
+            (y1 - y0 + 2 * r, x1 - x0 + 2 * r, n_ga + n_aa), dtype=np.float32
+        )
         self._pad_guide(
-            self.query_active[..., :n_ga], query.guide, query_context, r, guide_scale, rows, cols
+            self.query_active[..., :n_ga],
+            query.guide,
+            query_context,
+            r,
+            guide_scale,
+            *self.query_crop,
         )
         timer.add("setup", start)
         if prepare:
@@ -759,7 +771,7 @@ class _LevelSolver:
             _Windows(query_view, slice(n_ga, n_ga + n_aa)),
         )
         self.query_features = self._features(
-            self.query_windows, (self.query_y, self.query_x), self.query_position, 0.0
+            self.query_windows, (self.query_band_y, self.query_band_x), self.query_position, 0.0
         )
         ys = self.query_y
         n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
@@ -852,14 +864,14 @@ class _LevelSolver:
         n_ga = self.n_guide_active
         # No temporaries: the product is written into the query's band stack.
         np.multiply(
-            _channels(appearance_padded, self.appearance_active),
+            _channels(appearance_padded[self.query_crop], self.appearance_active),
             self.appearance_scale,
             out=self.query_active[..., n_ga:],
         )
         if project and self.appearance_projection.n_components:
             self.appearance_projection.project(
                 self.query_windows[1],
-                (self.query_y, self.query_x),
+                (self.query_band_y, self.query_band_x),
                 self.query_features[:, self.n_init_dims :],
                 self.inverse_unit,
             )
@@ -869,10 +881,11 @@ class _LevelSolver:
         """Exact window distances of query centres (all, or ``subset``) to ``matches``."""
         start = time.perf_counter()
         if subset is None:
-            centres_y, centres_x, positions = self.query_y, self.query_x, self.query_position
+            centres_y, centres_x = self.query_band_y, self.query_band_x
+            positions = self.query_position
         else:
             matches = matches[subset]
-            centres_y, centres_x = self.query_y[subset], self.query_x[subset]
+            centres_y, centres_x = self.query_band_y[subset], self.query_band_x[subset]
             positions = self.query_position[subset]
         out = _kernels.window_costs(
             self.query_active,
