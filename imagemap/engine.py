@@ -67,6 +67,7 @@ log = logging.getLogger("imagemap")
 BACKENDS = ("patchmatch", "exact", "pynndescent")
 VOTES = ("mean", "mode")
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
+_GATHER_ROWS = 2048  # windows per gather of one channel into such a block (see _Windows)
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
 # at least _BAND_ROWS rows, since propagation does not cross band borders.
 _MAX_BANDS = 8
@@ -473,7 +474,18 @@ class _Windows:
         k = view.shape[-1]
         self.scale = None if scale is None else np.repeat(scale.astype(np.float32), k * k)
 
-    def __call__(self, index: tuple[np.ndarray, ...]) -> np.ndarray:
+    @property
+    def width(self) -> int:
+        """Values per window (selected channels times k^2)."""
+        view = self.view
+        if isinstance(self.channels, slice):
+            return view[..., self.channels, :, :].shape[-3] * view.shape[-1] ** 2
+        n = view.shape[-3] if self.channels is None else len(self.channels)
+        return n * view.shape[-1] ** 2
+
+    def __call__(self, index: tuple[np.ndarray, ...], out: np.ndarray | None = None) -> np.ndarray:
+        """The (N, width) windows at ``index``, into the first N rows of ``out`` if given
+        (a buffer reused from block to block)."""
         view = self.view
         if isinstance(self.channels, slice):
             view = view[..., self.channels, :, :]
@@ -483,11 +495,19 @@ class _Windows:
         # Gathered one channel at a time into the (N, C, k, k) block: the gather of all
         # channels at once comes out in the view's memory order (not C-contiguous), and
         # flattening it copied the whole block a second time.
-        k = view.shape[-1]
-        block = np.empty((index[0].shape[0], len(channels), k, k), dtype=view.dtype)
-        for i, channel in enumerate(channels):
-            block[:, i] = view[..., channel, :, :][index]
-        block = block.reshape(block.shape[0], -1)
+        k, n = view.shape[-1], index[0].shape[0]
+        if out is None:
+            block = np.empty((n, len(channels), k, k), dtype=view.dtype)
+        else:
+            block = out[:n].reshape(n, len(channels), k, k)
+        # In runs of _GATHER_ROWS windows: each channel's gather makes a temporary, and
+        # small ones are reused from the heap instead of being mapped and faulted in anew.
+        for start in range(0, n, _GATHER_ROWS):
+            sub = tuple(i[start : start + _GATHER_ROWS] for i in index)
+            rows = block[start : start + _GATHER_ROWS]
+            for i, channel in enumerate(channels):
+                rows[:, i] = view[..., channel, :, :][sub]
+        block = block.reshape(n, -1)
         if self.scale is not None:
             block *= self.scale
         return block
@@ -531,11 +551,17 @@ class _Projection:
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
+        # One buffer for the windows and one for their product, reused by every block (not
+        # a fresh large array per block: each would be mapped and faulted in anew).
+        rows = min(_CHUNK, n)
+        gathered = np.empty((rows, windows.width), dtype=np.float32)
+        product = np.empty((rows, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
-            _store(
-                out[start : start + _CHUNK], windows(sub) @ self.matrix - self.offset, inverse_unit
-            )
+            m = sub[0].shape[0]
+            values = np.matmul(windows(sub, gathered), self.matrix, out=product[:m])
+            np.subtract(values, self.offset, out=values)
+            _store(out[start : start + m], values, inverse_unit)
         return out
 
 
