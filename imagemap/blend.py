@@ -335,7 +335,10 @@ def seamless_copy(
     -------
     ndarray, (H, W, C) float32
     """
-    reference = np.asarray(reference, dtype=np.float64)
+    from imagemap.engine import _trim_heap
+
+    _trim_heap()  # the caller's freed temporaries (seam placement): not kept resident
+    reference = np.asarray(reference)
     if reference.ndim != 3 or source.shape[:2] != reference.shape[:2] or source.shape[2] != 3:
         raise ValueError(f"reference {reference.shape} and source {source.shape} do not fit")
     if scale <= 0:
@@ -345,15 +348,16 @@ def seamless_copy(
     none_x = ~(has[:, 1:] & has[:, :-1])
     none_y = ~(has[1:] & has[:-1])
     groups = _source_groups(exemplars, source)
-    # One channel at a time (a third of the memory of all at once). Only the choice of
-    # the stronger gradient across a seam couples the channels (it compares their summed
-    # squares), so a first pass sums those squares.
+    # One channel at a time (a third of the memory of all at once), and within a channel
+    # one side's gradient at a time; the reference is made float64 a channel at a time.
+    # Only the choice of the stronger gradient across a seam couples the channels (it
+    # compares their summed squares), so a first pass sums those squares.
     norms = [np.zeros((h, w - 1)), np.zeros((h, w - 1)), np.zeros((h - 1, w)), np.zeros((h - 1, w))]
     for channel in range(n_channels):
-        for norm, difference in zip(
-            norms, _side_gradients(groups, has, reference, channel), strict=True
-        ):
-            norm += np.square(difference)
+        ref = reference[..., channel].astype(np.float64)
+        for norm, difference in zip(norms, _side_gradients(groups, has, ref, channel), strict=True):
+            norm += np.square(difference, out=difference)
+        del difference
     right_wins = norms[0] >= norms[1]
     down_wins = norms[2] >= norms[3]
     del norms
@@ -361,35 +365,45 @@ def seamless_copy(
     # -L is diagonal in the DCT-II basis: eigenvalues (2 - 2cos(pi u / H)) + (2 - 2cos(pi v / W)).
     eig_y = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
     eig_x = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
-    denominator = lam + eig_y[:, None] + eig_x[None, :]
     out = np.empty((h, w, n_channels), dtype=np.float32)
     for channel in range(n_channels):
-        ref = reference[..., channel]
-        a_x, b_x, a_y, b_y = _side_gradients(groups, has, reference, channel)
+        ref = reference[..., channel].astype(np.float64)
+        gradients = _side_gradients(groups, has, ref, channel)
         # Each side's own exemplar gradient (equal where the copy is coherent); across a
         # seam the stronger of the two, so an edge or stripe that meets the seam goes on
         # at full contrast instead of an average of two unrelated textures.
-        gx = np.where(right_wins, a_x, b_x)
-        gy = np.where(down_wins, a_y, b_y)
-        del a_x, b_x, a_y, b_y
-        gx[none_x] = (ref[:, 1:] - ref[:, :-1])[none_x]
-        gy[none_y] = (ref[1:] - ref[:-1])[none_y]
+        gx = next(gradients)
+        np.copyto(gx, next(gradients), where=~right_wins)
+        gy = next(gradients)
+        np.copyto(gy, next(gradients), where=~down_wins)
+        gradients.close()
+        np.subtract(ref[:, 1:], ref[:, :-1], out=gx, where=none_x)
+        np.subtract(ref[1:], ref[:-1], out=gy, where=none_y)
         # Normal equations: (lam - L) O = lam R + div g (L: Neumann graph Laplacian).
-        rhs = lam * ref
+        rhs = np.multiply(lam, ref, out=ref)
         rhs[:, 1:] += gx
         rhs[:, :-1] -= gx
         rhs[1:] += gy
         rhs[:-1] -= gy
         del gx, gy
-        spectrum = fft.dctn(rhs, type=2, axes=(0, 1), norm="ortho")
-        del rhs
-        spectrum /= denominator
-        out[..., channel] = fft.idctn(spectrum, type=2, axes=(0, 1), norm="ortho")
+        spectrum = fft.dctn(rhs, type=2, axes=(0, 1), norm="ortho", overwrite_x=True)
+        del rhs, ref
+        for y0 in range(0, h, _ROWS):  # the denominator a block of rows at a time
+            rows = slice(y0, y0 + _ROWS)
+            spectrum[rows] /= lam + eig_y[rows, None] + eig_x[None, :]
+        out[..., channel] = fft.idctn(spectrum, type=2, axes=(0, 1), norm="ortho", overwrite_x=True)
+        del spectrum
+    del groups
+    _trim_heap()  # before the caller's colour conversion
     return out
 
 
-def _copy_channel(groups, has, reference, channel, dy=0, dx=0) -> np.ndarray:
-    """One channel of :func:`copy_through` shifted by (dy, dx); the reference where no source.
+_ROWS = 256  # rows per block of the DCT denominator
+
+
+def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
+    """One channel of :func:`copy_through` shifted by (dy, dx); ``ref`` (the reference's
+    channel, float64) where no source.
 
     ``groups``: per exemplar, (exemplar, flat pixel indices, their source y and x)."""
     h, w = has.shape
@@ -397,7 +411,7 @@ def _copy_channel(groups, has, reference, channel, dy=0, dx=0) -> np.ndarray:
     for exemplar, pixels, sy, sx in groups:
         eh, ew = exemplar.shape[:2]
         out[pixels] = exemplar[np.clip(sy + dy, 0, eh - 1), np.clip(sx + dx, 0, ew - 1), channel]
-    return np.where(has, out.reshape(h, w), reference[..., channel])
+    return np.where(has, out.reshape(h, w), ref)
 
 
 def _source_groups(exemplars, source):
@@ -412,19 +426,19 @@ def _source_groups(exemplars, source):
     return groups
 
 
-def _side_gradients(groups, has, reference, channel):
-    """Per channel: the horizontal gradient by the left pixel's source and by the right
-    pixel's, then the vertical one by the upper and by the lower pixel's source."""
-    copy = _copy_channel(groups, has, reference, channel)
-    right = _copy_channel(groups, has, reference, channel, 0, 1)
-    a_x = right[:, :-1] - copy[:, :-1]
+def _side_gradients(groups, has, ref, channel):
+    """Per channel, one at a time (a generator: the caller frees each before the next is
+    made): the horizontal gradient by the left pixel's source and by the right pixel's,
+    then the vertical one by the upper and by the lower pixel's source."""
+    copy = _copy_channel(groups, has, ref, channel)
+    right = _copy_channel(groups, has, ref, channel, 0, 1)[:, :-1]
+    yield np.subtract(right, copy[:, :-1], out=right)
     del right
-    left = _copy_channel(groups, has, reference, channel, 0, -1)
-    b_x = copy[:, 1:] - left[:, 1:]
+    left = _copy_channel(groups, has, ref, channel, 0, -1)[:, 1:]
+    yield np.subtract(copy[:, 1:], left, out=left)
     del left
-    down = _copy_channel(groups, has, reference, channel, 1, 0)
-    a_y = down[:-1] - copy[:-1]
+    down = _copy_channel(groups, has, ref, channel, 1, 0)[:-1]
+    yield np.subtract(down, copy[:-1], out=down)
     del down
-    up = _copy_channel(groups, has, reference, channel, -1, 0)
-    b_y = copy[1:] - up[1:]
-    return a_x, b_x, a_y, b_y
+    up = _copy_channel(groups, has, ref, channel, -1, 0)[1:]
+    yield np.subtract(copy[1:], up, out=up)

@@ -53,17 +53,21 @@ log = logging.getLogger("imagemap")
 # two) once the front end's pyramid levels were freed as the engine packs them: in-process
 # VmHWM - VmRSS before the call, fish, m = 2 unless said: 200x150 91 MB measured / 87
 # estimated, 512^2 156 / 135, 1024^2 260 / 295 (m = 1: 244 / 281), 2048^2 789 / 930, a
-# 2000x1500 query with 200x150 examples 572 / 627 (-14 % to +18 %).
-_QUERY_CENTRE_BYTES = 40  # coordinates, positions, matches, candidates, costs
+# 2000x1500 query with 200x150 examples 572 / 627 (-14 % to +18 %). Refitted (issue 14,
+# round three) once the bands were packed for the box around the object's windows only and
+# the copy finish worked a channel and a side at a time, the same measure: 200x150 82 MB
+# measured / 86 estimated, 512^2 154 / 125, 1024^2 242 / 255 (m = 1: 196 / 229), 2048^2
+# 650 / 771, the 2000x1500 query with 200x150 examples 385 / 451 (-19 % to +19 %).
+_QUERY_CENTRE_BYTES = 55  # coordinates (frame and packed), positions, matches, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
-_QUERY_PIXEL_BYTES = 220  # padded bands, lookup, vote buffers, dense maps, the copy finish
+_QUERY_PIXEL_BYTES = 60  # lookup, vote buffers, dense maps, the copy finish
 _FEATURE_BYTES = 2  # per feature dimension: int16 (EngineParams.quantize_features)
-# Packed bands, lookups, valid masks: the fit puts them in the candidate and pyramid terms.
-_EXEMPLAR_PIXEL_BYTES = 0
+# Lookups, valid masks (the packed bands, for the object's box, in the candidate terms).
+_EXEMPLAR_PIXEL_BYTES = 10
 _QUERY_LEVEL_BYTES = 13  # a level of the query's pyramid: guide bands, mask
 _EXEMPLAR_LEVEL_BYTES = 25  # a level of an example's pyramid: guide and colour bands, mask
 _OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
-_MEMORY_FACTOR = 0.6
+_MEMORY_FACTOR = 0.8
 _SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
 _SECONDS_OVERHEAD = 0.3
 

@@ -67,6 +67,7 @@ log = logging.getLogger("imagemap")
 BACKENDS = ("patchmatch", "exact", "pynndescent")
 VOTES = ("mean", "mode")
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
+_GATHER_ROWS = 2048  # windows per gather of one channel into such a block (see _Windows)
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
 # at least _BAND_ROWS rows, since propagation does not cross band borders.
 _MAX_BANDS = 8
@@ -390,6 +391,43 @@ def _pad_into(out: np.ndarray, array: np.ndarray, r: int, mode: str, scale=None)
             lead[r + n :] = lead[r + n - 2 : n - 2 : -1] if n >= 2 else lead[r]
 
 
+def _pad_index(n: int, r: int, mode: str) -> np.ndarray:
+    """Which source row (or column) each of the n + 2r of an axis padded by r on both
+    sides shows, by :func:`numpy.pad`'s rule for ``mode`` (-1: the constant 0)."""
+    index = np.arange(n, dtype=np.int64)
+    if mode == "constant":
+        return np.pad(index, r, mode="constant", constant_values=-1)
+    return np.pad(index, r, mode=mode)
+
+
+def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) -> None:
+    """``np.pad(array * scale, r, mode)[rows, cols]`` written into ``out`` (a view of a
+    larger array): the crop alone, without the padded whole. The padding modes are
+    separable (numpy pads axis by axis), so a crop is a gather of source rows and
+    columns; the products are the same float32 ones as of the padded whole."""
+    h, w = array.shape[:2]
+    if rows == slice(0, h + 2 * r) and cols == slice(0, w + 2 * r):  # the whole: in place
+        _pad_into(out, array, r, mode, scale)
+        return
+    row_index = _pad_index(h, r, mode)[rows]
+    col_index = _pad_index(w, r, mode)[cols]
+    inside_rows, inside_cols = row_index >= 0, col_index >= 0  # all but constant padding
+    block = array[row_index[inside_rows][:, None], col_index[inside_cols][None, :]]
+    if scale is not None:
+        np.multiply(block, scale, out=block)
+    if inside_rows.all() and inside_cols.all():
+        out[...] = block
+        return
+    out[...] = 0
+    out[np.ix_(inside_rows, inside_cols)] = block
+
+
+def _box(valid: np.ndarray) -> tuple[int, int, int, int]:
+    """Rows y0:y1 and columns x0:x1 of the bounding box of a non-empty boolean image."""
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
 def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
     """``array[..., channels]`` without a copy when ``channels`` are all of them, in order."""
     if np.array_equal(channels, np.arange(array.shape[-1])):
@@ -440,7 +478,18 @@ class _Windows:
         k = view.shape[-1]
         self.scale = None if scale is None else np.repeat(scale.astype(np.float32), k * k)
 
-    def __call__(self, index: tuple[np.ndarray, ...]) -> np.ndarray:
+    @property
+    def width(self) -> int:
+        """Values per window (selected channels times k^2)."""
+        view = self.view
+        if isinstance(self.channels, slice):
+            return view[..., self.channels, :, :].shape[-3] * view.shape[-1] ** 2
+        n = view.shape[-3] if self.channels is None else len(self.channels)
+        return n * view.shape[-1] ** 2
+
+    def __call__(self, index: tuple[np.ndarray, ...], out: np.ndarray | None = None) -> np.ndarray:
+        """The (N, width) windows at ``index``, into the first N rows of ``out`` if given
+        (a buffer reused from block to block)."""
         view = self.view
         if isinstance(self.channels, slice):
             view = view[..., self.channels, :, :]
@@ -450,11 +499,19 @@ class _Windows:
         # Gathered one channel at a time into the (N, C, k, k) block: the gather of all
         # channels at once comes out in the view's memory order (not C-contiguous), and
         # flattening it copied the whole block a second time.
-        k = view.shape[-1]
-        block = np.empty((index[0].shape[0], len(channels), k, k), dtype=view.dtype)
-        for i, channel in enumerate(channels):
-            block[:, i] = view[..., channel, :, :][index]
-        block = block.reshape(block.shape[0], -1)
+        k, n = view.shape[-1], index[0].shape[0]
+        if out is None:
+            block = np.empty((n, len(channels), k, k), dtype=view.dtype)
+        else:
+            block = out[:n].reshape(n, len(channels), k, k)
+        # In runs of _GATHER_ROWS windows: each channel's gather makes a temporary, and
+        # small ones are reused from the heap instead of being mapped and faulted in anew.
+        for start in range(0, n, _GATHER_ROWS):
+            sub = tuple(i[start : start + _GATHER_ROWS] for i in index)
+            rows = block[start : start + _GATHER_ROWS]
+            for i, channel in enumerate(channels):
+                rows[:, i] = view[..., channel, :, :][sub]
+        block = block.reshape(n, -1)
         if self.scale is not None:
             block *= self.scale
         return block
@@ -498,11 +555,17 @@ class _Projection:
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
+        # One buffer for the windows and one for their product, reused by every block (not
+        # a fresh large array per block: each would be mapped and faulted in anew).
+        rows = min(_CHUNK, n)
+        gathered = np.empty((rows, windows.width), dtype=np.float32)
+        product = np.empty((rows, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
-            _store(
-                out[start : start + _CHUNK], windows(sub) @ self.matrix - self.offset, inverse_unit
-            )
+            m = sub[0].shape[0]
+            values = np.matmul(windows(sub, gathered), self.matrix, out=product[:m])
+            np.subtract(values, self.offset, out=values)
+            _store(out[start : start + m], values, inverse_unit)
         return out
 
 
@@ -530,10 +593,20 @@ class _LevelSolver:
         rng: np.random.Generator,
         timer: _Timer,
         prepare: bool = True,
+        context: tuple[np.ndarray, list[np.ndarray]] | None = None,
+        release=None,
     ) -> None:
         """Pack the bands of ``query`` and ``exemplars`` (nothing of the mappings is kept),
         then, unless ``prepare`` is False, learn the PCA and make the features
-        (:meth:`prepare`): with False the caller may free the mappings first."""
+        (:meth:`prepare`): with False the caller may free the mappings first.
+
+        ``context``: (query's, exemplars') extra guide bands, (H, W, Cc) each, that
+        follow the mappings' own guide bands (``params.guide_weights`` covers both):
+        packed from where they are, not concatenated into a copy of every guide.
+        ``release``: called with an exemplar's index once its bands are packed, so that
+        the caller may free its mapping (and context) before the next one is packed;
+        ``exemplars`` (a list) then loses that entry too.
+        """
         start = time.perf_counter()
         self.params = params
         self.r = r = k // 2
@@ -547,12 +620,16 @@ class _LevelSolver:
         self.appearance_active = np.flatnonzero(appearance_w != 0)
         n_ga, n_aa = len(self.guide_active), len(self.appearance_active)
         self.n_guide_active = n_ga
+        query_context, exemplar_context = context or (None, [None] * len(exemplars))
+        n_own = query.guide.shape[2]  # the mappings' own guide bands; context ones after
 
         # Band scales: weight per standard deviation over the exemplars' masks.
         guide_scale = guide_w[self.guide_active]
         appearance_scale = appearance_w[self.appearance_active]
         if params.normalize_bands:
-            guide_scale = guide_scale / self._band_std(exemplars, "guide", self.guide_active)
+            guide_scale = guide_scale / self._band_std(
+                exemplars, "guide", self.guide_active, exemplar_context, n_own
+            )
             appearance_scale = appearance_scale / self._band_std(
                 exemplars, "appearance", self.appearance_active
             )
@@ -563,40 +640,58 @@ class _LevelSolver:
         heights = [e.shape[0] for e in exemplars]
         widths = [e.shape[1] for e in exemplars]
         n_ex = len(exemplars)
-        hp, wp = max(heights) + 2 * r, max(widths) + 2 * r
+        self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
+        # Candidates: window centres in the (dilated) mask. Only their windows are ever
+        # read, so the bands are packed for the box around them (an object often fills
+        # a third of its frame): band_origin is the box's top-left in frame coordinates,
+        # band_y, band_x a candidate's window's top-left in the packed bands.
+        self.exemplar_valid = [self._region(ex.mask, ex.shape, r) for ex in exemplars]
+        boxes = [_box(valid) for valid in self.exemplar_valid]
+        self.band_origin = np.array([box[::2] for box in boxes], dtype=np.int32).reshape(-1, 2)
+        hp = max(y1 - y0 for y0, y1, _, _ in boxes) + 2 * r
+        wp = max(x1 - x0 for _, _, x0, x1 in boxes) + 2 * r
         # Guide bands scaled; appearance bands once, unscaled (the matched ones are scaled
         # where they are read: kernels and feature blocks).
         self.exemplar_guide = np.zeros((n_ex, hp, wp, n_ga), dtype=np.float32)
         self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
-        self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         cand_e, cand_y, cand_x, positions = [], [], [], []
         self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
-        self.exemplar_valid: list[np.ndarray] = []
         n_cand = 0
-        for e, ex in enumerate(exemplars):
+        for e in range(n_ex):
+            ex = exemplars[e]
             h, w = ex.shape
-            _pad_into(
-                self.exemplar_guide[e, : h + 2 * r, : w + 2 * r],
-                _channels(ex.guide, self.guide_active),
+            y0, y1, x0, x1 = boxes[e]
+            # The box's rows and columns of the padded frame (padded coordinates).
+            rows, cols = slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r)
+            crop = (slice(0, y1 - y0 + 2 * r), slice(0, x1 - x0 + 2 * r))
+            self._pad_guide(
+                self.exemplar_guide[e][crop],
+                ex.guide,
+                exemplar_context[e],
                 r,
-                params.guide_padding,
                 guide_scale,
+                rows,
+                cols,
             )
-            _pad_into(
-                self.exemplar_appearance[e, : h + 2 * r, : w + 2 * r], ex.appearance, r, "reflect"
+            _pad_crop_into(
+                self.exemplar_appearance[e][crop], ex.appearance, r, "reflect", rows, cols
             )
-            valid = self._region(ex.mask, (h, w), r)
-            ys, xs = np.nonzero(valid)
+            ys, xs = np.nonzero(self.exemplar_valid[e])
             self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
-            self.exemplar_valid.append(valid)  # for propagate()
             n_cand += len(ys)
             cand_e.append(np.full(len(ys), e, dtype=np.int32))
             cand_y.append(ys.astype(np.int32))
             cand_x.append(xs.astype(np.int32))
             positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
+            del ex
+            if release is not None:  # packed: the caller's mapping may go now
+                exemplars[e] = None
+                release(e)
         self.cand_e = np.concatenate(cand_e)
         self.cand_y = np.concatenate(cand_y)
         self.cand_x = np.concatenate(cand_x)
+        self.band_y = self.cand_y - self.band_origin[self.cand_e, 0]
+        self.band_x = self.cand_x - self.band_origin[self.cand_e, 1]
         self.cand_position = np.concatenate(positions)
         costs = np.zeros(n_ex, dtype=np.float32)
         if params.exemplar_costs:
@@ -624,13 +719,22 @@ class _LevelSolver:
         self.query_position = _positions(
             self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
         )
-        self.query_active = np.zeros((h + 2 * r, w + 2 * r, n_ga + n_aa), dtype=np.float32)
-        _pad_into(
+        # The query's matched bands, like the exemplars', for the box around its window
+        # centres only: query_band_y, query_band_x are a centre's window's top-left there,
+        # query_crop the box's rows and columns of the padded frame.
+        y0, y1, x0, x1 = _box(centres)
+        self.query_band_y, self.query_band_x = self.query_y - y0, self.query_x - x0
+        self.query_crop = (slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r))
+        self.query_active = np.zeros(
+            (y1 - y0 + 2 * r, x1 - x0 + 2 * r, n_ga + n_aa), dtype=np.float32
+        )
+        self._pad_guide(
             self.query_active[..., :n_ga],
-            _channels(query.guide, self.guide_active),
+            query.guide,
+            query_context,
             r,
-            params.guide_padding,
             guide_scale,
+            *self.query_crop,
         )
         timer.add("setup", start)
         if prepare:
@@ -659,7 +763,7 @@ class _LevelSolver:
         self.appearance_projection = _Projection(n_aa, self.window)
         n_samples = min(params.pca_samples, len(self.cand_e))
         pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
-        sample_index = (self.cand_e[pick], self.cand_y[pick], self.cand_x[pick])
+        sample_index = (self.cand_e[pick], self.band_y[pick], self.band_x[pick])
         projections = (self.guide_projection, self.appearance_projection)
         largest = 0.0
         for projection, windows in zip(projections, self.exemplar_windows, strict=True):
@@ -685,7 +789,7 @@ class _LevelSolver:
 
         # Features: [guide PCA | weighted position | exemplar cost | appearance PCA].
         start = time.perf_counter()
-        index = (self.cand_e, self.cand_y, self.cand_x)
+        index = (self.cand_e, self.band_y, self.band_x)
         # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
         self.n_init_dims = self.guide_projection.n_components + 3
         self.candidate_features = self._features(
@@ -697,7 +801,7 @@ class _LevelSolver:
             _Windows(query_view, slice(n_ga, n_ga + n_aa)),
         )
         self.query_features = self._features(
-            self.query_windows, (self.query_y, self.query_x), self.query_position, 0.0
+            self.query_windows, (self.query_band_y, self.query_band_x), self.query_position, 0.0
         )
         ys = self.query_y
         n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
@@ -706,13 +810,44 @@ class _LevelSolver:
         timer.add("features", start)
         self.indexes: dict[str, object] = {}
 
+    def _pad_guide(self, out, guide, context, r, scale, rows, cols) -> None:
+        """The active guide channels, of the mapping's own bands then of the context
+        bands, scaled and padded, the crop ``rows``, ``cols`` of the padded frame into
+        ``out`` (the channels written part by part: the same float32 products as of
+        one concatenated guide)."""
+        n = 0
+        for array, channels in _guide_parts(guide, context, self.guide_active):
+            m = n + len(channels)
+            _pad_crop_into(
+                out[..., n:m],
+                _channels(array, channels),
+                r,
+                self.params.guide_padding,
+                rows,
+                cols,
+                scale[n:m],
+            )
+            n = m
+
     @staticmethod
-    def _band_std(exemplars: Sequence[Mapping], part: str, channels: np.ndarray) -> np.ndarray:
+    def _band_std(
+        exemplars: Sequence[Mapping],
+        part: str,
+        channels: np.ndarray,
+        context: Sequence[np.ndarray | None] | None = None,
+        n_own: int | None = None,
+    ) -> np.ndarray:
         if len(channels) == 0:
             return np.ones(0, dtype=np.float32)
         values = []
-        for ex in exemplars:
-            bands = getattr(ex, part)[..., channels]
+        for e, ex in enumerate(exemplars):
+            if part == "guide":  # own bands, then context bands: one (N, C) array
+                extra = None if context is None else context[e]
+                parts = _guide_parts(ex.guide, extra, channels, n_own)
+                picked = [array[..., c] for array, c in parts]
+                bands = picked[0] if len(picked) == 1 else np.concatenate(picked, axis=2)
+            else:
+                bands = getattr(ex, part)[..., channels]
             values.append(
                 bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels))
             )
@@ -759,14 +894,14 @@ class _LevelSolver:
         n_ga = self.n_guide_active
         # No temporaries: the product is written into the query's band stack.
         np.multiply(
-            _channels(appearance_padded, self.appearance_active),
+            _channels(appearance_padded[self.query_crop], self.appearance_active),
             self.appearance_scale,
             out=self.query_active[..., n_ga:],
         )
         if project and self.appearance_projection.n_components:
             self.appearance_projection.project(
                 self.query_windows[1],
-                (self.query_y, self.query_x),
+                (self.query_band_y, self.query_band_x),
                 self.query_features[:, self.n_init_dims :],
                 self.inverse_unit,
             )
@@ -776,10 +911,11 @@ class _LevelSolver:
         """Exact window distances of query centres (all, or ``subset``) to ``matches``."""
         start = time.perf_counter()
         if subset is None:
-            centres_y, centres_x, positions = self.query_y, self.query_x, self.query_position
+            centres_y, centres_x = self.query_band_y, self.query_band_x
+            positions = self.query_position
         else:
             matches = matches[subset]
-            centres_y, centres_x = self.query_y[subset], self.query_x[subset]
+            centres_y, centres_x = self.query_band_y[subset], self.query_band_x[subset]
             positions = self.query_position[subset]
         out = _kernels.window_costs(
             self.query_active,
@@ -791,8 +927,8 @@ class _LevelSolver:
             centres_y,
             centres_x,
             self.cand_e,
-            self.cand_y,
-            self.cand_x,
+            self.band_y,
+            self.band_x,
             np.ascontiguousarray(matches),
             positions,
             self.cand_position,
@@ -813,8 +949,8 @@ class _LevelSolver:
             self.window,
             self.query_lookup,
             self.cand_e,
-            self.cand_y,
-            self.cand_x,
+            self.band_y,
+            self.band_x,
             matches,
         )
         if (kind or self.params.vote) == "mode":
@@ -967,12 +1103,25 @@ class _LevelSolver:
                 chosen = self.chosen[r + y0 : r + y1, r : r + w]
                 copied = chosen[..., 0] >= 0
                 e = np.where(copied, chosen[..., 0], e)
-                sy = np.where(copied, chosen[..., 1] - r, sy)
-                sx = np.where(copied, chosen[..., 2] - r, sx)
+                # The mode vote records padded coordinates in the packed bands.
+                origin = self.band_origin[e] - r
+                sy = np.where(copied, chosen[..., 1] + origin[..., 0], sy)
+                sx = np.where(copied, chosen[..., 2] + origin[..., 1], sx)
             out[y0:y1, :, 0] = e
             out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
             out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
         return out
+
+
+def _guide_parts(guide, context, active, n_own=None):
+    """The ``active`` guide channels as (array, channel indices) parts: of the mapping's
+    own ``guide`` bands (the first ``n_own``, default all of them), then of the
+    ``context`` bands (None: none)."""
+    n_own = guide.shape[2] if n_own is None else n_own
+    parts = [(guide, active[active < n_own])]
+    if context is not None:
+        parts.append((context, active[active >= n_own] - n_own))
+    return [(array, channels) for array, channels in parts if len(channels)]
 
 
 def _coarse_colours(coarser: np.ndarray | None, band: np.ndarray, kind: str) -> np.ndarray:
@@ -980,6 +1129,13 @@ def _coarse_colours(coarser: np.ndarray | None, band: np.ndarray, kind: str) -> 
     if kind == "gaussian" or coarser is None:
         return np.asarray(band, dtype=np.float32)
     return collapse_laplacian([band, coarser])  # one step of the collapse
+
+
+def _context(mapping: Mapping, coarser_colours: np.ndarray) -> np.ndarray:
+    """The coarser level's colours brought to a level's grid: its context guide bands,
+    (H, W, Cc) float32."""
+    context = np.asarray(expand(coarser_colours, mapping.shape), dtype=np.float32)
+    return context if context.ndim == 3 else context[..., None]
 
 
 def _with_context(mapping: Mapping, coarser_colours: np.ndarray) -> Mapping:
@@ -1105,34 +1261,48 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
         query = query_levels[level]
+        context = None
         scale = params.context_level_weights[level] if params.context_level_weights else 1.0
         if context_from > level and scale > 0:
             # The coarser level's colours (kept as a running collapse, so that no
-            # coarser band has to stay alive) as extra guide bands.
-            query = _with_context(query, query_colours)
-            exemplars = [
-                _with_context(ex, colours)
-                for ex, colours in zip(exemplars, exemplar_colours, strict=True)
-            ]
+            # coarser band has to stay alive) as extra guide bands, packed by the solver
+            # beside the own guide bands (no concatenated copy of every guide).
+            context = (
+                _context(query, query_colours),
+                [
+                    _context(ex, colours)
+                    for ex, colours in zip(exemplars, exemplar_colours, strict=True)
+                ],
+            )
             level_params = replace(
                 level_params,
                 guide_weights=params.guide_weights + tuple(scale * w for w in context_weights),
             )
-        solver = _LevelSolver(query, exemplars, k, level_params, rng, timer, prepare=False)
-        # The bands are packed: the level's mappings (and their context copies) are not
-        # needed any more. Pyramids handed over (ReleasableLevels) drop them now, before
-        # the features are made.
-        del query, exemplars
+
+        def release(e: int, level: int = level, context=context) -> None:
+            # Exemplar e's bands are packed: its mapping and context are not needed any
+            # more. Pyramids handed over (ReleasableLevels) drop the level now, before
+            # the next exemplar is packed.
+            if context is not None:
+                context[1][e] = None
+            if isinstance(exemplar_levels[e], ReleasableLevels):
+                exemplar_levels[e].release(level)
+
+        solver = _LevelSolver(
+            query, exemplars, k, level_params, rng, timer, False, context, release
+        )
+        # The query's bands are packed too: the mapping goes before the features are made.
+        del query, exemplars, context, release  # (release holds the context too)
         exemplar_colours = level_colours
-        for pyramid in (query_levels, *exemplar_levels):
-            if isinstance(pyramid, ReleasableLevels):
-                pyramid.release(level)
+        if isinstance(query_levels, ReleasableLevels):
+            query_levels.release(level)
         # The coarser level's matches propagated from the packed lookups alone (no random
         # number drawn): before the features, so that its transients do not add to them.
         propagated = None if coarse_source is None else solver.propagate(coarse_source)
         coarse_source = solver.exemplar_valid = None  # what only propagate needed
         _trim_heap()
         solver.prepare(rng)
+        _trim_heap()  # the PCA's and the feature blocks' temporaries, before the E-steps
         level_seed = int(rng.integers(0, 2**62))
         h, w = solver.query_shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)

@@ -537,9 +537,13 @@ def test_memory_estimate_grows_with_the_query():
     examples = [((150, 200), 7000, 400)] * 2
     small = budget.estimate_colorize((150, 200), 7000, 400, examples, (7, 11, 9))
     big = budget.estimate_colorize((1500, 2000), 700_000, 4000, examples, (7, 11, 9))
-    assert big.bytes > 5 * small.bytes and big.seconds > 10 * small.seconds
-    # Measured on this project's fish runs (README): 1500x2000 peaked 764 MB above baseline.
-    assert 600 * 2**20 < big.bytes < 1100 * 2**20
+    # Measured: 385 MB and 82 MB above the baseline (most of a small run is the fixed
+    # cost of loading the kernels).
+    assert big.bytes > 4 * small.bytes and big.seconds > 10 * small.seconds
+    # Measured on this project's fish runs (the same sizes: a 1500x2000 query, two 150x200
+    # examples): 385 MB above the baseline (VmHWM) since the bands are packed for the
+    # object's box (764 MB before). The estimate may err on the safe side, not far below.
+    assert 0.8 * 385 * 2**20 < big.bytes < 1.5 * 385 * 2**20
 
 
 # -- batch: one failing object is reported and the rest go on ---------------------------------

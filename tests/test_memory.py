@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from imagemap import engine
-from imagemap.engine import EngineParams, Mapping, _LevelSolver, _pad_into, _Timer, synthesize
+from imagemap.engine import (
+    EngineParams,
+    Mapping,
+    _LevelSolver,
+    _pad_crop_into,
+    _pad_into,
+    _Timer,
+    synthesize,
+)
 
 
 @pytest.mark.parametrize("mode", ["constant", "reflect", "edge"])
@@ -24,6 +32,31 @@ def test_pad_into_equals_numpy_pad_of_the_scaled_bands(mode, h, w, r):
     outside = np.ones(outer.shape[:2], bool)
     outside[1 : 1 + h + 2 * r, 2 : 2 + w + 2 * r] = False
     assert np.all(outer[outside] == 7.0)  # nothing written beyond the target
+
+
+@pytest.mark.parametrize("mode", ["constant", "reflect", "edge"])
+@pytest.mark.parametrize(
+    "h, w, r", [(5, 7, 2), (2, 5, 1), (10, 12, 4), (3, 9, 3), (1, 4, 2), (6, 6, 0)]
+)
+def test_pad_crop_into_equals_a_crop_of_numpy_pad(mode, h, w, r):
+    """Exemplar and query bands are packed for a box only: every crop of the padded
+    frame, at the edges and inside, is the same bytes as the crop of np.pad."""
+    rng = np.random.default_rng(h * 100 + w * 10 + r)
+    bands = rng.random((h, w, 3)).astype(np.float32)
+    scale = rng.random(3).astype(np.float32)
+    padded = np.pad(bands * scale, ((r, r), (r, r), (0, 0)), mode=mode)
+    for y0, y1, x0, x1 in [(0, h, 0, w), (0, 1, w - 1, w), (h // 2, h, 0, max(1, w // 2))]:
+        rows, cols = slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r)
+        target = np.full((y1 - y0 + 2 * r, x1 - x0 + 2 * r, 3), 7.0, np.float32)
+        _pad_crop_into(target, bands, r, mode, rows, cols, scale)
+        assert np.array_equal(target, padded[rows, cols]), (y0, y1, x0, x1)
+
+
+def _padded_frame(solver, channels=3):
+    """A random appearance estimate of the solver's padded query frame."""
+    h, w = solver.query_shape
+    shape = (h + 2 * solver.r, w + 2 * solver.r, channels)
+    return np.random.default_rng(1).random(shape).astype(np.float32)
 
 
 def _scene(size=48, seed=0):
@@ -61,8 +94,7 @@ def test_quantized_features_are_the_float_features_to_half_a_unit():
         assert np.abs(values).max() > 100 * unit  # the unit resolves the features
         assert np.abs(restored - values).max() <= 0.51 * unit, name
     # The appearance part is re-projected from a new estimate the same way.
-    estimate = np.random.default_rng(1).random(quantized.query_active.shape[:2] + (3,))
-    estimate = estimate.astype(np.float32)
+    estimate = _padded_frame(quantized)
     exact.set_appearance(estimate)
     quantized.set_appearance(estimate)
     restored = quantized.query_features.astype(np.float64) * unit
@@ -75,9 +107,12 @@ def test_exemplar_bands_are_stored_once_and_unmatched_bands_are_not_scaled():
     solver = _solver(False, appearance_weights=(1.0, 0.0, 0.5))
     assert not hasattr(solver, "exemplar_active")
     assert solver.exemplar_appearance.shape[-1] == 3 and solver.exemplar_guide.shape[-1] == 2
+    # Packed for the box around the window centres only, not the whole padded frame.
+    frame = solver.query_shape[1] + 2 * solver.r
+    assert solver.exemplar_guide.shape[2] < frame and solver.query_active.shape[1] < frame
     rng = np.random.default_rng(2)
     matches = rng.integers(0, len(solver.cand_e), size=len(solver.query_y))
-    solver.set_appearance(rng.random(solver.query_active.shape[:2] + (3,)).astype(np.float32))
+    solver.set_appearance(_padded_frame(solver))
     costs = solver.costs(matches)
     # The same distance from explicit scaled windows.
     r, k = solver.r, 2 * solver.r + 1
@@ -90,8 +125,9 @@ def test_exemplar_bands_are_stored_once_and_unmatched_bands_are_not_scaled():
     )
     for m in rng.choice(len(matches), size=20, replace=False):
         c = matches[m]
-        e, ey, ex = solver.cand_e[c], solver.cand_y[c], solver.cand_x[c]
-        qy, qx = solver.query_y[m], solver.query_x[m]
+        # Window top-lefts in the packed bands (each packed for the box of its centres).
+        e, ey, ex = solver.cand_e[c], solver.band_y[c], solver.band_x[c]
+        qy, qx = solver.query_band_y[m], solver.query_band_x[m]
         diff = solver.query_active[qy : qy + k, qx : qx + k] - scaled[e, ey : ey + k, ex : ex + k]
         expected = float((solver.window[..., None] * diff.astype(np.float64) ** 2).sum())
         d = solver.query_position[m] - solver.cand_position[c]
