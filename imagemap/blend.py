@@ -138,13 +138,7 @@ def place_seams(
     """
     from imagemap import _kernels
 
-    n_channels = exemplars[0].shape[2]
-    heights = [e.shape[0] for e in exemplars]
-    widths = [e.shape[1] for e in exemplars]
-    packed = np.zeros((len(exemplars), max(heights), max(widths), n_channels), np.float32)
-    for k, exemplar in enumerate(exemplars):
-        packed[k, : exemplar.shape[0], : exemplar.shape[1]] = exemplar
-    shapes = np.array([heights, widths], dtype=np.int64).T.copy()
+    packed, shapes = _packed(exemplars)
     yy, xx = np.ogrid[0 : source.shape[0], 0 : source.shape[1]]
     label_e = source[..., 0].astype(np.int64).copy()
     label_y = (source[..., 1] - yy).astype(np.int64)
