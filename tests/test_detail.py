@@ -302,16 +302,21 @@ def test_only_fine_levels_of_large_objects_get_context():
     assert context_level_weights(big, (7, 11, 9, 9)) == (1, (1.0, 0.0, 0.0, 0.0))
 
 
-def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
+def _busts_mappings(blob_database, query_blob, levels=3):
+    """The query's and the first two examples' mappings with the busts preset's bands."""
     from imagemap.colorization import depth_mappings, example_mappings
+
+    clip = PRESETS["busts"].detail_clip
+    query = depth_mappings(query_blob[0], levels, clip, True)
+    examples = blob_database.examples[:2]
+    return query, [example_mappings(e, levels, True, clip, True) for e in examples]
+
+
+def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
     from imagemap.engine import synthesize
 
-    depth, _ = query_blob
     params = PRESETS["busts"]
-    query = depth_mappings(depth, 3, params.detail_clip, True)
-    exemplars = [
-        example_mappings(e, 3, True, params.detail_clip, True) for e in blob_database.examples[:2]
-    ]
+    query, exemplars = _busts_mappings(blob_database, query_blob)
     finest = replace(params.engine_params(2, 1), max_iterations=3)
     weighted = replace(finest, context_levels=2, context_level_weights=(1.0, 0.0, 0.0))
     a = synthesize(query, exemplars, finest, seed=1)
@@ -327,15 +332,10 @@ def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
 def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_blob):
     """With context on every fine level the EM still never raises its target, and the
     same seed gives the same bytes; without it the map differs (it is used)."""
-    from imagemap.colorization import depth_mappings, example_mappings
     from imagemap.engine import synthesize
 
-    depth, _ = query_blob
     params = PRESETS["busts"]
-    query = depth_mappings(depth, 3, params.detail_clip, True)
-    exemplars = [
-        example_mappings(e, 3, True, params.detail_clip, True) for e in blob_database.examples[:2]
-    ]
+    query, exemplars = _busts_mappings(blob_database, query_blob)
     on = replace(params.engine_params(2, 2), max_iterations=4)
     off = replace(on, context_weights=())
     first, again = (
