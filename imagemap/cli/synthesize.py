@@ -265,17 +265,20 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
 
 def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.budget import guard_colorize
+    from imagemap.cli import map_large_blocks
     from imagemap.cli.batch import is_mesh_request, run_mesh_synthesize
     from imagemap.database import Database
     from imagemap.io import read_depth
     from imagemap.progress import progress
 
     if is_mesh_request(args):  # a mesh in, or a textured mesh out
+        map_large_blocks()
         return run_mesh_synthesize(args)
     background = parse_colour(args.background)
     jobs = _plan_outputs(args)
     # Bad input stops at the door, before any synthesis: every depth is read first.
     depths = [read_depth(job["depth"]) for job in jobs]
+    map_large_blocks(max(depth.size for depth in depths))
     database = Database.from_directory(args.db)
     if args.exclude:
         database = database.without([n.strip() for n in args.exclude.split(",") if n.strip()])
