@@ -37,7 +37,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CSV_COLUMNS",
+    "INTERVAL_COLUMNS",
     "SUMMARY_COLUMNS",
+    "bootstrap_intervals",
     "check_report",
     "summarize",
     "summary_markdown",
@@ -128,6 +130,102 @@ SUMMARY_COLUMNS = (
 )
 
 
+#: The summary's intervals: how many resamples of a class's objects, and their level.
+BOOTSTRAP_RESAMPLES = 2000
+INTERVAL_LEVEL = 0.95
+#: Interval table columns: (key of :func:`summarize`'s rows, title, format).
+INTERVAL_COLUMNS = (
+    ("ciede2000", "ΔE00", "{:.2f}"),
+    ("ssim", "SSIM", "{:.3f}"),
+    ("part_transfer_macro", "macro part transfer", "{:.3f}"),
+    ("objects_features_drawn", "objects with all features", "pct"),
+    ("blur_ratio", "blur ratio", "{:.2f}"),
+    ("faulty", "faulty", "pct"),
+)
+
+
+def _object_values(results: list, key: str) -> np.ndarray:
+    """One value per object for an interval column (NaN where it is not measured)."""
+    if key == "objects_features_drawn":
+        values = [
+            float(not r.metrics.features_missing) if r.metrics.features_measured else math.nan
+            for r in results
+        ]
+    elif key == "faulty":
+        values = [float(r.faulty) for r in results]
+    else:
+        values = [getattr(r.metrics, key) for r in results]
+    return np.asarray(values, dtype=np.float64)
+
+
+def bootstrap_intervals(
+    evaluation: Evaluation,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    level: float = INTERVAL_LEVEL,
+    seed: int = 0,
+    relative_to: str | None = None,
+) -> dict[str, dict[str, dict[str, tuple[float, float]]]]:
+    """Per class and method, an interval for each mean of :data:`INTERVAL_COLUMNS`.
+
+    The class's objects are drawn ``resamples`` times with replacement and each mean
+    is taken over every draw; the interval holds the central ``level`` of those means
+    (percentile bootstrap). It says how far the mean could move with another set of
+    objects of the same kind (with 12 objects, one object more or less with all its
+    features is 8 points). Every method is resampled with the same draws, and the same
+    seed gives the same intervals.
+
+    With ``relative_to`` (a method), the intervals are of each method's mean minus that
+    method's, object by object (paired): whether one method beats another on these
+    objects beyond the chance of which objects were drawn. An interval that excludes 0
+    is a difference the set supports.
+
+    Returns
+    -------
+    dict
+        ``{class: {method: {key: (low, high)}}}``; (NaN, NaN) where the column is not
+        measured.
+    """
+    rng = np.random.default_rng(seed)
+    tails = (100 * (1 - level) / 2, 100 * (1 + level) / 2)
+    intervals: dict[str, dict[str, dict[str, tuple[float, float]]]] = {}
+    for class_name in dict.fromkeys(obj.class_name for obj in evaluation.objects):
+        members = [obj for obj in evaluation.objects if obj.class_name == class_name]
+        draws = rng.integers(0, len(members), (resamples, len(members)))
+        intervals[class_name] = {}
+        base = None
+        if relative_to is not None:
+            base = [obj.results[relative_to] for obj in members]
+        for method in evaluation.methods:
+            results = [obj.results[method] for obj in members]
+            row = {}
+            for key, _, _ in INTERVAL_COLUMNS:
+                values = _object_values(results, key)
+                if base is not None:
+                    values = values - _object_values(base, key)
+                values = values[draws]
+                measured = np.isfinite(values)
+                counts = measured.sum(axis=1)
+                sums = np.where(measured, values, 0.0).sum(axis=1)
+                means = sums[counts > 0] / counts[counts > 0]
+                low, high = np.percentile(means, tails) if means.size else (math.nan,) * 2
+                row[key] = (float(low), float(high))
+            intervals[class_name][method] = row
+    return intervals
+
+
+def _interval_cells(row: dict) -> list[str]:
+    cells = []
+    for key, _, form in INTERVAL_COLUMNS:
+        low, high = row[key]
+        if math.isnan(low):
+            cells.append("–")
+        elif form == "pct":
+            cells.append(f"{100 * low:.0f} to {100 * high:.0f}%")
+        else:
+            cells.append(f"{form.format(low)} to {form.format(high)}")
+    return cells
+
+
 def _summary_cells(row: dict) -> list[str]:
     cells = []
     for key, _, form in SUMMARY_COLUMNS:
@@ -156,6 +254,8 @@ def _fmt(value: float, digits: int = 3) -> str:
 def summary_markdown(evaluation: Evaluation) -> str:
     """The per-class summary tables as Markdown."""
     table = summarize(evaluation)
+    intervals = bootstrap_intervals(evaluation)
+    differences = bootstrap_intervals(evaluation, relative_to=evaluation.methods[0])
     lines = ["# Leave-one-out evaluation", ""]
     lines.append(
         f"{len(evaluation.objects)} objects, methods {', '.join(evaluation.methods)}, "
@@ -196,6 +296,34 @@ def summary_markdown(evaluation: Evaluation) -> str:
         ]
         for method, row in methods.items():
             lines.append(f"| {method} | " + " | ".join(_summary_cells(row)) + " |")
+        lines += [
+            "",
+            f"{100 * INTERVAL_LEVEL:.0f} % intervals of these means over the class's objects "
+            f"(bootstrap: {BOOTSTRAP_RESAMPLES} draws of the objects with replacement, the "
+            "same draws for every method): how far each mean could move on another set of "
+            "objects of the same kind. Two methods or runs on these same objects are "
+            "compared object by object in the table after it.",
+            "",
+            "| method | " + " | ".join(title for _, title, _ in INTERVAL_COLUMNS) + " |",
+            "|---|" + "---:|" * len(INTERVAL_COLUMNS),
+        ]
+        for method, row in intervals[class_name].items():
+            lines.append(f"| {method} | " + " | ".join(_interval_cells(row)) + " |")
+        first = evaluation.methods[0]
+        if len(evaluation.methods) > 1:
+            lines += [
+                "",
+                f"The same, of each method's difference to `{first}` object by object "
+                "(paired): an interval that excludes 0 is a difference these objects support.",
+                "",
+                "| method | " + " | ".join(title for _, title, _ in INTERVAL_COLUMNS) + " |",
+                "|---|" + "---:|" * len(INTERVAL_COLUMNS),
+            ]
+            for method, row in differences[class_name].items():
+                if method != first:
+                    lines.append(
+                        f"| {method} − {first} | " + " | ".join(_interval_cells(row)) + " |"
+                    )
     problems = _problems(evaluation)
     if problems:
         lines += ["", "## Not evaluated", ""] + [f"- {text}" for text in problems]

@@ -308,3 +308,85 @@ def test_every_object_failing_still_writes_a_report(fish_dir, tmp_path, monkeypa
 def test_leave_one_out_checks_its_arguments(fish_dir, keyword, value):
     with pytest.raises(InputError, match=keyword):
         leave_one_out(Database.from_directory(fish_dir), **{keyword: value})
+
+
+def _scored_objects(faulty, ssim, features):
+    """A one-class, one-method evaluation whose objects have the given values."""
+    import numpy as np
+
+    from imagemap.evaluation import Evaluation, MethodResult, ObjectEvaluation
+    from imagemap.metrics import ImageMetrics
+
+    objects = []
+    for i, (bad, score, drawn) in enumerate(zip(faulty, ssim, features, strict=True)):
+        metrics = ImageMetrics(
+            ciede2000=20.0,
+            ssim=score,
+            part_accuracy=0.5,
+            features_drawn=drawn or 0,
+            features_measured=0 if drawn is None else 1,
+        )
+        result = MethodResult("full", np.zeros((2, 2, 3)), metrics, 0.0, [], faulty=bad)
+        empty = np.zeros((2, 2))
+        objects.append(
+            ObjectEvaluation(f"fish_{i:03d}", "fish", empty, empty, empty, {"full": result})
+        )
+    return Evaluation(objects, {}, {}, {"fish": "fish"}, ("full",))
+
+
+def test_bootstrap_intervals_known_answers():
+    from imagemap.report import bootstrap_intervals
+
+    half = _scored_objects([True, False] * 6, [0.6] * 12, [1, 0] * 6)
+    row = bootstrap_intervals(half)["fish"]["full"]
+    assert row["ssim"] == pytest.approx((0.6, 0.6))  # no spread, no interval
+    assert row["ciede2000"] == pytest.approx((20.0, 20.0))
+    # 6 of 12 faulty: the binomial spread, about +-0.28 at 95 %.
+    low, high = row["faulty"]
+    assert 0.15 <= low <= 0.3 and 0.7 <= high <= 0.85
+    low_f, high_f = row["objects_features_drawn"]  # 6 of 12 with their feature
+    assert 0.15 <= low_f <= 0.3 and 0.7 <= high_f <= 0.85
+    # Unmeasured columns stay NaN; the same seed gives the same intervals.
+    assert all(math.isnan(v) for v in row["blur_ratio"])
+    assert bootstrap_intervals(half) == bootstrap_intervals(half)
+    # More objects of the same kind: a narrower interval.
+    wide = _scored_objects([True, False] * 24, [0.6] * 48, [1, 0] * 24)
+    low48, high48 = bootstrap_intervals(wide)["fish"]["full"]["faulty"]
+    assert high48 - low48 < 0.7 * (high - low)
+    # Objects without features count for nothing in the features column.
+    none = _scored_objects([False] * 4, [0.5, 0.6, 0.7, 0.8], [None] * 4)
+    assert all(
+        math.isnan(v) for v in bootstrap_intervals(none)["fish"]["full"]["objects_features_drawn"]
+    )
+    assert bootstrap_intervals(none)["fish"]["full"]["faulty"] == (0.0, 0.0)
+
+
+def test_summary_intervals_hold_the_means(class_evaluation):
+    from imagemap.report import INTERVAL_COLUMNS, bootstrap_intervals, summary_markdown
+
+    table = summarize(class_evaluation)[CLASS]
+    intervals = bootstrap_intervals(class_evaluation)[CLASS]
+    for method, row in table.items():
+        for key, _, _ in INTERVAL_COLUMNS:
+            low, high = intervals[method][key]
+            if not math.isnan(row[key]):
+                assert low - 1e-9 <= row[key] <= high + 1e-9, (method, key)
+    assert "% intervals of these means" in summary_markdown(class_evaluation)
+
+
+def test_paired_intervals_see_a_difference_the_marginal_ones_hide():
+    from imagemap.evaluation import Evaluation
+    from imagemap.report import bootstrap_intervals
+
+    # SSIM spread widely over objects, and a second method 0.02 better on every one.
+    scores = [0.3 + 0.05 * i for i in range(12)]
+    a = _scored_objects([False] * 12, scores, [None] * 12)
+    b = _scored_objects([False] * 12, [s + 0.02 for s in scores], [None] * 12)
+    for obj, other in zip(a.objects, b.objects, strict=True):
+        obj.results["better"] = other.results["full"]
+    both = Evaluation(a.objects, {}, {}, {"fish": "fish"}, ("full", "better"))
+    marginal = bootstrap_intervals(both)["fish"]
+    assert marginal["better"]["ssim"][0] < marginal["full"]["ssim"][1]  # they overlap
+    paired = bootstrap_intervals(both, relative_to="full")["fish"]
+    assert paired["better"]["ssim"] == pytest.approx((0.02, 0.02))  # but always better
+    assert paired["full"]["ssim"] == (0.0, 0.0)
