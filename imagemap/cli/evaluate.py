@@ -21,8 +21,10 @@ five baselines:
   no_pyramid    the full method on plain colour instead of Laplacian bands
 
 Writes REPORT_DIR/results.csv (object, method, ciede2000, ssim, part_accuracy,
-part_transfer, ..., faulty, seconds), summary.md (a table per class), index.html
-(static; open it in a browser) with its pictures under images/, and overview.png.
+part_transfer, ..., faulty, seconds), summary.md (per class: the means, their 95 %
+bootstrap intervals over the objects, and each method's paired difference to the first
+method), index.html (static; open it in a browser) with its pictures under images/, and
+overview.png.
 An object whose synthesis fails is named (exit code 1) and the others go on;
 Ctrl-C stops the run and still writes the report of the objects finished.
 
