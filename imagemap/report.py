@@ -412,6 +412,7 @@ figure img{display:block;image-rendering:pixelated;border:1px solid #999}
 def _report_html(evaluation: Evaluation, image_paths: dict, example_paths: dict) -> str:
     esc = html.escape
     table = summarize(evaluation)
+    differences = bootstrap_intervals(evaluation, relative_to=evaluation.methods[0])
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
@@ -448,6 +449,23 @@ def _report_html(evaluation: Evaluation, image_paths: dict, example_paths: dict)
             cells = "".join(f"<td>{esc(cell)}</td>" for cell in _summary_cells(row))
             parts.append(f"<tr><td>{esc(method)}</td>{cells}</tr>")
         parts.append("</table>")
+        first = evaluation.methods[0]
+        if len(evaluation.methods) > 1:
+            parts.append(
+                f"<p>Each method minus <code>{esc(first)}</code>, object by object: 95 % "
+                "bootstrap interval of the mean difference (an interval that excludes 0 is a "
+                "difference these objects support; more in summary.md).</p>"
+            )
+            parts.append(
+                "<table><tr><th>method</th>"
+                + "".join(f"<th>{esc(title)}</th>" for _, title, _ in INTERVAL_COLUMNS)
+                + "</tr>"
+            )
+            for method, row in differences[class_name].items():
+                if method != first:
+                    cells = "".join(f"<td>{esc(cell)}</td>" for cell in _interval_cells(row))
+                    parts.append(f"<tr><td>{esc(method)} − {esc(first)}</td>{cells}</tr>")
+            parts.append("</table>")
     parts.append("<h2>Objects</h2>")
     for obj in evaluation.objects:
         paths = image_paths[obj.name]
