@@ -307,8 +307,8 @@ def summary_markdown(evaluation: Evaluation) -> str:
             "| method | " + " | ".join(title for _, title, _ in INTERVAL_COLUMNS) + " |",
             "|---|" + "---:|" * len(INTERVAL_COLUMNS),
         ]
-        for method, row in intervals[class_name].items():
-            lines.append(f"| {method} | " + " | ".join(_interval_cells(row)) + " |")
+        for method, bounds in intervals[class_name].items():
+            lines.append(f"| {method} | " + " | ".join(_interval_cells(bounds)) + " |")
         first = evaluation.methods[0]
         if len(evaluation.methods) > 1:
             lines += [
@@ -319,10 +319,10 @@ def summary_markdown(evaluation: Evaluation) -> str:
                 "| method | " + " | ".join(title for _, title, _ in INTERVAL_COLUMNS) + " |",
                 "|---|" + "---:|" * len(INTERVAL_COLUMNS),
             ]
-            for method, row in differences[class_name].items():
+            for method, bounds in differences[class_name].items():
                 if method != first:
                     lines.append(
-                        f"| {method} − {first} | " + " | ".join(_interval_cells(row)) + " |"
+                        f"| {method} − {first} | " + " | ".join(_interval_cells(bounds)) + " |"
                     )
     problems = _problems(evaluation)
     if problems:
@@ -461,9 +461,9 @@ def _report_html(evaluation: Evaluation, image_paths: dict, example_paths: dict)
                 + "".join(f"<th>{esc(title)}</th>" for _, title, _ in INTERVAL_COLUMNS)
                 + "</tr>"
             )
-            for method, row in differences[class_name].items():
+            for method, bounds in differences[class_name].items():
                 if method != first:
-                    cells = "".join(f"<td>{esc(cell)}</td>" for cell in _interval_cells(row))
+                    cells = "".join(f"<td>{esc(cell)}</td>" for cell in _interval_cells(bounds))
                     parts.append(f"<tr><td>{esc(method)} − {esc(first)}</td>{cells}</tr>")
             parts.append("</table>")
     parts.append("<h2>Objects</h2>")
