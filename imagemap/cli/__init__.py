@@ -134,15 +134,12 @@ _MMAP_THRESHOLD = 4 * 2**20
 LARGE_MAP_PIXELS = 2**20
 
 
-def map_large_blocks(pixels: int | None = None) -> None:
-    """As the ``imagemap`` program, give large blocks their own mappings (see
-    :func:`_map_large_blocks`) when ``pixels`` (the largest query) is None or at least
-    ``LARGE_MAP_PIXELS``; called as a library, nothing."""
-    if _OWN_PROCESS and (pixels is None or pixels >= LARGE_MAP_PIXELS):
+def map_large_blocks(args: argparse.Namespace, pixels: int | None = None) -> None:
+    """As the ``imagemap`` program (``args.own_process``), give large blocks their own
+    mappings (see :func:`_map_large_blocks`) when ``pixels`` (the largest query) is None
+    or at least ``LARGE_MAP_PIXELS``; called through :func:`main` with ``argv``, nothing."""
+    if getattr(args, "own_process", False) and (pixels is None or pixels >= LARGE_MAP_PIXELS):
         _map_large_blocks()
-
-
-_OWN_PROCESS = False
 
 
 def _map_large_blocks() -> None:
@@ -163,8 +160,6 @@ def _map_large_blocks() -> None:
 
 
 def _main(argv: list[str] | None, own_process: bool = False) -> int:
-    global _OWN_PROCESS
-    _OWN_PROCESS = own_process
     parser = build_parser()
     try:
         args, unknown = parser.parse_known_args(argv)
@@ -185,8 +180,9 @@ def _main(argv: list[str] | None, own_process: bool = False) -> int:
     if getattr(args, "quiet", False):
         level = logging.ERROR
     logging.basicConfig(level=level, format="imagemap: %(message)s", stream=sys.stderr)
+    args.own_process = own_process
     if args.command != "synthesize":  # synthesize decides by the map's size
-        map_large_blocks()
+        map_large_blocks(args)
     try:
         return int(args.func(args) or 0)
     except InputError as exc:

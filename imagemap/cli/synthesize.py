@@ -272,13 +272,13 @@ def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.progress import progress
 
     if is_mesh_request(args):  # a mesh in, or a textured mesh out
-        map_large_blocks()
+        map_large_blocks(args)
         return run_mesh_synthesize(args)
     background = parse_colour(args.background)
     jobs = _plan_outputs(args)
     # Bad input stops at the door, before any synthesis: every depth is read first.
     depths = [read_depth(job["depth"]) for job in jobs]
-    map_large_blocks(max(depth.size for depth in depths))
+    map_large_blocks(args, max(depth.size for depth in depths))
     database = Database.from_directory(args.db)
     if args.exclude:
         database = database.without([n.strip() for n in args.exclude.split(",") if n.strip()])
