@@ -192,17 +192,15 @@ def bootstrap_intervals(
         members = [obj for obj in evaluation.objects if obj.class_name == class_name]
         draws = rng.integers(0, len(members), (resamples, len(members)))
         intervals[class_name] = {}
-        base = None
+        base = {key: 0.0 for key, _, _ in INTERVAL_COLUMNS}
         if relative_to is not None:
-            base = [obj.results[relative_to] for obj in members]
+            reference = [obj.results[relative_to] for obj in members]
+            base = {key: _object_values(reference, key) for key, _, _ in INTERVAL_COLUMNS}
         for method in evaluation.methods:
             results = [obj.results[method] for obj in members]
             row = {}
             for key, _, _ in INTERVAL_COLUMNS:
-                values = _object_values(results, key)
-                if base is not None:
-                    values = values - _object_values(base, key)
-                values = values[draws]
+                values = (_object_values(results, key) - base[key])[draws]
                 measured = np.isfinite(values)
                 counts = measured.sum(axis=1)
                 sums = np.where(measured, values, 0.0).sum(axis=1)
@@ -213,16 +211,23 @@ def bootstrap_intervals(
     return intervals
 
 
+def _number(value: float, form: str) -> str:
+    """A table number in its column's format (``"pct"``: a share as whole per cent)."""
+    return f"{100 * value:.0f}" if form == "pct" else form.format(value)
+
+
+def _missing(value) -> bool:
+    return value is None or (isinstance(value, float) and math.isnan(value))
+
+
 def _interval_cells(row: dict) -> list[str]:
     cells = []
     for key, _, form in INTERVAL_COLUMNS:
         low, high = row[key]
-        if math.isnan(low):
-            cells.append("–")
-        elif form == "pct":
-            cells.append(f"{100 * low:.0f} to {100 * high:.0f}%")
-        else:
-            cells.append(f"{form.format(low)} to {form.format(high)}")
+        unit = "%" if form == "pct" else ""
+        cells.append(
+            "–" if _missing(low) else f"{_number(low, form)} to {_number(high, form)}{unit}"
+        )
     return cells
 
 
@@ -230,12 +235,8 @@ def _summary_cells(row: dict) -> list[str]:
     cells = []
     for key, _, form in SUMMARY_COLUMNS:
         value = row[key]
-        if value is None or (isinstance(value, float) and math.isnan(value)):
-            cells.append("–")
-        elif form == "pct":
-            cells.append(f"{100 * value:.0f}%")
-        else:
-            cells.append(form.format(value))
+        unit = "%" if form == "pct" else ""
+        cells.append("–" if _missing(value) else _number(value, form) + unit)
     return cells
 
 
