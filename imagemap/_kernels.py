@@ -598,6 +598,27 @@ def _label_colour_distance(exemplars, e1, y1, x1, e2, y2, x2):
 
 
 @njit(cache=True, nogil=True)
+def _pair_seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx):
+    """Kwatra et al.'s seam cost between pixel (y, x) labelled (e, oy, ox) and its
+    neighbour (ny, nx) labelled (f, fy, fx): the two sources' disagreement on both."""
+    if e == f and oy == fy and ox == fx:
+        return 0.0
+    seam = 1e-3
+    for py, px in ((y, x), (ny, nx)):
+        a, b, c, d = py + oy, px + ox, py + fy, px + fx
+        if (
+            0 <= a < shapes[e, 0]
+            and 0 <= b < shapes[e, 1]
+            and 0 <= c < shapes[f, 0]
+            and 0 <= d < shapes[f, 1]
+        ):
+            seam += _label_colour_distance(exemplars, e, a, b, f, c, d)
+        else:
+            seam += 1.0
+    return seam
+
+
+@njit(cache=True, nogil=True)
 def _label_cost(exemplars, shapes, reference, label_e, label_y, label_x, y, x, e, oy, ox, smooth):
     """Data + seam cost of giving pixel (y, x) the label (e, oy, ox) (source = pixel + o)."""
     height, width = label_e.shape
@@ -619,20 +640,7 @@ def _label_cost(exemplars, shapes, reference, label_e, label_y, label_x, y, x, e
         noy, nox = label_y[ny, nx], label_x[ny, nx]
         if ne == e and noy == oy and nox == ox:
             continue
-        # Seam cost (Kwatra et al. 2003): how much the two sources disagree on both pixels.
-        seam = 1e-3
-        a, b = y + noy, x + nox  # pixel (y, x) under the neighbour's label
-        if 0 <= a < shapes[ne, 0] and 0 <= b < shapes[ne, 1]:
-            seam += _label_colour_distance(exemplars, e, sy, sx, ne, a, b)
-        else:
-            seam += 1.0
-        a, b = ny + oy, nx + ox  # the neighbour under this label
-        c, d = ny + noy, nx + nox
-        if 0 <= a < shapes[e, 0] and 0 <= b < shapes[e, 1]:
-            seam += _label_colour_distance(exemplars, e, a, b, ne, c, d)
-        else:
-            seam += 1.0
-        cost += smooth * seam
+        cost += smooth * _pair_seam(exemplars, shapes, e, oy, ox, ne, noy, nox, y, x, ny, nx)
     return cost
 
 
@@ -766,27 +774,6 @@ def label_regions(label_e, label_y, label_x):
                 n += 1
             region[y, x] = number[root]
     return region, n
-
-
-@njit(cache=True, nogil=True)
-def _pair_seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx):
-    """Kwatra et al.'s seam cost between pixel (y, x) labelled (e, oy, ox) and its
-    neighbour (ny, nx) labelled (f, fy, fx): the two sources' disagreement on both."""
-    if e == f and oy == fy and ox == fx:
-        return 0.0
-    seam = 1e-3
-    for py, px in ((y, x), (ny, nx)):
-        a, b, c, d = py + oy, px + ox, py + fy, px + fx
-        if (
-            0 <= a < shapes[e, 0]
-            and 0 <= b < shapes[e, 1]
-            and 0 <= c < shapes[f, 0]
-            and 0 <= d < shapes[f, 1]
-        ):
-            seam += _label_colour_distance(exemplars, e, a, b, f, c, d)
-        else:
-            seam += 1.0
-    return seam
 
 
 @njit(cache=True, nogil=True)
