@@ -1138,16 +1138,6 @@ def _context(mapping: Mapping, coarser_colours: np.ndarray) -> np.ndarray:
     return context if context.ndim == 3 else context[..., None]
 
 
-def _with_context(mapping: Mapping, coarser_colours: np.ndarray) -> Mapping:
-    """A level's mapping with the coarser level's colours, brought to its grid, as guide."""
-    context = expand(coarser_colours, mapping.shape)
-    return Mapping(
-        guide=np.concatenate([mapping.guide, context], axis=2),
-        appearance=mapping.appearance,
-        mask=mapping.mask,
-    )
-
-
 def _validate(query_levels, exemplar_levels, params) -> None:
     n_levels = len(query_levels)
     if n_levels == 0:
