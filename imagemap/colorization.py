@@ -133,6 +133,19 @@ class ColorizeParams:
         depth and position alone replace them when they fit in less than this
         fraction of the distance (the engine's ``guide_reseed``; 0: off). Features
         that only the finer levels resolve are then drawn.
+    final_reseed : float
+        After the finest level's EM, where its matches fit the depth worst (a
+        quarter of the windows), matches on depth and position alone replace them
+        when they fit in less than this fraction of the distance, for the copy
+        (the engine's ``final_reseed``; 0: off; not with ``vote="mean"``, whose
+        map is the EM's vote). The EM keeps what the coarser levels drew, and an
+        eye or lips they blurred away at a coarse level fit no window of the
+        blurred estimate: the copy then takes them where the relief says. On 36
+        generated busts (seed 1) 0.7 drew 90 % of eyes, eyebrows and lips instead
+        of 83 %, every feature in 67 % of busts instead of 50 %, and raised macro
+        part transfer 0.662 to 0.741 and SSIM 0.606 to 0.616; the price is more
+        seams (blur ratio 0.86 to 0.83), and an eye may come from the other
+        example than its twin (another iris colour).
     context_weight : float
         Weight of the coarser levels' luminance as an extra guide band (times the Y
         weight; the engine's ``context_weights``; Cb and Cr too gave the same maps
@@ -182,6 +195,7 @@ class ColorizeParams:
     grow_pyramid: bool = True
     silhouette_weight: float = 0.5
     guide_reseed: float = 0.5
+    final_reseed: float = 0.7
     context_weight: float = 1.0
     wide_context_weight: float = 0.25
     merge_regions: bool = False
@@ -196,6 +210,8 @@ class ColorizeParams:
         check_float("silhouette_weight", self.silhouette_weight, minimum=0.0)
         if check_float("guide_reseed", self.guide_reseed, minimum=0.0, maximum=1.0) == 1.0:
             raise InputError("guide_reseed: must be below 1 (a fraction of the distance)")
+        if check_float("final_reseed", self.final_reseed, minimum=0.0, maximum=1.0) == 1.0:
+            raise InputError("final_reseed: must be below 1 (a fraction of the distance)")
 
     @property
     def levels(self) -> int:
@@ -220,6 +236,9 @@ class ColorizeParams:
             guide_padding="constant",
             vote="mode" if self.vote == "mode" else "mean",
             guide_reseed=self.guide_reseed,
+            # The mean vote's map is the EM's own vote: matches changed after it would
+            # describe (source, provenance) a map that was not made from them.
+            final_reseed=self.final_reseed if self.vote != "mean" else 0.0,
             context_weights=(
                 (self.context_weight * self.luma_weight, 0.0, 0.0)
                 if self.context_weight and context_levels

@@ -82,6 +82,10 @@ _FEATURE_MARGIN = 2.0
 #: Share of a level's windows, the worst fits of the guide after propagation, that
 #: ``EngineParams.guide_reseed`` may give a match on guide and position only.
 RESEED_WORST = 0.1
+#: Share of the finest level's windows, the worst fits of the guide after the EM, that
+#: ``EngineParams.final_reseed`` may give a match on guide and position only. Larger
+#: than ``RESEED_WORST``: no EM iteration follows that could vote a good guide fit away.
+FINAL_RESEED_WORST = 0.25
 
 
 @dataclass(frozen=True)
@@ -196,6 +200,16 @@ class EngineParams:
         (``RESEED_WORST``) and the new one fits in less than this fraction of its
         distance (0: off). Without it a feature that only the finer level's guide
         resolves is voted away by the coarser level's appearance.
+    final_reseed : float
+        After the finest level's EM, match once more on guide and position only,
+        and take that match where the EM's match is among the worst-fitting
+        quarter of the guide (``FINAL_RESEED_WORST``) and the new one fits in less
+        than this fraction of its distance (0: off). The EM's appearance term
+        keeps what the coarser levels drew: where they lost a small feature (an
+        eye blurred away at a coarse level), no window that draws it fits the
+        blurred estimate, and the finest level cannot bring it back. The matches
+        that make the copy (``copy_source``) then follow the relief there; the
+        voted appearance does not change.
     context_weights : tuple of float
         At every level but the coarsest, the coarser levels' result as extra guide
         bands, one weight per appearance band (empty or all 0: off; a band weighted 0
@@ -254,6 +268,7 @@ class EngineParams:
     vote: str = "mean"
     quantize_features: bool = True
     guide_reseed: float = 0.0
+    final_reseed: float = 0.0
     context_weights: tuple[float, ...] = ()
     context_levels: int | None = None
     context_level_weights: tuple[float, ...] = ()
@@ -272,6 +287,8 @@ class EngineParams:
             raise ValueError("guide_padding must be 'constant', 'reflect' or 'edge'")
         if not 0 <= self.guide_reseed < 1:
             raise ValueError("guide_reseed must be in [0, 1)")
+        if not 0 <= self.final_reseed < 1:
+            raise ValueError("final_reseed must be in [0, 1)")
         if self.stride < 1 or self.max_iterations < 0:
             raise ValueError("stride must be at least 1 and max_iterations at least 0")
         if self.appearance_pyramid not in ("laplacian", "gaussian"):
@@ -1034,11 +1051,13 @@ class _LevelSolver:
         ):
             setattr(self, name, None)
 
-    def reseed(self, matches: np.ndarray, ratio: float, seed: int, rng) -> np.ndarray:
+    def reseed(
+        self, matches: np.ndarray, ratio: float, seed: int, rng, worst: float = RESEED_WORST
+    ) -> np.ndarray:
         """Propagated matches, some replaced by matches on guide and position only.
 
         A replacement is taken where the propagated match is among the
-        ``RESEED_WORST`` worst fits of the guide and the guide-only match fits it
+        ``worst`` share of worst fits of the guide and the guide-only match fits it
         in less than ``ratio`` of that distance: relief that the coarser levels
         could not resolve (a small bulging eye) then gets its own match instead of
         the coarser level's appearance there.
@@ -1050,8 +1069,7 @@ class _LevelSolver:
         fit_guided = _kernels.feature_distances(
             self.query_features, self.candidate_features, guided, n
         )
-        worst = fit > np.quantile(fit, 1.0 - RESEED_WORST)
-        take = worst & (fit_guided < ratio * fit)
+        take = (fit > np.quantile(fit, 1.0 - worst)) & (fit_guided < ratio * fit)
         log.info("reseed: %d of %d matches taken from the guide", int(take.sum()), len(take))
         return np.where(take, guided, matches)
 
@@ -1345,6 +1363,11 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             if not better.any() or previous - value < params.tolerance * abs(previous):
                 break
             previous = value
+        if level == 0 and params.final_reseed > 0:
+            matches = solver.reseed(
+                matches, params.final_reseed, level_seed + 1 + params.max_iterations, rng,
+                worst=FINAL_RESEED_WORST,
+            )
         if level == 0:  # the finest level's exact costs, while the bands are there
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)

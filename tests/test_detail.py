@@ -224,7 +224,47 @@ def test_an_eye_next_to_the_outline_is_copied_from_the_examples_eyes():
         return np.mean(source_labels(result.source, example_labels, mask)[eye] == 2)
 
     assert eye_copied_from_eyes() >= 0.9
-    assert eye_copied_from_eyes(silhouette_weight=0.0, guide_reseed=0.0) <= 0.1
+    assert eye_copied_from_eyes(silhouette_weight=0.0, guide_reseed=0.0, final_reseed=0.0) <= 0.1
+
+
+def test_the_final_reseed_brings_back_an_eye_the_em_lost():
+    """Without the silhouette band and the per-level reseed the EM copies the
+    query's eye (3 px from its outline) from plain body; the final reseed, where
+    the finest matches fit the relief worst, takes it from the examples' eyes."""
+    d1, i1, l1 = domed_fish(centre=(30, 46), radii=(19, 35), eye=(24, 24), palette=0)
+    d2, i2, l2 = domed_fish(centre=(33, 50), radii=(21, 37), eye=(27, 28), palette=1)
+    db = Database(
+        [Example.from_arrays("a", d1, i1, labels=l1), Example.from_arrays("b", d2, i2, labels=l2)]
+    )
+    depth, _, labels = domed_fish(centre=(32, 48), radii=(16, 36), eye=(24, 24))
+    mask, eye = depth > 0, labels == 2
+    lost = dict(silhouette_weight=0.0, guide_reseed=0.0)
+
+    def eye_copied_from_eyes(**overrides):
+        result = colorize(depth, db, replace(PRESETS["fish"], m=2, **overrides), seed=0)
+        by_name = {"a": l1, "b": l2}
+        example_labels = [by_name[name] for name in result.example_names]
+        return np.mean(source_labels(result.source, example_labels, mask)[eye] == 2)
+
+    without = eye_copied_from_eyes(final_reseed=0.0, **lost)
+    assert without <= 0.1
+    assert eye_copied_from_eyes(final_reseed=0.7, **lost) >= without + 0.3
+
+
+def test_the_mean_vote_is_the_ems_own_map_whatever_the_final_reseed(blob_database, query_blob):
+    """The final reseed changes the matches the copy is made from, after the EM: the
+    paper's mean vote (and its source map) and the EM's target trace stay the same."""
+    depth, _ = query_blob
+    results = [
+        colorize(depth, blob_database, replace(PRESETS["busts"], vote=vote, final_reseed=r), seed=0)
+        for vote in ("mean", "copy")
+        for r in (0.0, 0.7)
+    ]
+    mean_off, mean_on, copy_off, copy_on = results
+    assert np.array_equal(mean_off.image, mean_on.image)
+    assert np.array_equal(mean_off.source, mean_on.source)
+    assert copy_off.objective == copy_on.objective
+    assert mean_off.objective == copy_on.objective
 
 
 def test_silhouette_band_is_a_clipped_signed_distance():
@@ -243,6 +283,8 @@ def test_guide_reseed_must_be_a_fraction():
 
     with pytest.raises(ValueError, match="guide_reseed"):
         EngineParams(guide_reseed=1.5)
+    with pytest.raises(ValueError, match="final_reseed"):
+        EngineParams(final_reseed=1.0)
 
 
 @pytest.mark.parametrize(
@@ -251,6 +293,8 @@ def test_guide_reseed_must_be_a_fraction():
         ("silhouette_weight", -0.5),
         ("silhouette_weight", float("nan")),
         ("guide_reseed", 1.0),
+        ("final_reseed", 1.0),
+        ("final_reseed", -0.1),
         ("context_weight", -1.0),
         ("keep_detail", 1.5),
         ("wide_context_weight", -0.25),
