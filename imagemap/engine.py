@@ -203,8 +203,9 @@ class EngineParams:
     final_reseed : float
         After the finest level's EM, match once more on guide and position only,
         and take that match where the EM's match is among the worst-fitting
-        quarter of the guide (``FINAL_RESEED_WORST``) and the new one fits in less
-        than this fraction of its distance (0: off). The EM's appearance term
+        quarter of the guide (``FINAL_RESEED_WORST``), the new one fits in less
+        than this fraction of its distance (0: off) and carries at least as much
+        appearance detail (a reseed may draw a feature, never erase one). The EM's appearance term
         keeps what the coarser levels drew: where they lost a small feature (an
         eye blurred away at a coarse level), no window that draws it fits the
         blurred estimate, and the finest level cannot bring it back. The matches
@@ -1052,7 +1053,13 @@ class _LevelSolver:
             setattr(self, name, None)
 
     def reseed(
-        self, matches: np.ndarray, ratio: float, seed: int, rng, worst: float = RESEED_WORST
+        self,
+        matches: np.ndarray,
+        ratio: float,
+        seed: int,
+        rng,
+        worst: float = RESEED_WORST,
+        keep_detail: bool = False,
     ) -> np.ndarray:
         """Propagated matches, some replaced by matches on guide and position only.
 
@@ -1060,7 +1067,11 @@ class _LevelSolver:
         ``worst`` share of worst fits of the guide and the guide-only match fits it
         in less than ``ratio`` of that distance: relief that the coarser levels
         could not resolve (a small bulging eye) then gets its own match instead of
-        the coarser level's appearance there.
+        the coarser level's appearance there. With ``keep_detail`` a replacement must
+        also carry at least the appearance detail of the match it replaces (the
+        energy of its window's appearance features): relief the depth marks only
+        vaguely (a brow ridge) keeps the brow the EM drew rather than a plain patch
+        that fits the ridge a little better.
         """
         guided = self.search(matches, init=True, seed=seed, rng=rng)
         n = self.n_init_dims
@@ -1070,8 +1081,15 @@ class _LevelSolver:
             self.query_features, self.candidate_features, guided, n
         )
         take = (fit > np.quantile(fit, 1.0 - worst)) & (fit_guided < ratio * fit)
+        if keep_detail:
+            take &= self._appearance_energy(guided) >= self._appearance_energy(matches)
         log.info("reseed: %d of %d matches taken from the guide", int(take.sum()), len(take))
         return np.where(take, guided, matches)
+
+    def _appearance_energy(self, matches: np.ndarray) -> np.ndarray:
+        """Squared norm of each matched window's appearance features (its detail)."""
+        features = self.candidate_features[matches, self.n_init_dims :].astype(np.float64)
+        return np.einsum("ij,ij->i", features, features)
 
     def propagate(self, coarse_source: np.ndarray) -> np.ndarray:
         """Initial matches from the coarser level's dense source map (coordinates x2)."""
@@ -1367,6 +1385,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             matches = solver.reseed(
                 matches, params.final_reseed, level_seed + 1 + params.max_iterations, rng,
                 worst=FINAL_RESEED_WORST,
+                keep_detail=True,
             )
         if level == 0:  # the finest level's exact costs, while the bands are there
             solver.set_appearance(appearance, project=False)
