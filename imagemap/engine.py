@@ -1383,7 +1383,10 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             previous = value
         if level == 0 and params.final_reseed > 0:
             matches = solver.reseed(
-                matches, params.final_reseed, level_seed + 1 + params.max_iterations, rng,
+                matches,
+                params.final_reseed,
+                level_seed + 1 + params.max_iterations,
+                rng,
                 worst=FINAL_RESEED_WORST,
                 keep_detail=True,
             )
