@@ -328,18 +328,42 @@ def _scan(root: Path) -> tuple[list[Example], list[str]]:
     return examples, problems
 
 
-def check_database(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
+def check_database(
+    path: str | os.PathLike, view=None, size: tuple[int, int] | None = None
+) -> tuple[list[dict], list[str]]:
     """Read every example of a database and report what was found.
+
+    The examples are those :meth:`Database.from_directory` opens: image pairs and
+    textured meshes, rendered from ``view`` at ``size`` (W, H) as a synthesis would.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The database directory.
+    view, size : optional
+        How meshes are rendered (defaults: :data:`imagemap.mesh.FRONT`, 200x150).
 
     Returns
     -------
     rows : list of dict
-        One per readable example: name, size, depth range, foreground fraction,
-        whether labels and JSON are present.
+        One per readable example: name, source (``"images"`` or the mesh file's
+        name), size, depth range, foreground fraction, whether labels and JSON are
+        present.
     problems : list of str
-        One message per problem (unpaired, unreadable, mismatched files).
+        One message per problem (unpaired, unreadable, mismatched files, a mesh
+        with nothing visible or no colours).
+
+    Examples
+    --------
+    >>> rows, problems = check_database("examples/fish")  # doctest: +SKIP
+    >>> rows[0]["name"], rows[0]["source"], problems  # doctest: +SKIP
+    ('fish_000', 'images', [])
     """
+    from imagemap.mesh import mesh_examples
+
     examples, problems = _scan(Path(path))
+    meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
+    examples, problems = examples + meshes, problems + mesh_problems
     rows = []
     for example in examples:
         try:
@@ -353,6 +377,7 @@ def check_database(path: str | os.PathLike) -> tuple[list[dict], list[str]]:
         rows.append(
             {
                 "name": example.name,
+                "source": example.mesh_path.name if hasattr(example, "mesh_path") else "images",
                 "size": f"{depth.shape[1]}x{depth.shape[0]}",
                 "depth_min": float(foreground.min()),
                 "depth_max": float(foreground.max()),

@@ -265,3 +265,30 @@ def test_mesh_without_colours_cannot_be_an_example(tmp_path, monkeypatch):
     database = Database.from_directory(tmp_path, size=(32, 32))
     with pytest.raises(InputError, match="plain.stl: .*needs colours"):
         _ = database["plain"].depth
+
+
+def test_db_check_lists_meshes_as_a_synthesis_opens_them(tmp_path, monkeypatch, capsys):
+    """`imagemap db check` reports the meshes `Database.from_directory` takes as examples,
+    a mesh without colours and a name clash as problems (exit code 1)."""
+    from imagemap.cli import main
+    from imagemap.database import check_database
+
+    monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path / "cache"))
+    db_dir = tmp_path / "db"
+    db_dir.mkdir()
+    coloured_sphere(db_dir / "ball.glb", RED)
+    rows, problems = check_database(db_dir, size=(40, 30))
+    assert problems == []
+    assert [(r["name"], r["source"], r["size"]) for r in rows] == [("ball", "ball.glb", "40x30")]
+    assert rows[0]["mean_colour"] == pytest.approx(RED, abs=3 / 255)
+    assert main(["db", "check", str(db_dir)]) == 0
+    assert "mesh ball.glb" in capsys.readouterr().out
+
+    trimesh.creation.icosphere(subdivisions=2).export(db_dir / "plain.stl")
+    write_image(db_dir / "ball_depth.png", np.pad(np.ones((10, 10)), 2) * 0.5, bits=16)
+    write_image(db_dir / "ball_image.png", np.zeros((14, 14, 3)))
+    rows, problems = check_database(db_dir, size=(40, 30))
+    assert [r["name"] for r in rows] == ["ball"]  # the pair; the mesh of that name clashes
+    assert any("ball.glb: an example named 'ball' exists already" in p for p in problems)
+    assert any("plain.stl" in p and "needs colours" in p for p in problems)
+    assert main(["db", "check", str(db_dir)]) == 1

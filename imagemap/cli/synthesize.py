@@ -126,9 +126,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     check = db_sub.add_parser(
         "check",
         help="read every example and report what was found",
-        description="Read every NAME_depth/NAME_image pair of DIR and report sizes, depth "
-        "ranges and problems (unpaired, unreadable or mismatched files). Exit code 1 when "
-        "there is a problem.",
+        description="Read every NAME_depth/NAME_image pair and every textured mesh of DIR "
+        "(rendered from the front at 200x150, as imagemap synthesize sees them by default) "
+        "and report sizes, depth ranges and problems (unpaired, unreadable or mismatched "
+        "files, meshes with nothing visible or no colours). Exit code 1 when there is a "
+        "problem.",
     )
     check.add_argument("directory")
     check.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -455,6 +457,7 @@ def run_db_check(args: argparse.Namespace) -> int:
                 f"  {row['name']:<24} {row['size']:>9}  depth {row['depth_min']:.3f}-"
                 f"{row['depth_max']:.3f}  foreground {100 * row['foreground']:.0f}%"
                 f"{'  labels' if row['labels'] else ''}{'  json' if row['json'] else ''}"
+                f"{'' if row['source'] == 'images' else '  mesh ' + row['source']}"
             )
         for problem in problems:
             print(f"  problem: {problem}")
