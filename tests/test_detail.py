@@ -201,13 +201,10 @@ def domed_fish(shape=(64, 96), centre=(32, 48), radii=(20, 36), eye=(26, 26), pa
     return depth.astype(np.float32), image, labels
 
 
-def test_an_eye_next_to_the_outline_is_copied_from_the_examples_eyes():
-    """The query's eye sits 3 px from its outline, the examples' well inside theirs.
-
-    With the paper's bands the outline's jump to background outweighs the eye's
-    bulge and the eye is copied from plain body; the silhouette band (depth
-    continued past the outline) and the guide reseed copy it from the eyes.
-    """
+def eye_at_the_outline():
+    """Two domed fish whose eyes sit well inside their outlines, a query whose eye sits
+    3 px from its own, and the share of that eye copied from the examples' eyes as a
+    function of the fish preset's overrides."""
     d1, i1, l1 = domed_fish(centre=(30, 46), radii=(19, 35), eye=(24, 24), palette=0)
     d2, i2, l2 = domed_fish(centre=(33, 50), radii=(21, 37), eye=(27, 28), palette=1)
     db = Database(
@@ -223,6 +220,17 @@ def test_an_eye_next_to_the_outline_is_copied_from_the_examples_eyes():
         example_labels = [by_name[name] for name in result.example_names]
         return np.mean(source_labels(result.source, example_labels, mask)[eye] == 2)
 
+    return eye_copied_from_eyes
+
+
+def test_an_eye_next_to_the_outline_is_copied_from_the_examples_eyes():
+    """The query's eye sits 3 px from its outline, the examples' well inside theirs.
+
+    With the paper's bands the outline's jump to background outweighs the eye's
+    bulge and the eye is copied from plain body; the silhouette band (depth
+    continued past the outline) and the guide reseed copy it from the eyes.
+    """
+    eye_copied_from_eyes = eye_at_the_outline()
     assert eye_copied_from_eyes() >= 0.9
     assert eye_copied_from_eyes(silhouette_weight=0.0, guide_reseed=0.0, final_reseed=0.0) <= 0.1
 
@@ -231,21 +239,8 @@ def test_the_final_reseed_brings_back_an_eye_the_em_lost():
     """Without the silhouette band and the per-level reseed the EM copies the
     query's eye (3 px from its outline) from plain body; the final reseed, where
     the finest matches fit the relief worst, takes it from the examples' eyes."""
-    d1, i1, l1 = domed_fish(centre=(30, 46), radii=(19, 35), eye=(24, 24), palette=0)
-    d2, i2, l2 = domed_fish(centre=(33, 50), radii=(21, 37), eye=(27, 28), palette=1)
-    db = Database(
-        [Example.from_arrays("a", d1, i1, labels=l1), Example.from_arrays("b", d2, i2, labels=l2)]
-    )
-    depth, _, labels = domed_fish(centre=(32, 48), radii=(16, 36), eye=(24, 24))
-    mask, eye = depth > 0, labels == 2
+    eye_copied_from_eyes = eye_at_the_outline()
     lost = dict(silhouette_weight=0.0, guide_reseed=0.0)
-
-    def eye_copied_from_eyes(**overrides):
-        result = colorize(depth, db, replace(PRESETS["fish"], m=2, **overrides), seed=0)
-        by_name = {"a": l1, "b": l2}
-        example_labels = [by_name[name] for name in result.example_names]
-        return np.mean(source_labels(result.source, example_labels, mask)[eye] == 2)
-
     without = eye_copied_from_eyes(final_reseed=0.0, **lost)
     assert without <= 0.1
     assert eye_copied_from_eyes(final_reseed=0.7, **lost) >= without + 0.3
