@@ -205,10 +205,10 @@ class EngineParams:
         and take that match where the EM's match is among the worst-fitting
         quarter of the guide (``FINAL_RESEED_WORST``), the new one fits in less
         than this fraction of its distance (0: off) and carries at least as much
-        appearance detail (a reseed may draw a feature, never erase one). The EM's appearance term
-        keeps what the coarser levels drew: where they lost a small feature (an
-        eye blurred away at a coarse level), no window that draws it fits the
-        blurred estimate, and the finest level cannot bring it back. The matches
+        appearance detail (a reseed may draw a feature, never erase one). The EM's
+        appearance term keeps what the coarser levels drew: where they lost a small
+        feature (an eye blurred away at a coarse level), no window that draws it
+        fits the blurred estimate, and the finest level cannot bring it back. The matches
         that make the copy (``copy_source``) then follow the relief there; the
         voted appearance does not change.
     context_weights : tuple of float
