@@ -4,8 +4,9 @@
   depth, the examples selected, the synthesized map, its provenance and the
   held-out truth.
 - ``crops.png``: close-ups (3x) of a fish's eye and a stripe boundary and a bust's
-  face: truth, the paper's mean vote, the default, and the nearest example's map
-  pasted over.
+  face: truth, the paper's mean vote on Laplacian bands, the copy on Laplacian bands
+  (the previous default), the default (the copy on plain colour levels), and the
+  nearest example's map pasted over.
 """
 
 from __future__ import annotations
@@ -89,7 +90,9 @@ def crops_figure(count: int = 12) -> np.ndarray:
     for cls, name_boxes in (("fish", ("eye", "stripes")), ("busts", ("face",))):
         db, query = _database(cls, count)
         mask = query.mask
-        paper = colorize(query.depth, db, replace(PRESETS[cls], vote="mean"), seed=0)
+        laplacian = replace(PRESETS[cls], appearance_pyramid="laplacian")
+        paper = colorize(query.depth, db, replace(laplacian, vote="mean"), seed=0)
+        laplacian_copy = colorize(query.depth, db, laplacian, seed=0)
         default = colorize(query.depth, db, cls, seed=0)
         pasted, _, _ = _copy_nearest(query.depth, db)
         labels = query.labels
@@ -106,8 +109,9 @@ def crops_figure(count: int = 12) -> np.ndarray:
             box = (max(cy - half, 0), cy + half, max(cx - half, 0), cx + half)
             tiles = [
                 _caption(_crop(_on_backdrop(query.image, mask), box), f"{cls} {what}: truth"),
-                _caption(_crop(_on_backdrop(paper.image, mask), box), "mean vote (paper)"),
-                _caption(_crop(_on_backdrop(default.image, mask), box), "default"),
+                _caption(_crop(_on_backdrop(paper.image, mask), box), "paper: mean, Laplacian"),
+                _caption(_crop(_on_backdrop(laplacian_copy.image, mask), box), "copy, Laplacian"),
+                _caption(_crop(_on_backdrop(default.image, mask), box), "default (copy, colour)"),
                 _caption(_crop(_on_backdrop(pasted, mask), box), "nearest pasted"),
             ]
             rows.append(_row(tiles))

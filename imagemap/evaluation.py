@@ -7,7 +7,7 @@ same objects are run through four baselines, so that the table shows what each
 part of the method is worth:
 
 ============== ==================================================================
-``full``        the method: three-level pyramid, hard EM, depth + colour +
+``full``        the method: a pyramid, hard EM, depth + colour +
                 relative position (the class preset as it is)
 ``copy_nearest`` the nearest example's image-map (``select_examples`` with m=1)
                 translated so that its centroid falls on the query's; query
@@ -20,8 +20,9 @@ part of the method is worth:
                 pixel the weighted mean of its windows) instead of the seam-
                 blended copy
 ``no_position`` the full method with ``position_weight=0``
-``no_pyramid``  the full method on plain YCbCr at every level instead of
-                Laplacian bands (``use_pyramid=False``)
+``laplacian``   the full method on the paper's YCbCr Laplacian bands instead
+                of each level's plain colours
+                (``appearance_pyramid="laplacian"``)
 ============== ==================================================================
 
 Objects are independent and run in a process pool; an object whose synthesis
@@ -110,7 +111,7 @@ METHODS: tuple[str, ...] = (
     "one_pass",
     "mean_vote",
     "no_position",
-    "no_pyramid",
+    "laplacian",
 )
 
 
@@ -251,8 +252,8 @@ def method_params(method: str, params: ColorizeParams) -> ColorizeParams | None:
         return replace(params, vote="mean")
     if method == "no_position":
         return replace(params, position_weight=0.0)
-    if method == "no_pyramid":
-        return replace(params, use_pyramid=False)
+    if method == "laplacian":
+        return replace(params, appearance_pyramid="laplacian")
     raise InputError(f"unknown method {method!r}; use some of {', '.join(METHODS)}")
 
 

@@ -149,7 +149,8 @@ def test_method_params_of_the_baselines():
     one = method_params("one_pass", fish)
     assert (one.patch_sizes, one.max_iterations, one.position_weight) == ((7,), 0, 0.0)
     assert method_params("no_position", fish).position_weight == 0.0
-    assert method_params("no_pyramid", fish).use_pyramid is False
+    assert method_params("laplacian", fish).appearance_pyramid == "laplacian"
+    assert fish.appearance_pyramid == "gaussian"
     with pytest.raises(InputError, match="unknown method"):
         method_params("best", fish)
     assert method_params("mean_vote", fish).vote == "mean" and fish.vote == "copy"
@@ -160,12 +161,12 @@ def test_method_params_of_the_baselines():
         "one_pass",
         "mean_vote",
         "no_position",
-        "no_pyramid",
+        "laplacian",
     }
 
 
 def test_cli_with_two_workers_matches_one(fish_dir, tmp_path, capsys):
-    args = ["evaluate", str(fish_dir), "--methods", "full,no_pyramid", "--limit", "2"]
+    args = ["evaluate", str(fish_dir), "--methods", "full,laplacian", "--limit", "2"]
     assert main([*args, "--out", str(tmp_path / "one"), "--workers", "1"]) == 0
     assert main([*args, "--out", str(tmp_path / "two"), "--workers", "2"]) == 0
     out = capsys.readouterr().out

@@ -34,7 +34,7 @@ BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
 #: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 #: ``imagemap.evaluation.METHODS``: the ``imagemap evaluate --methods`` names, in report order.
-METHOD_NAMES = ("full", "copy_nearest", "one_pass", "mean_vote", "no_position", "no_pyramid")
+METHOD_NAMES = ("full", "copy_nearest", "one_pass", "mean_vote", "no_position", "laplacian")
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",

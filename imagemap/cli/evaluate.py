@@ -18,7 +18,8 @@ five baselines:
   mean_vote     the full method with the paper's mean vote instead of the seam-
                 blended copy
   no_position   the full method without the position term
-  no_pyramid    the full method on plain colour instead of Laplacian bands
+  laplacian     the full method on the paper's Laplacian colour bands instead
+                of each pyramid level's plain colours
 
 Writes REPORT_DIR/results.csv (object, method, ciede2000, ssim, part_accuracy,
 part_transfer, ..., faulty, seconds), summary.md (per class: the means, their 95 %

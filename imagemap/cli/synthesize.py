@@ -90,6 +90,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "inside the EM iterations too)",
     )
     p.add_argument(
+        "--appearance-pyramid",
+        choices=("gaussian", "laplacian"),
+        help="what each pyramid level matches and copies: gaussian (default; the level's "
+        "plain colours, so a copied pixel keeps the colour the coarser levels chose), "
+        "laplacian (the paper's YCbCr Laplacian bands; '--vote mean --appearance-pyramid "
+        "laplacian' is the paper's method with our guide bands)",
+    )
+    p.add_argument(
         "--background",
         default="transparent",
         help="'transparent' (RGBA, default) or a colour: white, black, '#rrggbb'",
@@ -358,6 +366,7 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
             backend=args.backend,
             example_preference=args.example_preference,
             vote=args.vote,
+            appearance_pyramid=args.appearance_pyramid,
             seed=args.seed,
             quiet=batch or not interactive,
         )
