@@ -462,3 +462,22 @@ def test_colorize_with_region_merge_is_deterministic(blob_database, query_blob):
     first = colorize(depth, blob_database, preset=params, seed=2)
     again = colorize(depth, blob_database, preset=params, seed=2)
     assert first.image.tobytes() == again.image.tobytes()
+
+
+def test_the_blend_keeps_the_rim_at_the_copys_colours(blob_database, query_blob):
+    """Outside the object the voted map holds whatever the windows left there (zeros
+    on plain colour levels: green in YCbCr); the blend's reference there is the copy,
+    so the rim keeps the copied colours (it had drifted 0.16 towards the zeros)."""
+    from imagemap.colorization import _example_ycbcr, to_ycbcr
+
+    depth, _ = query_blob
+    result = colorize(depth, blob_database, "busts", seed=0)
+    assert result.params.appearance_pyramid == "gaussian"
+    mask = depth > 0
+    rim = mask & ~ndimage.binary_erosion(mask, iterations=3)
+    copied = copy_through(
+        [_example_ycbcr(blob_database[name]) for name in result.example_names], result.source
+    )
+    gap = np.abs(to_ycbcr(result.image) - copied)
+    assert gap[rim].mean() < 0.02
+    assert gap[rim].mean() <= 2 * gap[mask & ~rim].mean()  # no worse than the interior
