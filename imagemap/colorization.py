@@ -279,7 +279,7 @@ class ColorizeParams:
 #: Class presets after the paper's Table 1 (m and patch widths as published;
 #: weights restated per band standard deviation, see ``docs/presets.md``).
 PRESETS: dict[str, ColorizeParams] = {
-    "humans": ColorizeParams(m=1, patch_sizes=(7, 9, 9), position_weight=2.0),
+    "humans": ColorizeParams(m=1, patch_sizes=(7, 9, 9), position_weight=3.0),
     "busts": ColorizeParams(m=2, patch_sizes=(7, 11, 9), position_weight=1.0),
     "fish": ColorizeParams(m=2, patch_sizes=(7, 11, 9), position_weight=0.5),
 }
