@@ -1087,7 +1087,12 @@ class _LevelSolver:
         return np.where(take, guided, matches)
 
     def _appearance_energy(self, matches: np.ndarray) -> np.ndarray:
-        """Squared norm of each matched window's appearance features (its detail)."""
+        """Squared norm of each matched window's appearance features (its detail).
+
+        The features are PCA coefficients about the examples' mean window: of Laplacian
+        bands this is the window's detail; of plain colour levels (Gaussian) it is how
+        far the window stands out from the mean window in colour and detail, which
+        still ranks an eye or a brow above plain skin."""
         features = self.candidate_features[matches, self.n_init_dims :].astype(np.float64)
         return np.einsum("ij,ij->i", features, features)
 
