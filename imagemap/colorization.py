@@ -1,9 +1,11 @@
 """Depth-map colorization: the first front end of the engine (Hassner & Basri 2006).
 
 Guide bands per pyramid level: the depth's Gaussian level and its high
-frequencies (the Laplacian band of the same level). Appearance bands: the
-Laplacian pyramids of Y, Cb and Cr of the image-map, synthesised level by level
-and collapsed into RGB at the end.
+frequencies (the Laplacian band of the same level). Appearance bands: the Y, Cb
+and Cr of the image-map at each level of its Gaussian pyramid, synthesised level
+by level; the finest level's matches are copied into the map and the seams
+blended. The paper's Laplacian colour bands (collapsed at the end) are
+``appearance_pyramid="laplacian"``.
 
 Examples
 --------
