@@ -102,7 +102,7 @@ class ColorizeParams:
         smear. With plain colours every level's matches carry the colours they
         copy. On the generated classes (12 objects each, seed 0) plain colours
         raised macro part transfer (fish 0.762 to 0.776, busts 0.709 to 0.807,
-        humans 0.771 to 0.801), busts with every feature 83 to 92 %, and the
+        humans 0.785 to 0.810), busts with every feature 83 to 92 %, and the
         blur ratio (fish 0.89 to 0.93, busts 0.84 to 0.88); at 4x busts drew 87 %
         of their features instead of 67 % (see ``docs/presets.md``).
     example_preference : float

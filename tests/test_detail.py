@@ -301,6 +301,8 @@ def test_guide_reseed_must_be_a_fraction():
         ("keep_detail", 1.5),
         ("wide_context_weight", -0.25),
         ("keep_detail", -0.1),
+        ("appearance_pyramid", "lap"),
+        ("appearance_pyramid", "Gaussian"),
     ],
 )
 def test_new_colorize_settings_are_checked(field, value):
