@@ -37,7 +37,14 @@ from imagemap.blend import (
     seamless_copy,
 )
 from imagemap.database import Database, Example
-from imagemap.engine import EngineParams, EngineResult, Mapping, ReleasableLevels, synthesize
+from imagemap.engine import (
+    APPEARANCE_PYRAMIDS,
+    EngineParams,
+    EngineResult,
+    Mapping,
+    ReleasableLevels,
+    synthesize,
+)
 from imagemap.io import InputError, validate_depth
 from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
 from imagemap.validate import check_colorize_arguments, check_float, check_int
@@ -62,7 +69,6 @@ log = logging.getLogger("imagemap")
 
 #: How matched windows make the map (see :class:`ColorizeParams`).
 VOTES = ("copy", "mean", "mode")
-APPEARANCE_PYRAMIDS = ("gaussian", "laplacian")
 
 
 @dataclass(frozen=True)

@@ -87,6 +87,9 @@ RESEED_WORST = 0.1
 #: than ``RESEED_WORST``: no EM iteration follows that could vote a good guide fit away.
 FINAL_RESEED_WORST = 0.25
 
+#: What the appearance bands of a level are: its Gaussian level or its Laplacian band.
+APPEARANCE_PYRAMIDS = ("gaussian", "laplacian")
+
 
 @dataclass(frozen=True)
 class Mapping:
@@ -292,7 +295,7 @@ class EngineParams:
             raise ValueError("final_reseed must be in [0, 1)")
         if self.stride < 1 or self.max_iterations < 0:
             raise ValueError("stride must be at least 1 and max_iterations at least 0")
-        if self.appearance_pyramid not in ("laplacian", "gaussian"):
+        if self.appearance_pyramid not in APPEARANCE_PYRAMIDS:
             raise ValueError("appearance_pyramid must be 'laplacian' or 'gaussian'")
 
 

@@ -11,7 +11,14 @@ from pathlib import Path
 import pytest
 
 import imagemap
-from imagemap.cli import BACKEND_NAMES, METHOD_NAMES, PRESET_NAMES, build_parser, main
+from imagemap.cli import (
+    APPEARANCE_PYRAMID_NAMES,
+    BACKEND_NAMES,
+    METHOD_NAMES,
+    PRESET_NAMES,
+    build_parser,
+    main,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("numpy", "scipy", "skimage", "sklearn", "numba", "pynndescent", "imageio", "trimesh")
@@ -64,12 +71,13 @@ def test_public_names_are_importable_and_lazy_submodules_resolve():
 
 def test_option_choices_match_the_library():
     from imagemap.colorization import PRESETS
-    from imagemap.engine import BACKENDS
+    from imagemap.engine import APPEARANCE_PYRAMIDS, BACKENDS
     from imagemap.evaluation import METHODS
 
     assert PRESET_NAMES == tuple(sorted(PRESETS))
     assert BACKEND_NAMES == tuple(BACKENDS)
     assert METHOD_NAMES == tuple(METHODS)
+    assert APPEARANCE_PYRAMID_NAMES == APPEARANCE_PYRAMIDS
 
 
 def test_version_has_one_source(capsys):

@@ -35,6 +35,8 @@ BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 #: ``imagemap.evaluation.METHODS``: the ``imagemap evaluate --methods`` names, in report order.
 METHOD_NAMES = ("full", "copy_nearest", "one_pass", "mean_vote", "no_position", "laplacian")
+#: ``imagemap.engine.APPEARANCE_PYRAMIDS``: the ``--appearance-pyramid`` choices.
+APPEARANCE_PYRAMID_NAMES = ("gaussian", "laplacian")
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",

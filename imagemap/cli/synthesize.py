@@ -39,7 +39,12 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import BACKEND_NAMES, PRESET_NAMES, add_common_options
+    from imagemap.cli import (
+        APPEARANCE_PYRAMID_NAMES,
+        BACKEND_NAMES,
+        PRESET_NAMES,
+        add_common_options,
+    )
     from imagemap.cli.batch import add_mesh_options
     from imagemap.validate import non_negative_float, non_negative_int, positive_int
 
@@ -91,7 +96,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--appearance-pyramid",
-        choices=("gaussian", "laplacian"),
+        choices=APPEARANCE_PYRAMID_NAMES,
         help="what each pyramid level matches and copies: gaussian (default; the level's "
         "plain colours, so a copied pixel keeps the colour the coarser levels chose), "
         "laplacian (the paper's YCbCr Laplacian bands; '--vote mean --appearance-pyramid "
