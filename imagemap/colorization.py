@@ -554,6 +554,8 @@ def example_mappings(
     silhouette: bool = False,
 ) -> list[Mapping]:
     """An example's pyramid of mappings: depth bands, YCbCr (Gaussian or Laplacian) levels, mask."""
+    if appearance_pyramid not in APPEARANCE_PYRAMIDS:  # the old use_pyramid bool included
+        raise ValueError(f"appearance_pyramid must be one of {APPEARANCE_PYRAMIDS}")
     mask = example.mask
     ycbcr = _example_ycbcr(example)
     if appearance_pyramid == "laplacian":

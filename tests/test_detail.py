@@ -483,3 +483,16 @@ def test_the_blend_keeps_the_rim_at_the_copys_colours(blob_database, query_blob)
     gap = np.abs(to_ycbcr(result.image) - copied)
     assert gap[rim].mean() < 0.02
     assert gap[rim].mean() <= 2 * gap[mask & ~rim].mean()  # no worse than the interior
+
+
+def test_example_mappings_refuse_the_old_boolean(blob_database):
+    """``example_mappings`` took ``use_pyramid=True`` where it now takes a pyramid name:
+    a leftover bool is refused rather than read silently as plain colours."""
+    from imagemap.colorization import example_mappings
+
+    example = blob_database.examples[0]
+    with pytest.raises(ValueError, match="appearance_pyramid"):
+        example_mappings(example, 2, True)
+    plain, bands = (example_mappings(example, 2, kind) for kind in ("gaussian", "laplacian"))
+    assert np.allclose(plain[1].appearance, bands[1].appearance)  # the coarsest level: equal
+    assert not np.allclose(plain[0].appearance, bands[0].appearance)
