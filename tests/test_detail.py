@@ -90,6 +90,49 @@ def test_seamless_copy_keeps_a_coherent_copy_and_hides_a_palette_seam():
     np.testing.assert_allclose(none, reference, atol=1e-6)
 
 
+def _sleeve_and_hand(exemplars=1):
+    """A map copied from a textured exemplar whose left half is dark (a sleeve) and
+    right half bright (a hand): the output's left half from the sleeve, its right half
+    from inside the hand 8 px further on (or from a second exemplar), a seam at column 16
+    between two sources; the voted reference shows the edge blurred."""
+    rng = np.random.default_rng(3)
+    texture = 0.03 * ndimage.gaussian_filter(rng.standard_normal((32, 48, 1)), (1, 1, 0))
+    exemplar = np.where(np.arange(48)[None, :, None] < 20, 0.2, 0.8) + texture
+    source = identity_source((32, 32))
+    source[:, 16:, 2] += 8  # columns 24.. of the exemplar: inside the hand
+    if exemplars == 2:
+        source[:, 16:, 0] = 1
+    step = np.where(np.arange(32) < 16, 0.2, 0.8).astype(float)
+    reference = ndimage.gaussian_filter1d(step, 1.5)[None, :, None] * np.ones((32, 1, 1))
+    return [exemplar, exemplar.copy()][:exemplars], source, reference
+
+
+def test_an_edge_on_a_seam_within_one_exemplar_stays_sharp():
+    exemplars, source, reference = _sleeve_and_hand()
+    assert not coherent_edges(source)[0][:, 15].any()  # a seam, within one exemplar
+    blended = seamless_copy(exemplars, source, reference, scale=6.0)
+    kept = seamless_copy(exemplars, source, reference, scale=6.0, edge_support=0.3)
+    jump = lambda out: float(np.mean(out[:, 16] - out[:, 15]))  # noqa: E731
+    assert jump(blended) < 0.25  # spread over the blend scale
+    assert jump(kept) > 0.5  # one pixel, nearly the full 0.6
+    # Away from the seam the texture is the copy's either way.
+    detail = np.diff(kept[:, 2:12, 0], axis=1).ravel()
+    truth = np.diff(exemplars[0][:, 2:12, 0], axis=1).ravel()
+    assert np.corrcoef(detail, truth)[0, 1] > 0.95
+
+
+def test_an_edge_the_reference_does_not_show_or_between_examples_is_blended():
+    exemplars, source, reference = _sleeve_and_hand()
+    flat = np.full_like(reference, 0.5)
+    out = seamless_copy(exemplars, source, flat, scale=6.0, edge_support=0.3)
+    assert float(np.mean(out[:, 16] - out[:, 15])) < 0.25
+    two, source2, reference2 = _sleeve_and_hand(exemplars=2)
+    out = seamless_copy(two, source2, reference2, scale=6.0, edge_support=0.3)
+    assert float(np.mean(out[:, 16] - out[:, 15])) < 0.25  # a palette step: spread
+    with pytest.raises(ValueError, match="edge_support"):
+        seamless_copy(exemplars, source, reference, edge_support=2.0)
+
+
 def test_pyramid_grows_with_large_objects():
     def square(side, canvas=1200):
         mask = np.zeros((canvas, canvas), bool)
@@ -301,6 +344,8 @@ def test_guide_reseed_must_be_a_fraction():
         ("keep_detail", 1.5),
         ("wide_context_weight", -0.25),
         ("keep_detail", -0.1),
+        ("edge_support", 1.5),
+        ("edge_support", float("nan")),
         ("appearance_pyramid", "lap"),
         ("appearance_pyramid", "Gaussian"),
     ],
