@@ -679,6 +679,7 @@ def colorize(
     example_preference: float | None = None,
     vote: str | None = None,
     appearance_pyramid: str | None = None,
+    edge_support: float | None = None,
     seed: int = 0,
     quiet: bool = True,
 ) -> ColorizeResult:
@@ -705,6 +706,9 @@ def colorize(
     appearance_pyramid : {"gaussian", "laplacian"}, optional
         Plain colours per level (default) or the paper's Laplacian bands
         (overrides the preset).
+    edge_support : float, optional
+        Share of an edge on a seam within one example that the voted map must show
+        for the copy to keep it sharp (overrides the preset; 0 blends every seam).
     seed : int
         The same seed gives the same bytes.
     quiet : bool
@@ -728,6 +732,7 @@ def colorize(
         example_preference=example_preference,
         vote=vote,
         appearance_pyramid=appearance_pyramid,
+        edge_support=edge_support,
     )
     depth = validate_depth(depth)
     if len(database) == 0:

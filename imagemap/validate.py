@@ -180,6 +180,10 @@ non_negative_int = _argparse_type(lambda v: check_int("value", v, minimum=0), "a
 non_negative_float = _argparse_type(
     lambda v: check_float("value", v, minimum=0.0), "a finite float >= 0"
 )
+#: argparse ``type=`` for a fraction in [0, 1] (``--edge-support``).
+fraction = _argparse_type(
+    lambda v: check_float("value", v, minimum=0.0, maximum=1.0), "a float from 0 to 1"
+)
 #: argparse ``type=`` for any finite float.
 finite_float = _argparse_type(lambda v: check_float("value", v), "a finite float")
 

@@ -89,6 +89,24 @@ def test_synthesize_background_colour_and_examples(files, tmp_path):
     assert np.all(image[depth == 0] == 1.0)
 
 
+@pytest.mark.parametrize("argv, expected", [([], 0.3), (["--edge-support", "0"], 0.0)])
+def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, argv, expected):
+    import imagemap.colorization
+
+    seen = []
+    original = imagemap.colorization.seamless_copy
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs["edge_support"])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(imagemap.colorization, "seamless_copy", recording)
+    db, query, _ = files
+    argv = ["synthesize", str(query), "--db", str(db), "-o", str(tmp_path / "m.png"), "-q", *argv]
+    assert main(argv) == 0
+    assert seen == [expected]
+
+
 def bad_cases(tmp_path, db, query):
     empty = tmp_path / "empty_depth.png"
     write_image(empty, np.zeros((40, 40), np.uint16))

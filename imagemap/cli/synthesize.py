@@ -46,7 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         add_common_options,
     )
     from imagemap.cli.batch import add_mesh_options
-    from imagemap.validate import non_negative_float, non_negative_int, positive_int
+    from imagemap.validate import fraction, non_negative_float, non_negative_int, positive_int
 
     p = subparsers.add_parser(
         "synthesize",
@@ -101,6 +101,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "plain colours, so a copied pixel keeps the colour the coarser levels chose), "
         "laplacian (the paper's YCbCr Laplacian bands; '--vote mean --appearance-pyramid "
         "laplacian' is the paper's method with our guide bands)",
+    )
+    p.add_argument(
+        "--edge-support",
+        type=fraction,
+        help="where the copy changes source inside one example and the step there is an "
+        "edge the voted map shows too (a sleeve meeting a hand), keep it one pixel sharp "
+        "if the vote shows at least this share of it (default 0.3); 0 blends every seam "
+        "(softer part boundaries)",
     )
     p.add_argument(
         "--background",
@@ -372,6 +380,7 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
             example_preference=args.example_preference,
             vote=args.vote,
             appearance_pyramid=args.appearance_pyramid,
+            edge_support=args.edge_support,
             seed=args.seed,
             quiet=batch or not interactive,
         )
