@@ -72,6 +72,7 @@ class BatchOptions:
     m: int | None = None
     backend: str | None = None
     example_preference: float | None = None
+    edge_support: float | None = None
     seed: int = 0
     views: tuple[View, ...] = (FRONT,)
     size: tuple[int, int] = DEFAULT_SIZE
@@ -98,6 +99,7 @@ class BatchOptions:
             "m": self.m,
             "backend": self.backend,
             "example_preference": self.example_preference,
+            "edge_support": self.edge_support,
         }
 
 

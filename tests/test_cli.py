@@ -89,8 +89,9 @@ def test_synthesize_background_colour_and_examples(files, tmp_path):
     assert np.all(image[depth == 0] == 1.0)
 
 
+@pytest.mark.parametrize("command", ["synthesize", "batch"])
 @pytest.mark.parametrize("argv, expected", [([], 0.3), (["--edge-support", "0"], 0.0)])
-def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, argv, expected):
+def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, argv, expected):
     import imagemap.colorization
 
     seen = []
@@ -102,8 +103,14 @@ def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, argv, expe
 
     monkeypatch.setattr(imagemap.colorization, "seamless_copy", recording)
     db, query, _ = files
-    argv = ["synthesize", str(query), "--db", str(db), "-o", str(tmp_path / "m.png"), "-q", *argv]
-    assert main(argv) == 0
+    if command == "synthesize":
+        target = [str(query), "--db", str(db), "-o", str(tmp_path / "m.png")]
+    else:  # one worker: in this process
+        inputs = tmp_path / "inputs"
+        inputs.mkdir()
+        (inputs / query.name).write_bytes(query.read_bytes())
+        target = [str(inputs), "--db", str(db), "-o", str(tmp_path / "out"), "--workers", "1"]
+    assert main([command, *target, "--preset", "busts", "-q", *argv]) == 0
     assert seen == [expected]
 
 

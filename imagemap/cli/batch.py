@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from imagemap.errors import InputError
-from imagemap.validate import parse_size
+from imagemap.validate import fraction, parse_size
 
 BATCH_HELP = """\
 Synthesize every depth map (NAME_depth.png|tif|tiff|npy -> NAME_image.png) and
@@ -141,6 +141,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         examples=examples,
         backend=args.backend,
         example_preference=args.example_preference,
+        edge_support=args.edge_support,
         quiet=args.quiet or not sys.stderr.isatty(),
     )
     seconds = time.perf_counter() - start
@@ -207,6 +208,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="extra cost per example rank at the coarser levels (default 0.3; 0: the paper)",
     )
     p.add_argument(
+        "--edge-support",
+        type=fraction,
+        help="keep an edge on a seam within one example sharp where the voted map shows "
+        "this share of it (default 0.3; 0 blends every seam)",
+    )
+    p.add_argument(
         "--format", choices=("glb", "obj"), default="glb", help="textured mesh format (glb)"
     )
     p.add_argument(
@@ -230,6 +237,7 @@ def run_batch_cli(args: argparse.Namespace) -> int:
         m=args.m,
         backend=args.backend,
         example_preference=args.example_preference,
+        edge_support=args.edge_support,
         seed=args.seed,
         views=views_of(args),
         size=args.size,
