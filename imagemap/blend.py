@@ -370,14 +370,17 @@ def seamless_copy(
         del difference
     right_wins = norms[0] >= norms[1]
     down_wins = norms[2] >= norms[3]
+    strongest = None
+    if edge_support > 0:  # the sides are chosen: each direction's stronger side, in place
+        strongest = (
+            np.maximum(norms[0], norms[1], out=norms[0]),
+            np.maximum(norms[2], norms[3], out=norms[2]),
+        )
+    del norms
     edges = None
-    if edge_support > 0:
-        strongest = (np.maximum(norms[0], norms[1]), np.maximum(norms[2], norms[3]))
-        del norms
+    if strongest is not None:
         edges = _supported_edges(groups, has, source, reference, edge_support, strongest)
-        del strongest
-    else:
-        del norms
+    del strongest
     lam = 1.0 / scale**2
     # -L is diagonal in the DCT-II basis: eigenvalues (2 - 2cos(pi u / H)) + (2 - 2cos(pi v / W)).
     eig_y = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
@@ -433,16 +436,14 @@ def _supported_edges(groups, has, source, reference, support, strongest):
     same exemplar whose copied step is an edge that the reference shows too.
 
     ``strongest``: per direction, the larger summed square of the two sides' own
-    gradients. Float32 accumulators: this runs on a large map's memory peak."""
+    gradients. This runs on a large map's memory peak: float32 accumulators, one
+    direction at a time (the copy is remade per direction rather than six
+    accumulators kept)."""
     e = source[..., 0]
     pairs = []
     for axis in (1, 0):
-        ahead = [slice(None), slice(None)]
-        behind = [slice(None), slice(None)]
-        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
-        ahead, behind = tuple(ahead), tuple(behind)
-        shape = e[ahead].shape
-        terms = [np.zeros(shape, np.float32) for _ in range(3)]  # step.span, span^2, step^2
+        ahead, behind = _along(axis, slice(1, None)), _along(axis, slice(None, -1))
+        terms = [np.zeros(e[ahead].shape, np.float32) for _ in range(3)]  # step.span, span², step²
         for channel in range(reference.shape[2]):
             ref = reference[..., channel]
             copy = _copy_channel(groups, has, ref.astype(np.float64), channel)
@@ -451,10 +452,8 @@ def _supported_edges(groups, has, source, reference, support, strongest):
             # The reference's change from the pixel before the pair to the one after it:
             # the voted map's edges are a few pixels wide.
             padded = np.pad(ref, [(1, 1) if a == axis else (0, 0) for a in (0, 1)], mode="edge")
-            far = [slice(None), slice(None)]
-            near = [slice(None), slice(None)]
-            far[axis], near[axis] = slice(3, None), slice(None, -3)
-            span = np.subtract(padded[tuple(far)], padded[tuple(near)], dtype=np.float32)
+            far, near = _along(axis, slice(3, None)), _along(axis, slice(None, -3))
+            span = np.subtract(padded[far], padded[near], dtype=np.float32)
             del padded
             terms[0] += step * span
             terms[1] += np.square(span, out=span)
@@ -467,6 +466,13 @@ def _supported_edges(groups, has, source, reference, support, strongest):
         pairs.append(keep)
         del terms, dot, span2, step2
     return pairs[0], pairs[1]
+
+
+def _along(axis: int, part: slice) -> tuple[slice, slice]:
+    """The index of ``part`` along ``axis`` (0 or 1) of a 2-D array, all of the other."""
+    index = [slice(None), slice(None)]
+    index[axis] = part
+    return tuple(index)
 
 
 def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
