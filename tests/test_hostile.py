@@ -295,6 +295,27 @@ def test_numeric_options_are_validated(world, capsys, case):
     assert_unchanged(world, before)
 
 
+BATCH_OPTION_CASES = {
+    **{k: v for k, v in OPTION_CASES.items() if k != "--background"},
+    "--workers 0": (["--workers", "0"], "--workers"),
+    "--texture-size 0": (["--texture-size", "0"], "--texture-size"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BATCH_OPTION_CASES))
+def test_batch_options_are_validated_before_the_work(world, capsys, case):
+    # Same checks as synthesize: argparse's exit 2 naming the option, no output folder made.
+    extra, option = BATCH_OPTION_CASES[case]
+    inputs = world["root"] / "inputs"
+    inputs.mkdir()
+    (inputs / world["query"].name).write_bytes(world["query"].read_bytes())
+    before = snapshot(world["root"])
+    argv = ["batch", str(inputs), "--db", str(world["db"]), "-o", str(world["root"] / "out")]
+    code, message = cli([*argv, "-q", *extra], capsys)
+    assert code == 2 and option in message and "Traceback" not in message
+    assert_unchanged(world, before)
+
+
 @pytest.mark.parametrize(
     "argv, option",
     [

@@ -8,7 +8,13 @@ import sys
 from pathlib import Path
 
 from imagemap.errors import InputError
-from imagemap.validate import fraction, parse_size
+from imagemap.validate import (
+    fraction,
+    non_negative_float,
+    non_negative_int,
+    parse_size,
+    positive_int,
+)
 
 BATCH_HELP = """\
 Synthesize every depth map (NAME_depth.png|tif|tiff|npy -> NAME_image.png) and
@@ -56,7 +62,7 @@ def add_mesh_options(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument(
         "--texture-size",
-        type=int,
+        type=positive_int,
         default=512,
         help="texture width and height when several views are baked (default 512)",
     )
@@ -188,7 +194,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--db", required=True, help="database directory (pictures and/or meshes)")
     p.add_argument("-o", "--output", required=True, help="output directory")
     p.add_argument(
-        "--workers", type=int, default=1, help="local worker processes (default 1: in-process)"
+        "--workers",
+        type=positive_int,
+        default=1,
+        help="local worker processes >= 1 (default 1: in-process)",
     )
     p.add_argument(
         "--scheduler",
@@ -200,11 +209,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="busts",
         help="class preset (default busts)",
     )
-    p.add_argument("--m", type=int, help="number of examples to select automatically")
+    p.add_argument(
+        "--m", type=positive_int, help="number of examples to select automatically (>= 1)"
+    )
     p.add_argument("--backend", choices=BACKEND_NAMES, help="nearest-neighbour search")
     p.add_argument(
         "--example-preference",
-        type=float,
+        type=non_negative_float,
         help="extra cost per example rank at the coarser levels (default 0.3; 0: the paper)",
     )
     p.add_argument(
@@ -221,7 +232,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="transparent",
         help="maps of depth inputs: 'transparent' (RGBA, default) or a colour",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same bytes)")
+    p.add_argument(
+        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
+    )
     p.add_argument("--force", action="store_true", help="redo objects already complete")
     add_mesh_options(p)
     add_common_options(p)
