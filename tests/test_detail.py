@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap import ColorizeParams, Database, Example, blend, colorize
 from imagemap.blend import coherent_edges, copy_through, merge_regions, seamless_copy
 from imagemap.colorization import PRESETS, level_patch_sizes, pyramid_levels
 from imagemap.metrics import (
@@ -90,19 +90,19 @@ def test_seamless_copy_keeps_a_coherent_copy_and_hides_a_palette_seam():
     np.testing.assert_allclose(none, reference, atol=1e-6)
 
 
-def _sleeve_and_hand(exemplars=1):
+def _sleeve_and_hand(exemplars=1, low=0.2, high=0.8):
     """A map copied from a textured exemplar whose left half is dark (a sleeve) and
     right half bright (a hand): the output's left half from the sleeve, its right half
     from inside the hand 8 px further on (or from a second exemplar), a seam at column 16
     between two sources; the voted reference shows the edge blurred."""
     rng = np.random.default_rng(3)
     texture = 0.03 * ndimage.gaussian_filter(rng.standard_normal((32, 48, 1)), (1, 1, 0))
-    exemplar = np.where(np.arange(48)[None, :, None] < 20, 0.2, 0.8) + texture
+    exemplar = np.where(np.arange(48)[None, :, None] < 20, low, high) + texture
     source = identity_source((32, 32))
     source[:, 16:, 2] += 8  # columns 24.. of the exemplar: inside the hand
     if exemplars == 2:
         source[:, 16:, 0] = 1
-    step = np.where(np.arange(32) < 16, 0.2, 0.8).astype(float)
+    step = np.where(np.arange(32) < 16, low, high).astype(float)
     reference = ndimage.gaussian_filter1d(step, 1.5)[None, :, None] * np.ones((32, 1, 1))
     return [exemplar, exemplar.copy()][:exemplars], source, reference
 
@@ -119,6 +119,16 @@ def test_an_edge_on_a_seam_within_one_exemplar_stays_sharp():
     detail = np.diff(kept[:, 2:12, 0], axis=1).ravel()
     truth = np.diff(exemplars[0][:, 2:12, 0], axis=1).ravel()
     assert np.corrcoef(detail, truth)[0, 1] > 0.95
+
+
+def test_a_faint_step_on_a_seam_is_shading_and_is_blended(monkeypatch):
+    # Two offsets of a smooth region differ by a little shading (0.03, under EDGE_FLOOR):
+    # next to smooth sides it passes the contrast test, but kept it draws a tile edge.
+    exemplars, source, reference = _sleeve_and_hand(low=0.485, high=0.515)
+    jump = lambda out: float(np.mean(out[:, 16] - out[:, 15]))  # noqa: E731
+    assert jump(seamless_copy(exemplars, source, reference, scale=6.0, edge_support=0.3)) < 0.012
+    monkeypatch.setattr(blend, "EDGE_FLOOR", 0.0)  # the contrast test alone keeps it
+    assert jump(seamless_copy(exemplars, source, reference, scale=6.0, edge_support=0.3)) > 0.025
 
 
 def test_an_edge_the_reference_does_not_show_or_between_examples_is_blended():
