@@ -436,8 +436,9 @@ EDGE_FLOOR = 0.05
 ΔE00 5 for a step in luminance alone, more for one in hue). Two offsets of a smooth
 region (skin, a plain shirt) differ by a few hundredths of shading; next to sides that
 smooth even such a step passes the contrast test. Kept, it drew a faint tile edge (a
-blocky face at 4x the default size). Across the generated classes the kept steps fall
-into two groups, under 0.04 (shading) and from 0.06 (part edges); the floor lies between."""
+blocky face at 4x the default size). On the generated humans and busts the kept steps
+fall into two groups, under 0.04 (shading) and from 0.06 (part edges); the floor lies
+between (``docs/presets.md``)."""
 
 
 def _supported_edges(groups, has, source, reference, support, strongest):
