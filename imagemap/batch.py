@@ -10,7 +10,8 @@ local process pool gets it in its initializer, a Dask cluster by
 Resumable: after an object's outputs are written (each atomically), a small
 manifest ``OUT/.imagemap-done/SOURCE.json`` is written last, holding the input's
 content hash, the options and the outputs' sizes; an object whose manifest matches
-(same input, same options, outputs present with the recorded sizes) is skipped.
+(same input, same options, same engine code, outputs present with the recorded sizes) is
+skipped.
 A failing object is reported and the others go on. The summary counts done,
 skipped and failed objects and the throughput (objects per minute).
 
@@ -25,6 +26,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -89,9 +91,10 @@ class BatchOptions:
             raise InputError("at least one view is needed")
 
     def key(self) -> str:
-        """A digest of everything that changes the outputs."""
+        """A digest of everything that changes the outputs: the options and the engine's code."""
         record = asdict(self)
         record["views"] = [str(v) for v in self.views]
+        record["engine"] = engine_digest()
         return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()[:16]
 
     def colorize_options(self) -> dict:
@@ -177,6 +180,40 @@ def _outputs_of(job: Job) -> list[Path]:
     if job.output.suffix == ".obj":
         return [job.output.with_suffix(".png"), job.output.with_suffix(".mtl"), job.output]
     return [job.output]
+
+
+#: The modules whose code shapes a map or a texture. A batch resumed after one of them
+#: changed (an upgrade) redoes its objects rather than mix two engines' outputs.
+ENGINE_MODULES = (
+    "_kernels",
+    "align",
+    "blend",
+    "colorization",
+    "database",
+    "engine",
+    "io",
+    "mesh",
+    "pyramid",
+    "raycast",
+    "render",
+    "search",
+)
+
+
+@functools.cache
+def engine_digest() -> str:
+    """A digest of the source of :data:`ENGINE_MODULES` (the version where it is unreadable)."""
+    import importlib
+
+    import imagemap
+
+    digest = hashlib.sha256()
+    try:
+        for name in ENGINE_MODULES:
+            digest.update(Path(importlib.import_module(f"imagemap.{name}").__file__).read_bytes())
+    except (OSError, TypeError):  # no source files (a frozen install)
+        return f"version {imagemap.__version__}"
+    return digest.hexdigest()[:16]
 
 
 def is_complete(job: Job, options: BatchOptions, digest: str | None = None) -> bool:

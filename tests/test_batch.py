@@ -87,6 +87,18 @@ def test_dask_local_cluster_of_two_workers_gives_the_same_bytes(fish, pool_run, 
         assert (tmp_path / name).read_bytes() == (pool_out / name).read_bytes(), name
 
 
+def test_a_changed_engine_redoes_finished_objects(fish, pool_run, monkeypatch):
+    # Resuming after an upgrade must not mix two engines' maps in one output folder.
+    import imagemap.batch
+    from imagemap.batch import is_complete
+
+    out, _ = pool_run
+    jobs = plan_jobs(fish / "queries", out, OPTIONS)
+    assert len(jobs) == 4 and all(is_complete(job, OPTIONS) for job in jobs)
+    monkeypatch.setattr(imagemap.batch, "engine_digest", lambda: "another engine")
+    assert not any(is_complete(job, OPTIONS) for job in jobs)
+
+
 def test_stop_mid_batch_then_resume(fish, tmp_path):
     def stop(record):
         raise KeyboardInterrupt

@@ -24,10 +24,11 @@ of INPUT_DIR into OUT_DIR.
 The database is prepared once (examples loaded; mesh examples rendered at each
 view, cached on disk) and shipped once to each worker. Runs on a local process
 pool (--workers N, nothing to start) or on an existing Dask cluster (--scheduler;
-pip install 'imagemap[dask]'). Resumable: objects whose outputs are complete are
-skipped (--force redoes them); every output is written atomically; a failing object
-is reported and the rest go on (exit code 1 if any failed). Prints a summary: done,
-skipped, failed, objects per minute; OUT_DIR/batch_report.json has the details.
+pip install 'imagemap[dask]'). Resumable: objects whose outputs are complete (same
+input, options and imagemap engine) are skipped (--force redoes them); every output
+is written atomically; a failing object is reported and the rest go on (exit code 1
+if any failed). Prints a summary: done, skipped, failed, objects per minute;
+OUT_DIR/batch_report.json has the details.
 
 examples:
   python -m data_gen fish --count 12 --holdout 3 --meshes --out fish
