@@ -69,6 +69,39 @@ def add_mesh_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_colorize_options(parser: argparse.ArgumentParser) -> None:
+    """--m, --backend, --example-preference, --edge-support, --seed: one definition for
+    ``imagemap synthesize`` and ``imagemap batch``, so their checks cannot drift apart."""
+    from imagemap.cli import BACKEND_NAMES
+
+    parser.add_argument(
+        "--m", type=positive_int, help="number of examples to select automatically (>= 1)"
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKEND_NAMES,
+        help="nearest-neighbour search (default patchmatch: fastest; exact: reference)",
+    )
+    parser.add_argument(
+        "--example-preference",
+        type=non_negative_float,
+        help="extra cost per rank of a selected example at the coarser levels (default "
+        "0.3): each region of the object from one example where it fits nearly as well, "
+        "instead of patches of two palettes; 0 is the paper's method",
+    )
+    parser.add_argument(
+        "--edge-support",
+        type=fraction,
+        help="where the copy changes source inside one example and the step there is an "
+        "edge the voted map shows too (a sleeve meeting a hand), keep it one pixel sharp "
+        "if the vote shows at least this share of it (default 0.3); 0 blends every seam "
+        "(softer part boundaries)",
+    )
+    parser.add_argument(
+        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
+    )
+
+
 def views_of(args: argparse.Namespace):
     from imagemap.mesh import FRONT, parse_view, parse_views
 
@@ -183,7 +216,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import BACKEND_NAMES, PRESET_NAMES, add_common_options
+    from imagemap.cli import PRESET_NAMES, add_common_options
 
     p = subparsers.add_parser(
         "batch",
@@ -210,21 +243,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="busts",
         help="class preset (default busts)",
     )
-    p.add_argument(
-        "--m", type=positive_int, help="number of examples to select automatically (>= 1)"
-    )
-    p.add_argument("--backend", choices=BACKEND_NAMES, help="nearest-neighbour search")
-    p.add_argument(
-        "--example-preference",
-        type=non_negative_float,
-        help="extra cost per example rank at the coarser levels (default 0.3; 0: the paper)",
-    )
-    p.add_argument(
-        "--edge-support",
-        type=fraction,
-        help="keep an edge on a seam within one example sharp where the voted map shows "
-        "this share of it (default 0.3; 0 blends every seam)",
-    )
+    add_colorize_options(p)
     p.add_argument(
         "--format", choices=("glb", "obj"), default="glb", help="textured mesh format (glb)"
     )
@@ -232,9 +251,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--background",
         default="transparent",
         help="maps of depth inputs: 'transparent' (RGBA, default) or a colour",
-    )
-    p.add_argument(
-        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
     )
     p.add_argument("--force", action="store_true", help="redo objects already complete")
     add_mesh_options(p)

@@ -41,12 +41,10 @@ examples:
 def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import (
         APPEARANCE_PYRAMID_NAMES,
-        BACKEND_NAMES,
         PRESET_NAMES,
         add_common_options,
     )
-    from imagemap.cli.batch import add_mesh_options
-    from imagemap.validate import fraction, non_negative_float, non_negative_int, positive_int
+    from imagemap.cli.batch import add_colorize_options, add_mesh_options
 
     p = subparsers.add_parser(
         "synthesize",
@@ -69,23 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="busts",
         help="class preset: weights, patch sizes and m after the paper's Table 1 (default busts)",
     )
-    p.add_argument(
-        "--m", type=positive_int, help="number of examples to select automatically (>= 1)"
-    )
+    add_colorize_options(p)
     p.add_argument("--examples", help="comma-separated example names to use instead")
     p.add_argument("--exclude", help="comma-separated example names to leave out of the database")
-    p.add_argument(
-        "--backend",
-        choices=BACKEND_NAMES,
-        help="nearest-neighbour search (default patchmatch: fastest; exact: reference)",
-    )
-    p.add_argument(
-        "--example-preference",
-        type=non_negative_float,
-        help="extra cost per rank of a selected example at the coarser levels (default "
-        "0.3): each region of the object from one example where it fits nearly as well, "
-        "instead of patches of two palettes; 0 is the paper's method",
-    )
     p.add_argument(
         "--vote",
         choices=("copy", "mean", "mode"),
@@ -103,14 +87,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "laplacian' is the paper's method with our guide bands)",
     )
     p.add_argument(
-        "--edge-support",
-        type=fraction,
-        help="where the copy changes source inside one example and the step there is an "
-        "edge the voted map shows too (a sleeve meeting a hand), keep it one pixel sharp "
-        "if the vote shows at least this share of it (default 0.3); 0 blends every seam "
-        "(softer part boundaries)",
-    )
-    p.add_argument(
         "--background",
         default="transparent",
         help="'transparent' (RGBA, default) or a colour: white, black, '#rrggbb'",
@@ -122,9 +98,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "example's map on the same depth",
     )
     p.add_argument("--report", help="also write a JSON report (examples, timings, memory, target)")
-    p.add_argument(
-        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
-    )
     p.add_argument(
         "--overwrite",
         action="store_true",
