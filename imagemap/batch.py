@@ -189,6 +189,7 @@ ENGINE_MODULES = (
     "align",
     "blend",
     "colorization",
+    "completion",
     "database",
     "engine",
     "io",

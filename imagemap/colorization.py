@@ -29,6 +29,7 @@ from skimage import color
 
 from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
+from imagemap.completion import complete_features, small_features
 from imagemap.blend import (
     copy_through,
     fill_background,
@@ -201,6 +202,15 @@ class ColorizeParams:
         ``docs/presets.md``.
     keep_detail : float
         The share of a region's luminance detail a merge must keep (0 to 1).
+    complete_features : bool
+        After the seams are placed, copy whole every small feature of an example
+        (an eye, lips, a brow: found from its colours, see
+        :mod:`imagemap.completion`) that the map copies only in part, at the mean
+        offset of the part: two offsets meeting inside lips had left a lozenge of
+        lips. On the generated classes (12 objects, seed 0) busts drew every
+        feature in 100 % of objects instead of 92 %, and at 4x the size in 83 %
+        instead of 67 % (6 busts); fish and humans were unchanged (see
+        ``docs/presets.md``). Only with ``vote`` "copy" or "mode".
     edge_support : float
         Where the copy changes source within one example, keep its own step if
         it is an edge (twice as strong as the texture on either side) and the
@@ -242,6 +252,7 @@ class ColorizeParams:
     wide_context_weight: float = 0.25
     merge_regions: bool = False
     keep_detail: float = 0.5
+    complete_features: bool = True
     edge_support: float = 0.3
 
     def __post_init__(self) -> None:
@@ -803,6 +814,12 @@ def colorize(
                 masks=[example.mask for example in chosen],
                 keep_detail=params.keep_detail,
             )
+        if params.complete_features:
+            features = [small_features(x, example.mask) for x, example in zip(exemplars, chosen)]
+            source, completed = complete_features(
+                exemplars, source, features, mask, [example.mask for example in chosen]
+            )
+            log.info("small features completed: %d", completed)
         # Outside the object the voted map is whatever the windows left there (zero where
         # no window reached: black in YCbCr terms is green); the blend must not pull the
         # object's edge towards it, so the reference there is the copy itself.

@@ -1,0 +1,303 @@
+"""Small features copied whole: completing an exemplar's eye or lips that the copy cut.
+
+A copy-based map draws a small feature (an eye, lips, a brow) only where the
+source map copies it. Where two offsets meet inside it, each copies part of the
+feature and the pixels between them copy the skin beside it: the map shows a
+shrunken or half feature (a lozenge for lips, half a brow). Seam placement
+cannot mend this: its data term is the voted map, whose mean holds only as much
+of the feature as the cut copy.
+
+:func:`small_features` finds an exemplar's features from its colours alone (no
+labels): components of pixels whose YCbCr colour is at least
+``FEATURE_CONTRAST`` from the median colour around them, holes filled (an eye's
+iris belongs to its eye), that are
+
+- compact: no wider than ``FEATURE_EXTENT`` of the object's size (not a stripe,
+  a hairline or a sleeve);
+- sharp: they end at an edge (not a blush, whose colour fades over its width);
+- rare: at most ``MAX_REPEATS`` of one colour (not a shirt's squares or a
+  fish's spots, which the copy draws as texture).
+
+:func:`complete_features` then looks, for each feature, at the pixels of the
+map that copy it. Where they lie together (one instance) and cover between
+``PARTIAL_SHARE`` and ``COMPLETE_SHARE`` of it, the whole feature, with a rim of
+its surroundings, is copied at the mean offset of those pixels: the feature
+appears once, whole, where the cut copy had put it. Not where the rim would
+not match what the map shows there (a feature is completed on its own
+surroundings, never pasted over another part), and not beside a whole feature
+of the same colour (a piece of a second brow above the brow is a stray).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from scipy import ndimage
+
+from imagemap.blend import copy_through
+
+__all__ = ["complete_features", "small_features"]
+
+log = logging.getLogger(__name__)
+
+#: A feature is at most this share of the object's size (square root of its area)
+#: across: an eye, lips, a brow; not a stripe, a sleeve or hair.
+FEATURE_EXTENT = 0.2
+#: Its colour stands out from its surroundings' (their median) by at least this
+#: much (YCbCr distance; lips on skin 0.09, an eye 0.3, shading under 0.03).
+FEATURE_CONTRAST = 0.07
+#: More components of one colour than this are a texture's elements, not features.
+MAX_REPEATS = 4
+#: The host colour's median window, in pixels of the resolution it is taken at.
+HOST_WINDOW = 15
+#: An instance that copies at least this share of the feature's pixels counts as
+#: drawn whole and is left alone.
+COMPLETE_SHARE = 0.8
+#: An instance copying less than this share is a stray fragment, not an attempt to
+#: draw the feature: left alone too.
+PARTIAL_SHARE = 0.3
+#: Pixels of surroundings copied with the feature around it.
+RIM = 2
+
+
+def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | None = None):
+    """Label an exemplar's small features: compact regions that stand out in colour.
+
+    Parameters
+    ----------
+    exemplar : ndarray, (H, W, C)
+        The exemplar's colours (YCbCr in [0, 1]).
+    mask : ndarray of bool, (H, W)
+        Its object.
+    extent : float, optional
+        Largest feature width in pixels; default ``FEATURE_EXTENT`` times the
+        square root of the object's area.
+
+    Returns
+    -------
+    labels : ndarray of int32, (H, W)
+        0 outside features, 1..n a feature (holes filled).
+    n : int
+
+    Examples
+    --------
+    >>> image = np.full((60, 60, 3), 0.5)
+    >>> image[28:32, 20:28, 0] = 0.1                 # a dark brow on flat skin
+    >>> labels, n = small_features(image, np.ones((60, 60), bool))
+    >>> n, int((labels > 0).sum())
+    (1, 32)
+    """
+    mask = np.asarray(mask, bool)
+    if extent is None:
+        extent = FEATURE_EXTENT * np.sqrt(mask.sum())
+    inside = ndimage.binary_erosion(mask, iterations=2)
+    colours = np.asarray(exemplar, np.float32)
+    if not mask.all():
+        # The object's own colours continued outside it: its outline is no feature.
+        _, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
+        colours = colours[ny, nx]
+    # The host colour around each pixel: the median over a feature's width, which a
+    # feature (under half the window) does not move. Taken at a resolution where that
+    # width is HOST_WINDOW pixels: the host varies slowly, and a large window's
+    # median is slow.
+    factor = min(1.0, HOST_WINDOW / max(extent, 1.0))
+    small = ndimage.zoom(colours, (factor, factor, 1), order=1) if factor < 1 else colours
+    size = max(int(round(extent * factor)) | 1, 3)
+    host = np.stack(
+        [ndimage.median_filter(small[..., c], size=size) for c in range(small.shape[-1])], -1
+    )
+    if factor < 1:
+        zoom = (colours.shape[0] / host.shape[0], colours.shape[1] / host.shape[1], 1)
+        host = ndimage.zoom(host, zoom, order=1)[: colours.shape[0], : colours.shape[1]]
+    stands_out = np.sqrt(((colours - host) ** 2).sum(-1)) >= FEATURE_CONTRAST
+    stands_out &= inside
+    stands_out = ndimage.binary_fill_holes(stands_out)
+    labels, n = ndimage.label(stands_out)
+    if n == 0:
+        return labels.astype(np.int32), 0
+    keep = np.zeros(n + 1, bool)
+    for i, box in enumerate(ndimage.find_objects(labels), start=1):
+        h, w = box[0].stop - box[0].start, box[1].stop - box[1].start
+        # Compact: a stripe or a hairline's band is long; a one-pixel speck is noise.
+        keep[i] = max(h, w) <= extent and (labels[box] == i).sum() >= 4
+        if keep[i]:
+            keep[i] = _sharp(colours, mask, labels, i, box, max(h, w))
+    # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
+    # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
+    # as texture and are left to it: completing some of them breaks its regularity.
+    counts = np.bincount(labels.ravel(), minlength=n + 1).astype(np.float64)
+    means = np.stack(
+        [np.bincount(labels.ravel(), colours[..., c].ravel(), minlength=n + 1) for c in
+         range(colours.shape[-1])], -1
+    ) / np.maximum(counts, 1)[:, None]
+    similar = np.sqrt(((means[:, None] - means[None]) ** 2).sum(-1)) < FEATURE_CONTRAST
+    repeats = (similar & keep[None, :]).sum(1)
+    keep &= repeats <= MAX_REPEATS
+    labels = np.where(keep[labels], labels, 0)
+    labels, n = ndimage.label(labels > 0)
+    return labels.astype(np.int32), int(n)
+
+
+def _sharp(colours, mask, labels, i, box, span):
+    """Whether component i ends at an edge: its boundary pixels differ from the
+    pixels a short way outside (an eighth of its width, at least 2 px) by half
+    the feature contrast. Lips, eyes and brows do; a blush or a shading's blob,
+    whose colour fades out over much of its width, does not."""
+    r = max(2, int(round(span / 8)))
+    y0, x0 = max(box[0].start - r - 1, 0), max(box[1].start - r - 1, 0)
+    y1, x1 = box[0].stop + r + 1, box[1].stop + r + 1
+    own = labels[y0:y1, x0:x1] == i
+    edge = own & ~ndimage.binary_erosion(own)
+    grown = ndimage.binary_dilation(own, iterations=r)
+    outside = grown & ~ndimage.binary_dilation(own, iterations=r - 1) & mask[y0:y1, x0:x1]
+    if not outside.any():
+        return False
+    here = colours[y0:y1, x0:x1]
+    step = here[edge].mean(0) - here[outside].mean(0)
+    return bool(np.sqrt((step**2).sum()) >= FEATURE_CONTRAST / 2)
+
+
+def complete_features(
+    exemplars: list[np.ndarray],
+    source: np.ndarray,
+    features: list[tuple[np.ndarray, int]],
+    object_mask: np.ndarray,
+    exemplar_masks: list[np.ndarray],
+) -> tuple[np.ndarray, int]:
+    """A source map in which every partly copied small feature is copied whole.
+
+    Parameters
+    ----------
+    exemplars : list of ndarray, (H_e, W_e, C)
+        The exemplars' colours.
+    source : ndarray of int, (H, W, 3)
+        Exemplar index, y, x per pixel (index < 0: none).
+    features : list of (labels, n)
+        Per exemplar, :func:`small_features` of it.
+    object_mask : ndarray of bool, (H, W)
+        The query's object: a completed feature must lie inside it.
+    exemplar_masks : list of ndarray of bool
+        The exemplars' objects: a completed feature's rim must come from inside.
+
+    Returns
+    -------
+    source : ndarray of int32, (H, W, 3)
+    completed : int
+        How many features were completed.
+    """
+    source = np.array(source, dtype=np.int32, copy=True)
+    height, width = source.shape[:2]
+    inside = ndimage.binary_erosion(object_mask, iterations=1)
+    rim = ndimage.generate_binary_structure(2, 1)
+    instances = _instances(exemplars, source, features)
+    # Where the map already shows a whole feature, and its colour: a partial copy
+    # beside a whole feature of the same colour (a piece of a second brow above the
+    # brow, of a second eye beside the eye) is a stray, not a feature to complete.
+    drawn = np.full((height, width, exemplars[0].shape[-1]), np.nan, np.float32)
+    for item in instances:
+        if item["covered"] >= COMPLETE_SHARE * item["size"]:
+            drawn[item["ys"], item["xs"]] = item["colour"]
+    taken = np.zeros((height, width), bool)  # completed regions: not overwritten again
+    completed = 0
+    # Larger features first: an eye before a speck beside it.
+    for item in sorted(instances, key=lambda item: -item["size"]):
+        k, f, ys, xs, size, span = (item[key] for key in ("k", "f", "ys", "xs", "size", "span"))
+        if len(ys) < PARTIAL_SHARE * size or item["covered"] >= COMPLETE_SHARE * size:
+            continue
+        dy = int(np.rint(np.mean(source[ys, xs, 1] - ys)))
+        dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
+        ty, tx = item["fy"] - dy, item["fx"] - dx
+        if (
+            ty.min() < 0 or tx.min() < 0 or ty.max() >= height or tx.max() >= width
+            or not inside[ty, tx].all()
+        ):
+            continue
+        near = drawn[
+            max(ty.min() - span, 0) : ty.max() + span + 1,
+            max(tx.min() - span, 0) : tx.max() + span + 1,
+        ].reshape(-1, drawn.shape[-1])
+        near = near[~np.isnan(near[:, 0])]
+        if len(near) and (
+            np.sqrt(((near - item["colour"]) ** 2).sum(-1)).min() < FEATURE_CONTRAST
+        ):
+            log.debug(
+                "feature %d of exemplar %d (%d px at y %d x %d, colour %s): a whole one beside it",
+                item["f"], k, size, ty.mean(), tx.mean(), np.round(item["colour"], 2),
+            )
+            continue
+        by0, bx0 = max(ty.min() - RIM, 0), max(tx.min() - RIM, 0)
+        by1, bx1 = min(ty.max() + RIM + 1, height), min(tx.max() + RIM + 1, width)
+        region = np.zeros((by1 - by0, bx1 - bx0), bool)
+        region[ty - by0, tx - bx0] = True
+        region = ndimage.binary_dilation(region, rim, iterations=RIM)
+        region &= object_mask[by0:by1, bx0:bx1]
+        ry, rx = np.nonzero(region)
+        ry, rx = ry + by0, rx + bx0
+        sy, sx = ry + dy, rx + dx
+        mask_k = exemplar_masks[k]
+        if (
+            taken[ry, rx].any()
+            or sy.min() < 0 or sx.min() < 0
+            or sy.max() >= mask_k.shape[0] or sx.max() >= mask_k.shape[1]
+            or not mask_k[sy, sx].all()
+        ):
+            continue
+        # The rim must agree with what the map shows there now: a feature is
+        # completed on its own surroundings (lips on skin), never pasted over
+        # another part (a shirt's square over the neck).
+        rim_here = ~np.isin(ry * width + rx, ty * width + tx) & (source[ry, rx, 0] >= 0)
+        if rim_here.any():
+            now = copy_through(exemplars, source[ry[rim_here], rx[rim_here]][None])[0]
+            new = exemplars[k][sy[rim_here], sx[rim_here]]
+            if np.sqrt(((now - new) ** 2).sum(-1)).mean() > FEATURE_CONTRAST:
+                log.debug("feature %d of exemplar %d: rim disagrees", item["f"], k)
+                continue
+        source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
+        taken[ry, rx] = True
+        drawn[ty, tx] = item["colour"]
+        completed += 1
+        log.debug(
+            "feature %d of exemplar %d (%d px) completed at y %d x %d: %d px copied, "
+            "%d covered", f, k, size, ty.mean(), tx.mean(), len(ys), item["covered"]
+        )
+    return source, completed
+
+
+def _instances(exemplars, source, features):
+    """Each place where the map copies an exemplar's feature: the pixels copying
+    it within half its width of one another, how many of its pixels they cover."""
+    height, width = source.shape[:2]
+    found = []
+    for k, (labels, n) in enumerate(features):
+        if n == 0:
+            continue
+        here = np.nonzero(source[..., 0] == k)
+        feature_of = np.zeros((height, width), np.int32)
+        feature_of[here] = labels[source[..., 1][here], source[..., 2][here]]
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)
+        boxes = ndimage.find_objects(labels)
+        order = np.argsort(feature_of.ravel(), kind="stable")
+        starts = np.searchsorted(feature_of.ravel()[order], np.arange(n + 2))
+        for f in np.unique(feature_of[feature_of > 0]):
+            fy, fx = np.nonzero(labels[boxes[f - 1]] == f)
+            fy, fx = fy + boxes[f - 1][0].start, fx + boxes[f - 1][1].start
+            span = int(max(np.ptp(fy), np.ptp(fx))) + 1
+            reach = max(span // 2, 1)
+            cy, cx = np.divmod(order[starts[f] : starts[f + 1]], width)
+            # Work in the box around this feature's copies: a feature is small.
+            y0, x0 = max(cy.min() - reach, 0), max(cx.min() - reach, 0)
+            y1, x1 = min(cy.max() + reach + 1, height), min(cx.max() + reach + 1, width)
+            copies = np.zeros((y1 - y0, x1 - x0), bool)
+            copies[cy - y0, cx - x0] = True
+            groups, m = ndimage.label(ndimage.binary_dilation(copies, iterations=reach))
+            colour = exemplars[k][fy, fx].mean(0)
+            for i in range(1, m + 1):
+                ys, xs = np.nonzero(copies & (groups == i))
+                ys, xs = ys + y0, xs + x0
+                covered = np.unique(source[ys, xs, 1] * labels.shape[1] + source[ys, xs, 2]).size
+                found.append(
+                    dict(k=k, f=int(f), ys=ys, xs=xs, fy=fy, fx=fx, size=int(sizes[f]),
+                         span=span, covered=int(covered), colour=colour)
+                )
+    return found

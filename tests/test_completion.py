@@ -1,0 +1,140 @@
+"""Small features: found from an exemplar's colours, and copied whole where the copy cut them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imagemap import completion
+from imagemap.blend import copy_through
+from imagemap.completion import complete_features, small_features
+
+SKIN = 0.5
+
+
+def _skin(size=120):
+    return np.full((size, size, 1), SKIN, np.float32)
+
+
+def _identity(size):
+    source = np.zeros((size, size, 3), np.int32)
+    source[..., 1], source[..., 2] = np.mgrid[0:size, 0:size]
+    return source
+
+
+def _exemplar_with_lips(size=80):
+    """Flat skin with dark lips (4 x 12 px) at rows 38-41, columns 34-45."""
+    exemplar = _skin(size)
+    exemplar[38:42, 34:46] = 0.2
+    return exemplar
+
+
+def test_small_features_are_compact_sharp_and_rare():
+    image = _skin()
+    image[20:24, 20:34] = 0.15  # a brow: the one feature
+    yy, xx = np.mgrid[0:120, 0:120]
+    image[..., 0] += 0.12 * np.exp(-((yy - 70) ** 2 + (xx - 30) ** 2) / (2 * 6.0**2))  # a blush
+    image[100:103, 10:110] = 0.1  # a long stripe
+    for y in (40, 55, 70):  # a texture: nine equal squares
+        for x in (70, 85, 100):
+            image[y : y + 5, x : x + 5] = 0.9
+    labels, n = small_features(image, np.ones((120, 120), bool))
+    assert n == 1
+    ys, xs = np.nonzero(labels)
+    assert (ys.min(), ys.max(), xs.min(), xs.max()) == (20, 23, 20, 33)
+
+
+def test_five_squares_are_a_texture_and_four_are_features():
+    for count, expected in ((4, 4), (5, 0)):
+        image = _skin()
+        for i in range(count):
+            image[20 + 20 * i : 25 + 20 * i, 50:55] = 0.9
+        assert small_features(image, np.ones((120, 120), bool))[1] == expected
+
+
+def test_a_cut_feature_is_copied_whole_where_the_pieces_were():
+    exemplar = _exemplar_with_lips()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    assert features[0][1] == 1
+    source = _identity(80)
+    # The right half of the lips' place copies skin from 6 px further right: half lips.
+    source[30:50, 40:60, 2] += 6
+    cut = copy_through([exemplar], source)
+    assert (cut < 0.3).sum() == 4 * 6
+    mask = np.ones((80, 80), bool)
+    completed_source, completed = complete_features([exemplar], source, features, mask, [mask])
+    assert completed == 1
+    whole = copy_through([exemplar], completed_source)
+    np.testing.assert_array_equal(whole[36:44, 32:48], exemplar[36:44, 32:48])
+    # Nothing else was touched.
+    changed = (completed_source != source).any(-1)
+    assert not changed[:35].any() and not changed[45:].any()
+
+
+def test_whole_copies_and_stray_fragments_are_left_alone():
+    exemplar = _exemplar_with_lips()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    mask = np.ones((80, 80), bool)
+    whole = _identity(80)
+    assert complete_features([exemplar], whole, features, mask, [mask])[1] == 0
+    fragment = _identity(80)
+    fragment[30:50, 37:60, 2] += 9  # only 3 of the 12 columns copied: a fragment
+    assert complete_features([exemplar], fragment, features, mask, [mask])[1] == 0
+
+
+def test_a_piece_beside_a_whole_feature_of_its_colour_is_a_stray():
+    # Two exemplars with the same lips: the map shows the first's whole, and 8 px
+    # above them half of the second's (a piece of a second mouth).
+    exemplars = [_exemplar_with_lips(), _exemplar_with_lips()]
+    features = [small_features(x, np.ones((80, 80), bool)) for x in exemplars]
+    mask = np.ones((80, 80), bool)
+    source = _identity(80)
+    source[30:34, 34:52, 0] = 1
+    source[30:34, 34:52, 1] += 8
+    source[30:34, 40:52, 2] += 6
+    shown = copy_through(exemplars, source)
+    assert (shown[30:34] < 0.3).sum() == 4 * 6 and (shown[38:42] < 0.3).sum() == 4 * 12
+    assert complete_features(exemplars, source, features, mask, [mask, mask])[1] == 0
+    # Without the whole lips below, the same piece is completed.
+    alone = source.copy()
+    alone[36:44, :, 1] -= 20
+    assert (copy_through(exemplars, alone)[36:44] < 0.3).sum() == 0
+    assert complete_features(exemplars, alone, features, mask, [mask, mask])[1] == 1
+
+
+def test_a_feature_is_not_completed_over_another_part():
+    exemplar = _exemplar_with_lips()
+    exemplar[:, 50:] = 0.9  # a different part starts 4 px right of the lips
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    mask = np.ones((80, 80), bool)
+    source = _identity(80)
+    source[30:50, 40:, 2] -= 30  # the map's right side copies skin from the left
+    shown = copy_through([exemplar], source)
+    assert (shown[38:42, 40:48] == SKIN).all()
+    # Completing would bring the other part's colour into the rim only if the rim
+    # reached it; here it does not, so the lips are completed ...
+    assert complete_features([exemplar], source, features, mask, [mask])[1] == 1
+    # ... but where the map shows the other part right beside the cut lips, they are not.
+    other = source.copy()
+    other[30:50, 41:, 2] = 60
+    assert complete_features([exemplar], other, features, mask, [mask])[1] == 0
+
+
+def test_a_feature_must_land_inside_the_object():
+    exemplar = _exemplar_with_lips()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    source = _identity(80)
+    source[30:50, 40:60, 2] += 6
+    mask = np.ones((80, 80), bool)
+    query_mask = mask.copy()
+    query_mask[:, 44:] = False  # the query's outline cuts through where the lips would go
+    assert complete_features([exemplar], source, features, query_mask, [mask])[1] == 0
+
+
+@pytest.mark.parametrize("threshold", [completion.FEATURE_CONTRAST])
+def test_shading_below_the_contrast_is_no_feature(threshold):
+    image = _skin()
+    image[20:24, 20:34] = SKIN - 0.8 * threshold
+    assert small_features(image, np.ones((120, 120), bool))[1] == 0
+    image[20:24, 20:34] = SKIN - 1.5 * threshold
+    assert small_features(image, np.ones((120, 120), bool))[1] == 1
