@@ -29,7 +29,6 @@ from skimage import color
 
 from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
-from imagemap.completion import complete_features, small_features
 from imagemap.blend import (
     copy_through,
     fill_background,
@@ -37,6 +36,7 @@ from imagemap.blend import (
     place_seams,
     seamless_copy,
 )
+from imagemap.completion import complete_features, small_features
 from imagemap.database import Database, Example
 from imagemap.engine import (
     APPEARANCE_PYRAMIDS,
@@ -815,7 +815,10 @@ def colorize(
                 keep_detail=params.keep_detail,
             )
         if params.complete_features:
-            features = [small_features(x, example.mask) for x, example in zip(exemplars, chosen)]
+            features = [
+                small_features(exemplar, example.mask)
+                for exemplar, example in zip(exemplars, chosen, strict=True)
+            ]
             source, completed = complete_features(
                 exemplars, source, features, mask, [example.mask for example in chosen]
             )

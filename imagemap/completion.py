@@ -50,7 +50,7 @@ FEATURE_CONTRAST = 0.07
 #: More components of one colour than this are a texture's elements, not features.
 MAX_REPEATS = 4
 #: The host colour's median window, in pixels of the resolution it is taken at.
-HOST_WINDOW = 15
+HOST_WINDOW = 9
 #: An instance that copies at least this share of the feature's pixels counts as
 #: drawn whole and is left alone.
 COMPLETE_SHARE = 0.8
@@ -126,11 +126,13 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
     # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
     # as texture and are left to it: completing some of them breaks its regularity.
-    counts = np.bincount(labels.ravel(), minlength=n + 1).astype(np.float64)
-    means = np.stack(
-        [np.bincount(labels.ravel(), colours[..., c].ravel(), minlength=n + 1) for c in
-         range(colours.shape[-1])], -1
-    ) / np.maximum(counts, 1)[:, None]
+    flat = labels.ravel()
+    counts = np.maximum(np.bincount(flat, minlength=n + 1), 1).astype(np.float64)
+    sums = [
+        np.bincount(flat, channel.ravel(), minlength=n + 1)
+        for channel in np.moveaxis(colours, -1, 0)
+    ]
+    means = np.stack(sums, -1) / counts[:, None]
     similar = np.sqrt(((means[:, None] - means[None]) ** 2).sum(-1)) < FEATURE_CONTRAST
     repeats = (similar & keep[None, :]).sum(1)
     keep &= repeats <= MAX_REPEATS
@@ -209,7 +211,10 @@ def complete_features(
         dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
         ty, tx = item["fy"] - dy, item["fx"] - dx
         if (
-            ty.min() < 0 or tx.min() < 0 or ty.max() >= height or tx.max() >= width
+            ty.min() < 0
+            or tx.min() < 0
+            or ty.max() >= height
+            or tx.max() >= width
             or not inside[ty, tx].all()
         ):
             continue
@@ -218,13 +223,8 @@ def complete_features(
             max(tx.min() - span, 0) : tx.max() + span + 1,
         ].reshape(-1, drawn.shape[-1])
         near = near[~np.isnan(near[:, 0])]
-        if len(near) and (
-            np.sqrt(((near - item["colour"]) ** 2).sum(-1)).min() < FEATURE_CONTRAST
-        ):
-            log.debug(
-                "feature %d of exemplar %d (%d px at y %d x %d, colour %s): a whole one beside it",
-                item["f"], k, size, ty.mean(), tx.mean(), np.round(item["colour"], 2),
-            )
+        if len(near) and np.sqrt(((near - item["colour"]) ** 2).sum(-1)).min() < FEATURE_CONTRAST:
+            log.debug("feature %d of exemplar %d: a whole one beside it", f, k)
             continue
         by0, bx0 = max(ty.min() - RIM, 0), max(tx.min() - RIM, 0)
         by1, bx1 = min(ty.max() + RIM + 1, height), min(tx.max() + RIM + 1, width)
@@ -238,8 +238,10 @@ def complete_features(
         mask_k = exemplar_masks[k]
         if (
             taken[ry, rx].any()
-            or sy.min() < 0 or sx.min() < 0
-            or sy.max() >= mask_k.shape[0] or sx.max() >= mask_k.shape[1]
+            or sy.min() < 0
+            or sx.min() < 0
+            or sy.max() >= mask_k.shape[0]
+            or sx.max() >= mask_k.shape[1]
             or not mask_k[sy, sx].all()
         ):
             continue
@@ -257,10 +259,7 @@ def complete_features(
         taken[ry, rx] = True
         drawn[ty, tx] = item["colour"]
         completed += 1
-        log.debug(
-            "feature %d of exemplar %d (%d px) completed at y %d x %d: %d px copied, "
-            "%d covered", f, k, size, ty.mean(), tx.mean(), len(ys), item["covered"]
-        )
+        log.debug("feature %d of exemplar %d completed at y %d x %d", f, k, ty.mean(), tx.mean())
     return source, completed
 
 
@@ -297,7 +296,17 @@ def _instances(exemplars, source, features):
                 ys, xs = ys + y0, xs + x0
                 covered = np.unique(source[ys, xs, 1] * labels.shape[1] + source[ys, xs, 2]).size
                 found.append(
-                    dict(k=k, f=int(f), ys=ys, xs=xs, fy=fy, fx=fx, size=int(sizes[f]),
-                         span=span, covered=int(covered), colour=colour)
+                    dict(
+                        k=k,
+                        f=int(f),
+                        ys=ys,
+                        xs=xs,
+                        fy=fy,
+                        fx=fx,
+                        size=int(sizes[f]),
+                        span=span,
+                        covered=int(covered),
+                        colour=colour,
+                    )
                 )
     return found
