@@ -14,7 +14,9 @@ iris belongs to its eye), that are
 
 - compact: no wider than ``FEATURE_EXTENT`` of the object's size (not a stripe,
   a hairline or a sleeve);
-- sharp: they end at an edge (not a blush, whose colour fades over its width);
+- on one ground, and ending at an edge: the pixels just outside are of one
+  colour and differ from the feature's boundary (not a blush, whose colour fades
+  over its width, nor a shirt's corner cut by a neckline);
 - rare: at most ``MAX_REPEATS`` of one colour (not a shirt's squares or a
   fish's spots, which the copy draws as texture).
 
@@ -49,6 +51,8 @@ FEATURE_EXTENT = 0.2
 FEATURE_CONTRAST = 0.07
 #: More components of one colour than this are a texture's elements, not features.
 MAX_REPEATS = 4
+#: The share of the pixels around a feature that must be of one colour (its ground).
+SURROUND_SHARE = 0.8
 #: The host colour's median window, in pixels of the resolution it is taken at.
 HOST_WINDOW = 9
 #: An instance that copies at least this share of the feature's pixels counts as
@@ -100,29 +104,36 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     # The host colour around each pixel: the median over a feature's width, which a
     # feature (under half the window) does not move. Taken at a resolution where that
     # width is HOST_WINDOW pixels: the host varies slowly, and a large window's
-    # median is slow.
+    # median is slow. A pixel stands out when it differs from the hosts of its own
+    # low-resolution cell and of the eight around it: next to an edge between two
+    # parts one of them has its own side's colour, so the edge is no feature.
     factor = min(1.0, HOST_WINDOW / max(extent, 1.0))
     small = ndimage.zoom(colours, (factor, factor, 1), order=1) if factor < 1 else colours
     size = max(int(round(extent * factor)) | 1, 3)
     host = np.stack(
         [ndimage.median_filter(small[..., c], size=size) for c in range(small.shape[-1])], -1
     )
-    if factor < 1:
-        zoom = (colours.shape[0] / host.shape[0], colours.shape[1] / host.shape[1], 1)
-        host = ndimage.zoom(host, zoom, order=1)[: colours.shape[0], : colours.shape[1]]
-    stands_out = np.sqrt(((colours - host) ** 2).sum(-1)) >= FEATURE_CONTRAST
+    cell_y = np.minimum((np.arange(colours.shape[0]) * factor).astype(int), host.shape[0] - 1)
+    cell_x = np.minimum((np.arange(colours.shape[1]) * factor).astype(int), host.shape[1] - 1)
+    distance = np.full(colours.shape[:2], np.inf, np.float32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            ys = np.clip(cell_y + dy, 0, host.shape[0] - 1)
+            xs = np.clip(cell_x + dx, 0, host.shape[1] - 1)
+            near = host[ys[:, None], xs[None, :]]
+            np.minimum(distance, np.sqrt(((colours - near) ** 2).sum(-1)), out=distance)
+    stands_out = distance >= FEATURE_CONTRAST
     stands_out &= inside
     stands_out = ndimage.binary_fill_holes(stands_out)
     labels, n = ndimage.label(stands_out)
     if n == 0:
         return labels.astype(np.int32), 0
+    boxes = ndimage.find_objects(labels)
     keep = np.zeros(n + 1, bool)
-    for i, box in enumerate(ndimage.find_objects(labels), start=1):
+    for i, box in enumerate(boxes, start=1):
         h, w = box[0].stop - box[0].start, box[1].stop - box[1].start
         # Compact: a stripe or a hairline's band is long; a one-pixel speck is noise.
         keep[i] = max(h, w) <= extent and (labels[box] == i).sum() >= 4
-        if keep[i]:
-            keep[i] = _sharp(colours, mask, labels, i, box, max(h, w))
     # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
     # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
     # as texture and are left to it: completing some of them breaks its regularity.
@@ -134,18 +145,24 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     ]
     means = np.stack(sums, -1) / counts[:, None]
     similar = np.sqrt(((means[:, None] - means[None]) ** 2).sum(-1)) < FEATURE_CONTRAST
-    repeats = (similar & keep[None, :]).sum(1)
-    keep &= repeats <= MAX_REPEATS
+    keep &= (similar & keep[None, :]).sum(1) <= MAX_REPEATS
+    for i in np.flatnonzero(keep):
+        box = boxes[i - 1]
+        span = max(box[0].stop - box[0].start, box[1].stop - box[1].start)
+        keep[i] = _stands_alone(colours, mask, labels, i, box, span)
     labels = np.where(keep[labels], labels, 0)
     labels, n = ndimage.label(labels > 0)
     return labels.astype(np.int32), int(n)
 
 
-def _sharp(colours, mask, labels, i, box, span):
-    """Whether component i ends at an edge: its boundary pixels differ from the
-    pixels a short way outside (an eighth of its width, at least 2 px) by half
-    the feature contrast. Lips, eyes and brows do; a blush or a shading's blob,
-    whose colour fades out over much of its width, does not."""
+def _stands_alone(colours, mask, labels, i, box, span):
+    """Whether component i is a feature on one ground: the pixels a short way
+    outside it (an eighth of its width, at least 2 px) are of one colour (at
+    least ``SURROUND_SHARE`` of them within ``FEATURE_CONTRAST`` of their
+    median), and its boundary differs from them by half the feature contrast.
+    Lips, eyes and brows on skin do. A blush, whose colour fades out over its
+    width, and a piece of a part cut by another (a shirt's corner at a neckline,
+    skin on one side and cloth on the other) do not."""
     r = max(2, int(round(span / 8)))
     y0, x0 = max(box[0].start - r - 1, 0), max(box[1].start - r - 1, 0)
     y1, x1 = box[0].stop + r + 1, box[1].stop + r + 1
@@ -156,7 +173,11 @@ def _sharp(colours, mask, labels, i, box, span):
     if not outside.any():
         return False
     here = colours[y0:y1, x0:x1]
-    step = here[edge].mean(0) - here[outside].mean(0)
+    ground = here[outside]
+    spread = np.sqrt(((ground - np.median(ground, axis=0)) ** 2).sum(-1))
+    if (spread < FEATURE_CONTRAST).mean() < SURROUND_SHARE:
+        return False
+    step = here[edge].mean(0) - ground.mean(0)
     return bool(np.sqrt((step**2).sum()) >= FEATURE_CONTRAST / 2)
 
 

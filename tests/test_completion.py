@@ -44,6 +44,19 @@ def test_small_features_are_compact_sharp_and_rare():
     assert (ys.min(), ys.max(), xs.min(), xs.max()) == (20, 23, 20, 33)
 
 
+def test_a_feature_has_one_ground():
+    # Two parts meeting at a straight edge (skin and cloth), a dark mark on each
+    # side's own ground and one across the edge: only the two on one ground are features.
+    image = _skin()
+    image[:, 60:] = 0.8
+    image[30:34, 20:28] = 0.2
+    image[60:64, 56:64] = 0.2
+    image[90:94, 85:93] = 0.2
+    labels, n = small_features(image, np.ones((120, 120), bool))
+    assert n == 2
+    assert labels[31, 23] and labels[91, 88] and not labels[61, 60]
+
+
 def test_five_squares_are_a_texture_and_four_are_features():
     for count, expected in ((4, 4), (5, 0)):
         image = _skin()
