@@ -822,6 +822,7 @@ def colorize(
             source, completed = complete_features(
                 exemplars, source, features, mask, [example.mask for example in chosen]
             )
+            del features  # label maps: not held through the blend, the finish's peak
             log.info("small features completed: %d", completed)
         # Outside the object the voted map is whatever the windows left there (zero where
         # no window reached: black in YCbCr terms is green); the blend must not pull the

@@ -93,6 +93,11 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     (1, 32)
     """
     mask = np.asarray(mask, bool)
+    if exemplar.ndim != 3 or exemplar.shape[:2] != mask.shape:
+        raise ValueError(
+            f"exemplar of shape {exemplar.shape} and mask of shape {mask.shape}: expected "
+            "(H, W, C) colours and an (H, W) mask"
+        )
     if extent is None:
         extent = FEATURE_EXTENT * np.sqrt(mask.sum())
     inside = ndimage.binary_erosion(mask, iterations=2)
@@ -209,6 +214,16 @@ def complete_features(
     completed : int
         How many features were completed.
     """
+    if not len(exemplars) == len(features) == len(exemplar_masks):
+        raise ValueError(
+            f"{len(exemplars)} exemplars, {len(features)} feature labellings and "
+            f"{len(exemplar_masks)} masks: one of each per exemplar"
+        )
+    if source.ndim != 3 or source.shape[2] != 3 or source.shape[:2] != object_mask.shape:
+        raise ValueError(
+            f"source of shape {source.shape} and object mask of shape {object_mask.shape}: "
+            "expected (H, W, 3) and (H, W)"
+        )
     source = np.array(source, dtype=np.int32, copy=True)
     height, width = source.shape[:2]
     inside = ndimage.binary_erosion(object_mask, iterations=1)

@@ -144,10 +144,22 @@ def test_a_feature_must_land_inside_the_object():
     assert complete_features([exemplar], source, features, query_mask, [mask])[1] == 0
 
 
-@pytest.mark.parametrize("threshold", [completion.FEATURE_CONTRAST])
-def test_shading_below_the_contrast_is_no_feature(threshold):
+def test_shading_below_the_contrast_is_no_feature():
+    threshold = completion.FEATURE_CONTRAST
     image = _skin()
     image[20:24, 20:34] = SKIN - 0.8 * threshold
     assert small_features(image, np.ones((120, 120), bool))[1] == 0
     image[20:24, 20:34] = SKIN - 1.5 * threshold
     assert small_features(image, np.ones((120, 120), bool))[1] == 1
+
+
+def test_mismatched_inputs_are_refused_with_their_shapes():
+    exemplar = _exemplar_with_lips()
+    with pytest.raises(ValueError, match=r"\(80, 80, 1\).*\(60, 60\)"):
+        small_features(exemplar, np.ones((60, 60), bool))
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    mask = np.ones((80, 80), bool)
+    with pytest.raises(ValueError, match="one of each per exemplar"):
+        complete_features([exemplar, exemplar], _identity(80), features, mask, [mask])
+    with pytest.raises(ValueError, match=r"\(80, 80, 3\).*\(40, 40\)"):
+        complete_features([exemplar], _identity(80), features, mask[:40, :40], [mask])
