@@ -75,6 +75,7 @@ class BatchOptions:
     backend: str | None = None
     example_preference: float | None = None
     edge_support: float | None = None
+    complete_features: bool | None = None
     seed: int = 0
     views: tuple[View, ...] = (FRONT,)
     size: tuple[int, int] = DEFAULT_SIZE
@@ -103,6 +104,7 @@ class BatchOptions:
             "backend": self.backend,
             "example_preference": self.example_preference,
             "edge_support": self.edge_support,
+            "complete_features": self.complete_features,
         }
 
 

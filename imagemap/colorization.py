@@ -27,6 +27,7 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
+from imagemap import completion
 from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import (
@@ -36,7 +37,6 @@ from imagemap.blend import (
     place_seams,
     seamless_copy,
 )
-from imagemap.completion import complete_features, small_features
 from imagemap.database import Database, Example
 from imagemap.engine import (
     APPEARANCE_PYRAMIDS,
@@ -691,6 +691,7 @@ def colorize(
     vote: str | None = None,
     appearance_pyramid: str | None = None,
     edge_support: float | None = None,
+    complete_features: bool | None = None,
     seed: int = 0,
     quiet: bool = True,
 ) -> ColorizeResult:
@@ -720,6 +721,9 @@ def colorize(
     edge_support : float, optional
         Share of an edge on a seam within one example that the voted map must show
         for the copy to keep it sharp (overrides the preset; 0 blends every seam).
+    complete_features : bool, optional
+        Copy whole the examples' small features that the copy cut (overrides the
+        preset; see :mod:`imagemap.completion`).
     seed : int
         The same seed gives the same bytes.
     quiet : bool
@@ -744,6 +748,7 @@ def colorize(
         vote=vote,
         appearance_pyramid=appearance_pyramid,
         edge_support=edge_support,
+        complete_features=complete_features,
     )
     depth = validate_depth(depth)
     if len(database) == 0:
@@ -816,10 +821,10 @@ def colorize(
             )
         if params.complete_features:
             features = [
-                small_features(exemplar, example.mask)
+                completion.small_features(exemplar, example.mask)
                 for exemplar, example in zip(exemplars, chosen, strict=True)
             ]
-            source, completed = complete_features(
+            source, completed = completion.complete_features(
                 exemplars, source, features, mask, [example.mask for example in chosen]
             )
             del features  # label maps: not held through the blend, the finish's peak

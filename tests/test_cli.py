@@ -114,6 +114,33 @@ def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, a
     assert seen == [expected]
 
 
+@pytest.mark.parametrize("command", ["synthesize", "batch"])
+@pytest.mark.parametrize("argv, expected", [([], 1), (["--no-feature-completion"], 0)])
+def test_feature_completion_can_be_switched_off(
+    files, tmp_path, monkeypatch, command, argv, expected
+):
+    import imagemap.completion
+
+    calls = []
+    original = imagemap.completion.complete_features
+
+    def recording(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(imagemap.completion, "complete_features", recording)
+    db, query, _ = files
+    if command == "synthesize":
+        target = [str(query), "--db", str(db), "-o", str(tmp_path / "m.png")]
+    else:  # one worker: in this process
+        inputs = tmp_path / "inputs"
+        inputs.mkdir()
+        (inputs / query.name).write_bytes(query.read_bytes())
+        target = [str(inputs), "--db", str(db), "-o", str(tmp_path / "out"), "--workers", "1"]
+    assert main([command, *target, "--preset", "busts", "-q", *argv]) == 0
+    assert len(calls) == expected
+
+
 def bad_cases(tmp_path, db, query):
     empty = tmp_path / "empty_depth.png"
     write_image(empty, np.zeros((40, 40), np.uint16))

@@ -70,8 +70,9 @@ def add_mesh_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_colorize_options(parser: argparse.ArgumentParser) -> None:
-    """--m, --backend, --example-preference, --edge-support, --seed: one definition for
-    ``imagemap synthesize`` and ``imagemap batch``, so their checks cannot drift apart."""
+    """--m, --backend, --example-preference, --edge-support, --no-feature-completion and
+    --seed: one definition for ``imagemap synthesize`` and ``imagemap batch``, so their
+    checks cannot drift apart."""
     from imagemap.cli import BACKEND_NAMES
 
     parser.add_argument(
@@ -96,6 +97,16 @@ def add_colorize_options(parser: argparse.ArgumentParser) -> None:
         "edge the voted map shows too (a sleeve meeting a hand), keep it one pixel sharp "
         "if the vote shows at least this share of it (default 0.3); 0 blends every seam "
         "(softer part boundaries)",
+    )
+    parser.add_argument(
+        "--no-feature-completion",
+        dest="complete_features",
+        action="store_const",
+        const=False,
+        default=None,
+        help="leave an example's eye, lips or brow as the copy cut it (by default a small "
+        "feature copied only in part, say lips cut into a lozenge where two offsets meet, "
+        "is copied whole)",
     )
     parser.add_argument(
         "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
@@ -182,6 +193,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         backend=args.backend,
         example_preference=args.example_preference,
         edge_support=args.edge_support,
+        complete_features=args.complete_features,
         quiet=args.quiet or not sys.stderr.isatty(),
     )
     seconds = time.perf_counter() - start
@@ -268,6 +280,7 @@ def run_batch_cli(args: argparse.Namespace) -> int:
         backend=args.backend,
         example_preference=args.example_preference,
         edge_support=args.edge_support,
+        complete_features=args.complete_features,
         seed=args.seed,
         views=views_of(args),
         size=args.size,

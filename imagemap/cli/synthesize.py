@@ -354,6 +354,7 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
             vote=args.vote,
             appearance_pyramid=args.appearance_pyramid,
             edge_support=args.edge_support,
+            complete_features=args.complete_features,
             seed=args.seed,
             quiet=batch or not interactive,
         )
