@@ -35,7 +35,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, spatial
 
 from imagemap.blend import copy_through
 
@@ -149,8 +149,15 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
         for channel in np.moveaxis(colours, -1, 0)
     ]
     means = np.stack(sums, -1) / counts[:, None]
-    similar = np.sqrt(((means[:, None] - means[None]) ** 2).sum(-1)) < FEATURE_CONTRAST
-    keep &= (similar & keep[None, :]).sum(1) <= MAX_REPEATS
+    compact = np.flatnonzero(keep)
+    if len(compact):
+        # Neighbours in colour through a k-d tree: a noisy photograph can have tens of
+        # thousands of compact components, too many for a table of all pairs.
+        tree = spatial.cKDTree(means[compact])
+        repeats = tree.query_ball_point(
+            means[compact], r=FEATURE_CONTRAST * (1 - 1e-6), return_length=True
+        )
+        keep[compact] = repeats <= MAX_REPEATS
     for i in np.flatnonzero(keep):
         box = boxes[i - 1]
         span = max(box[0].stop - box[0].start, box[1].stop - box[1].start)
