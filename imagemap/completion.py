@@ -239,10 +239,14 @@ def complete_features(
     # Where the map already shows a whole feature, and its colour: a partial copy
     # beside a whole feature of the same colour (a piece of a second brow above the
     # brow, of a second eye beside the eye) is a stray, not a feature to complete.
-    drawn = np.full((height, width, exemplars[0].shape[-1]), np.nan, np.float32)
+    # (An index into ``colours`` per pixel, 0 for none: a full-size colour image
+    # would cost 200 MB at 4096².)
+    drawn = np.zeros((height, width), np.int32)
+    colours = [np.full(exemplars[0].shape[-1], np.inf, np.float32)]
     for item in instances:
         if item["covered"] >= COMPLETE_SHARE * item["size"]:
-            drawn[item["ys"], item["xs"]] = item["colour"]
+            drawn[item["ys"], item["xs"]] = len(colours)
+            colours.append(item["colour"])
     taken = np.zeros((height, width), bool)  # completed regions: not overwritten again
     completed = 0
     # Larger features first: an eye before a speck beside it.
@@ -261,11 +265,13 @@ def complete_features(
             or not inside[ty, tx].all()
         ):
             continue
-        near = drawn[
-            max(ty.min() - span, 0) : ty.max() + span + 1,
-            max(tx.min() - span, 0) : tx.max() + span + 1,
-        ].reshape(-1, drawn.shape[-1])
-        near = near[~np.isnan(near[:, 0])]
+        near = np.unique(
+            drawn[
+                max(ty.min() - span, 0) : ty.max() + span + 1,
+                max(tx.min() - span, 0) : tx.max() + span + 1,
+            ]
+        )
+        near = np.asarray([colours[i] for i in near if i > 0]).reshape(-1, len(colours[0]))
         if len(near) and np.sqrt(((near - item["colour"]) ** 2).sum(-1)).min() < FEATURE_CONTRAST:
             log.debug("feature %d of exemplar %d: a whole one beside it", f, k)
             continue
@@ -300,7 +306,8 @@ def complete_features(
                 continue
         source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
         taken[ry, rx] = True
-        drawn[ty, tx] = item["colour"]
+        drawn[ty, tx] = len(colours)
+        colours.append(item["colour"])
         completed += 1
         log.debug("feature %d of exemplar %d completed at y %d x %d", f, k, ty.mean(), tx.mean())
     return source, completed
@@ -319,14 +326,19 @@ def _instances(exemplars, source, features):
         feature_of[here] = labels[source[..., 1][here], source[..., 2][here]]
         sizes = np.bincount(labels.ravel(), minlength=n + 1)
         boxes = ndimage.find_objects(labels)
-        order = np.argsort(feature_of.ravel(), kind="stable")
-        starts = np.searchsorted(feature_of.ravel()[order], np.arange(n + 2))
-        for f in np.unique(feature_of[feature_of > 0]):
+        # The pixels that copy a feature, grouped by feature (a few of the map's pixels:
+        # no sort of the whole map).
+        copying = np.flatnonzero(feature_of)
+        which = feature_of.ravel()[copying]
+        order = np.argsort(which, kind="stable")
+        copying, which = copying[order], which[order]
+        starts = np.searchsorted(which, np.arange(n + 2))
+        for f in np.unique(which):
             fy, fx = np.nonzero(labels[boxes[f - 1]] == f)
             fy, fx = fy + boxes[f - 1][0].start, fx + boxes[f - 1][1].start
             span = int(max(np.ptp(fy), np.ptp(fx))) + 1
             reach = max(span // 2, 1)
-            cy, cx = np.divmod(order[starts[f] : starts[f + 1]], width)
+            cy, cx = np.divmod(copying[starts[f] : starts[f + 1]], width)
             # Work in the box around this feature's copies: a feature is small.
             y0, x0 = max(cy.min() - reach, 0), max(cx.min() - reach, 0)
             y1, x1 = min(cy.max() + reach + 1, height), min(cx.max() + reach + 1, width)
