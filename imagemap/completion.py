@@ -33,11 +33,12 @@ of the same colour (a piece of a second brow above the brow is a stray).
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage, spatial
 
-from imagemap.blend import copy_through
+from imagemap.blend import copy_through, fill_background
 
 __all__ = ["complete_features", "small_features"]
 
@@ -104,8 +105,7 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     colours = np.asarray(exemplar, np.float32)
     if not mask.all():
         # The object's own colours continued outside it: its outline is no feature.
-        _, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
-        colours = colours[ny, nx]
+        colours = fill_background(colours, mask)
     # The host colour around each pixel: the median over a feature's width, which a
     # feature (under half the window) does not move. Taken at a resolution where that
     # width is HOST_WINDOW pixels: the host varies slowly, and a large window's
@@ -193,6 +193,25 @@ def _stands_alone(colours, mask, labels, i, box, span):
     return bool(np.sqrt((step**2).sum()) >= FEATURE_CONTRAST / 2)
 
 
+class _Instance(NamedTuple):
+    """One place where the map copies feature ``f`` of exemplar ``k``."""
+
+    k: int
+    f: int
+    ys: np.ndarray  # the map's pixels copying it
+    xs: np.ndarray
+    fy: np.ndarray  # the feature's pixels in the exemplar
+    fx: np.ndarray
+    size: int
+    span: int  # its width, in pixels
+    covered: int  # how many of its pixels the map's pixels copy
+    colour: np.ndarray  # its mean colour
+
+
+def _within(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]) -> bool:
+    return ys.min() >= 0 and xs.min() >= 0 and ys.max() < shape[0] and xs.max() < shape[1]
+
+
 def complete_features(
     exemplars: list[np.ndarray],
     source: np.ndarray,
@@ -244,26 +263,20 @@ def complete_features(
     drawn = np.zeros((height, width), np.int32)
     colours = [np.full(exemplars[0].shape[-1], np.inf, np.float32)]
     for item in instances:
-        if item["covered"] >= COMPLETE_SHARE * item["size"]:
-            drawn[item["ys"], item["xs"]] = len(colours)
-            colours.append(item["colour"])
+        if item.covered >= COMPLETE_SHARE * item.size:
+            drawn[item.ys, item.xs] = len(colours)
+            colours.append(item.colour)
     taken = np.zeros((height, width), bool)  # completed regions: not overwritten again
     completed = 0
     # Larger features first: an eye before a speck beside it.
-    for item in sorted(instances, key=lambda item: -item["size"]):
-        k, f, ys, xs, size, span = (item[key] for key in ("k", "f", "ys", "xs", "size", "span"))
-        if len(ys) < PARTIAL_SHARE * size or item["covered"] >= COMPLETE_SHARE * size:
+    for item in sorted(instances, key=lambda item: -item.size):
+        k, f, ys, xs, size, span = item.k, item.f, item.ys, item.xs, item.size, item.span
+        if len(ys) < PARTIAL_SHARE * size or item.covered >= COMPLETE_SHARE * size:
             continue
         dy = int(np.rint(np.mean(source[ys, xs, 1] - ys)))
         dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
-        ty, tx = item["fy"] - dy, item["fx"] - dx
-        if (
-            ty.min() < 0
-            or tx.min() < 0
-            or ty.max() >= height
-            or tx.max() >= width
-            or not inside[ty, tx].all()
-        ):
+        ty, tx = item.fy - dy, item.fx - dx
+        if not _within(ty, tx, (height, width)) or not inside[ty, tx].all():
             continue
         near = np.unique(
             drawn[
@@ -272,7 +285,7 @@ def complete_features(
             ]
         )
         near = np.asarray([colours[i] for i in near if i > 0]).reshape(-1, len(colours[0]))
-        if len(near) and np.sqrt(((near - item["colour"]) ** 2).sum(-1)).min() < FEATURE_CONTRAST:
+        if len(near) and np.sqrt(((near - item.colour) ** 2).sum(-1)).min() < FEATURE_CONTRAST:
             log.debug("feature %d of exemplar %d: a whole one beside it", f, k)
             continue
         by0, bx0 = max(ty.min() - RIM, 0), max(tx.min() - RIM, 0)
@@ -285,14 +298,7 @@ def complete_features(
         ry, rx = ry + by0, rx + bx0
         sy, sx = ry + dy, rx + dx
         mask_k = exemplar_masks[k]
-        if (
-            taken[ry, rx].any()
-            or sy.min() < 0
-            or sx.min() < 0
-            or sy.max() >= mask_k.shape[0]
-            or sx.max() >= mask_k.shape[1]
-            or not mask_k[sy, sx].all()
-        ):
+        if taken[ry, rx].any() or not _within(sy, sx, mask_k.shape) or not mask_k[sy, sx].all():
             continue
         # The rim must agree with what the map shows there now: a feature is
         # completed on its own surroundings (lips on skin), never pasted over
@@ -302,18 +308,18 @@ def complete_features(
             now = copy_through(exemplars, source[ry[rim_here], rx[rim_here]][None])[0]
             new = exemplars[k][sy[rim_here], sx[rim_here]]
             if np.sqrt(((now - new) ** 2).sum(-1)).mean() > FEATURE_CONTRAST:
-                log.debug("feature %d of exemplar %d: rim disagrees", item["f"], k)
+                log.debug("feature %d of exemplar %d: rim disagrees", f, k)
                 continue
         source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
         taken[ry, rx] = True
         drawn[ty, tx] = len(colours)
-        colours.append(item["colour"])
+        colours.append(item.colour)
         completed += 1
         log.debug("feature %d of exemplar %d completed at y %d x %d", f, k, ty.mean(), tx.mean())
     return source, completed
 
 
-def _instances(exemplars, source, features):
+def _instances(exemplars, source, features) -> list[_Instance]:
     """Each place where the map copies an exemplar's feature: the pixels copying
     it within half its width of one another, how many of its pixels they cover."""
     height, width = source.shape[:2]
@@ -351,17 +357,6 @@ def _instances(exemplars, source, features):
                 ys, xs = ys + y0, xs + x0
                 covered = np.unique(source[ys, xs, 1] * labels.shape[1] + source[ys, xs, 2]).size
                 found.append(
-                    dict(
-                        k=k,
-                        f=int(f),
-                        ys=ys,
-                        xs=xs,
-                        fy=fy,
-                        fx=fx,
-                        size=int(sizes[f]),
-                        span=span,
-                        covered=int(covered),
-                        colour=colour,
-                    )
+                    _Instance(k, int(f), ys, xs, fy, fx, int(sizes[f]), span, int(covered), colour)
                 )
     return found

@@ -89,6 +89,20 @@ def test_synthesize_background_colour_and_examples(files, tmp_path):
     assert np.all(image[depth == 0] == 1.0)
 
 
+def _run_one(command, files, tmp_path, argv):
+    """``imagemap synthesize`` of the query, or ``imagemap batch`` of a folder holding
+    only it (one worker: in this process), with the busts preset and ``argv``."""
+    db, query, _ = files
+    if command == "synthesize":
+        target = [str(query), "--db", str(db), "-o", str(tmp_path / "m.png")]
+    else:
+        inputs = tmp_path / "inputs"
+        inputs.mkdir()
+        (inputs / query.name).write_bytes(query.read_bytes())
+        target = [str(inputs), "--db", str(db), "-o", str(tmp_path / "out"), "--workers", "1"]
+    return main([command, *target, "--preset", "busts", "-q", *argv])
+
+
 @pytest.mark.parametrize("command", ["synthesize", "batch"])
 @pytest.mark.parametrize("argv, expected", [([], 0.3), (["--edge-support", "0"], 0.0)])
 def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, argv, expected):
@@ -102,15 +116,7 @@ def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, a
         return original(*args, **kwargs)
 
     monkeypatch.setattr(imagemap.colorization, "seamless_copy", recording)
-    db, query, _ = files
-    if command == "synthesize":
-        target = [str(query), "--db", str(db), "-o", str(tmp_path / "m.png")]
-    else:  # one worker: in this process
-        inputs = tmp_path / "inputs"
-        inputs.mkdir()
-        (inputs / query.name).write_bytes(query.read_bytes())
-        target = [str(inputs), "--db", str(db), "-o", str(tmp_path / "out"), "--workers", "1"]
-    assert main([command, *target, "--preset", "busts", "-q", *argv]) == 0
+    assert _run_one(command, files, tmp_path, argv) == 0
     assert seen == [expected]
 
 
@@ -129,15 +135,7 @@ def test_feature_completion_can_be_switched_off(
         return original(*args, **kwargs)
 
     monkeypatch.setattr(imagemap.completion, "complete_features", recording)
-    db, query, _ = files
-    if command == "synthesize":
-        target = [str(query), "--db", str(db), "-o", str(tmp_path / "m.png")]
-    else:  # one worker: in this process
-        inputs = tmp_path / "inputs"
-        inputs.mkdir()
-        (inputs / query.name).write_bytes(query.read_bytes())
-        target = [str(inputs), "--db", str(db), "-o", str(tmp_path / "out"), "--workers", "1"]
-    assert main([command, *target, "--preset", "busts", "-q", *argv]) == 0
+    assert _run_one(command, files, tmp_path, argv) == 0
     assert len(calls) == expected
 
 
