@@ -36,7 +36,8 @@ import logging
 from typing import NamedTuple
 
 import numpy as np
-from scipy import ndimage, spatial
+from scipy import ndimage, sparse, spatial
+from scipy.sparse import csgraph
 
 from imagemap.blend import copy_through, fill_background
 
@@ -61,9 +62,11 @@ HOST_WINDOW = 9
 COMPLETE_SHARE = 0.8
 #: An instance copying less than this share is a stray fragment, not an attempt to
 #: draw the feature: left alone too.
-PARTIAL_SHARE = 0.3
+PARTIAL_SHARE = 0.2
 #: Pixels of surroundings copied with the feature around it.
 RIM = 2
+#: The rim's largest mean colour difference (YCbCr) from what the map shows there.
+RIM_AGREEMENT = 0.07
 
 
 def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | None = None):
@@ -142,6 +145,20 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
     # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
     # as texture and are left to it: completing some of them breaks its regularity.
+    # A feature touching a larger part that also stands out (a brow touching the
+    # hair) is one component with it, too wide to be a feature. Such components are
+    # cut where the colour steps by half the feature contrast between neighbouring
+    # pixels (the brow's edge against the hair; the hair's own shading steps far
+    # less), and their compact pieces, holes filled, are candidates too.
+    wide = [
+        i
+        for i, box in enumerate(boxes, start=1)
+        if max(box[0].stop - box[0].start, box[1].stop - box[1].start) > extent
+    ]
+    first_piece = n + 1
+    if wide:
+        labels, n, keep = _pieces_of_wide(colours, labels, n, keep, np.isin(labels, wide), extent)
+        boxes = ndimage.find_objects(labels, max_label=n)
     flat = labels.ravel()
     counts = np.maximum(np.bincount(flat, minlength=n + 1), 1).astype(np.float64)
     sums = [
@@ -161,13 +178,55 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     for i in np.flatnonzero(keep):
         box = boxes[i - 1]
         span = max(box[0].stop - box[0].start, box[1].stop - box[1].start)
-        keep[i] = _stands_alone(colours, mask, labels, i, box, span)
-    labels = np.where(keep[labels], labels, 0)
-    labels, n = ndimage.label(labels > 0)
-    return labels.astype(np.int32), int(n)
+        keep[i] = _stands_alone(colours, mask, labels, i, box, span, grounds=1 + (i >= first_piece))
+    # Numbered 1..n in order, each kept feature its own label (two pieces of one
+    # cut component may touch).
+    keep[0] = False
+    lookup = np.zeros(n + 1, np.int32)
+    lookup[keep] = np.arange(1, int(keep.sum()) + 1)
+    return lookup[labels], int(keep.sum())
 
 
-def _stands_alone(colours, mask, labels, i, box, span):
+def _pieces_of_wide(colours, labels, n, keep, region, extent):
+    """Cut the wide components at colour steps; their compact pieces become new
+    components (numbered after n, holes filled, an enclosed piece absorbed by its
+    enclosure) and the rest of them is dropped."""
+    index = np.full(region.shape, -1, np.int64)
+    index[region] = np.arange(int(region.sum()))
+    step = FEATURE_CONTRAST / 2
+    pairs = []
+    for a, b in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1, :], np.s_[1:, :])):
+        near = np.sqrt(((colours[a] - colours[b]) ** 2).sum(-1)) < step
+        joined = region[a] & region[b] & near
+        pairs.append((index[a][joined], index[b][joined]))
+    first = np.concatenate([p[0] for p in pairs])
+    second = np.concatenate([p[1] for p in pairs])
+    size = int(region.sum())
+    graph = sparse.coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
+    m, which = csgraph.connected_components(graph, directed=False)
+    pieces = np.zeros(labels.shape, np.int32)
+    pieces[region] = which + 1
+    labels = np.where(region, 0, labels)
+    found = []
+    for j, box in enumerate(ndimage.find_objects(pieces), start=1):
+        if box is None or max(box[0].stop - box[0].start, box[1].stop - box[1].start) > extent:
+            continue
+        filled = ndimage.binary_fill_holes(pieces[box] == j)
+        # At least 2 px thick: the one-pixel lines where two of a texture's
+        # elements meet (a check's anti-aliased borders) are no features.
+        if ndimage.binary_erosion(filled, np.ones((2, 2), bool)).any():
+            found.append((int(filled.sum()), box, filled))
+    # Smaller pieces first: an enclosing piece, written later, takes in what it encloses.
+    found.sort(key=lambda item: item[0])
+    for j, (_, box, filled) in enumerate(found, start=n + 1):
+        labels[box][filled] = j
+    keep = np.concatenate([keep, np.ones(len(found), bool)])
+    # A piece taken in entirely by its enclosure has no pixels left.
+    keep &= np.bincount(labels.ravel(), minlength=len(keep)) > 0
+    return labels, n + len(found), keep
+
+
+def _stands_alone(colours, mask, labels, i, box, span, grounds=1):
     """Whether component i is a feature on one ground: the pixels a short way
     outside it (an eighth of its width, at least 2 px) are of one colour (at
     least ``SURROUND_SHARE`` of them within ``FEATURE_CONTRAST`` of their
@@ -186,8 +245,13 @@ def _stands_alone(colours, mask, labels, i, box, span):
         return False
     here = colours[y0:y1, x0:x1]
     ground = here[outside]
-    spread = np.sqrt(((ground - np.median(ground, axis=0)) ** 2).sum(-1))
-    if (spread < FEATURE_CONTRAST).mean() < SURROUND_SHARE:
+    on_ground = np.sqrt(((ground - np.median(ground, axis=0)) ** 2).sum(-1)) < FEATURE_CONTRAST
+    if grounds == 2 and not on_ground.all():
+        # A piece cut from a larger part it touches (a brow touching the hair) has
+        # that part as its second ground.
+        rest = ground[~on_ground]
+        on_ground |= np.sqrt(((ground - np.median(rest, axis=0)) ** 2).sum(-1)) < FEATURE_CONTRAST
+    if on_ground.mean() < SURROUND_SHARE:
         return False
     step = here[edge].mean(0) - ground.mean(0)
     return bool(np.sqrt((step**2).sum()) >= FEATURE_CONTRAST / 2)
@@ -268,8 +332,10 @@ def complete_features(
             colours.append(item.colour)
     taken = np.zeros((height, width), bool)  # completed regions: not overwritten again
     completed = 0
-    # Larger features first: an eye before a speck beside it.
-    for item in sorted(instances, key=lambda item: -item.size):
+    # The most complete copies first, then larger features: where the map copies
+    # most of one eye and a quarter of another beside it, the first is completed
+    # and the second, a whole one now beside it, is left.
+    for item in sorted(instances, key=lambda item: (-item.covered / item.size, -item.size)):
         k, f, ys, xs, size, span = item.k, item.f, item.ys, item.xs, item.size, item.span
         if len(ys) < PARTIAL_SHARE * size or item.covered >= COMPLETE_SHARE * size:
             continue
@@ -307,8 +373,16 @@ def complete_features(
         if rim_here.any():
             now = copy_through(exemplars, source[ry[rim_here], rx[rim_here]][None])[0]
             new = exemplars[k][sy[rim_here], sx[rim_here]]
-            if np.sqrt(((now - new) ** 2).sum(-1)).mean() > FEATURE_CONTRAST:
-                log.debug("feature %d of exemplar %d: rim disagrees", f, k)
+            disagreement = float(np.sqrt(((now - new) ** 2).sum(-1)).mean())
+            if disagreement > RIM_AGREEMENT:
+                log.debug(
+                    "feature %d of exemplar %d: rim disagrees by %.3f at y %d x %d",
+                    f,
+                    k,
+                    disagreement,
+                    ty.mean(),
+                    tx.mean(),
+                )
                 continue
         source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
         taken[ry, rx] = True

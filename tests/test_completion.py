@@ -57,6 +57,40 @@ def test_a_feature_has_one_ground():
     assert labels[31, 23] and labels[91, 88] and not labels[61, 60]
 
 
+def test_a_brow_touching_a_larger_part_is_a_feature_of_its_own():
+    # A dark brow touching a long band (a fringe of hair) is one component with it,
+    # too wide to be a feature; cut at the colour step between them, the brow is one.
+    # Of the band's colour it is part of the band, and no feature.
+    for brow, expected in ((0.1, 1), (0.3, 0)):
+        image = _skin()
+        image[16:20, 10:110] = 0.3
+        image[20:24, 40:56] = brow
+        labels, n = small_features(image, np.ones((120, 120), bool))
+        assert n == expected
+        if n:
+            ys, xs = np.nonzero(labels)
+            assert (ys.min(), ys.max(), xs.min(), xs.max()) == (20, 23, 40, 55)
+
+
+def test_an_eye_cut_from_a_larger_part_keeps_its_iris():
+    image = _skin()
+    image[16:20, 10:110] = 0.3
+    image[20:28, 40:56] = 0.9  # an eye's white touching the band
+    image[22:26, 46:50] = 0.1  # its iris: a piece of its own, inside the white
+    labels, n = small_features(image, np.ones((120, 120), bool))
+    assert n == 1
+    assert labels[24, 48] and (labels > 0).sum() == 8 * 16
+
+
+def test_a_one_pixel_line_cut_from_a_larger_part_is_no_feature():
+    image = _skin()
+    image[16:20, 10:110] = 0.3
+    image[20:21, 40:56] = 0.1  # a line where two parts meet, not a mark
+    assert small_features(image, np.ones((120, 120), bool))[1] == 0
+    image[20:22, 40:56] = 0.1
+    assert small_features(image, np.ones((120, 120), bool))[1] == 1
+
+
 def test_five_squares_are_a_texture_and_four_are_features():
     for count, expected in ((4, 4), (5, 0)):
         image = _skin()
@@ -91,7 +125,8 @@ def test_whole_copies_and_stray_fragments_are_left_alone():
     whole = _identity(80)
     assert complete_features([exemplar], whole, features, mask, [mask])[1] == 0
     fragment = _identity(80)
-    fragment[30:50, 37:60, 2] += 9  # only 3 of the 12 columns copied: a fragment
+    fragment[30:50, 36:60, 2] += 10  # only 2 of the 12 columns copied: a fragment
+    assert 2 / 12 < completion.PARTIAL_SHARE
     assert complete_features([exemplar], fragment, features, mask, [mask])[1] == 0
 
 
@@ -113,6 +148,28 @@ def test_a_piece_beside_a_whole_feature_of_its_colour_is_a_stray():
     alone[36:44, :, 1] -= 20
     assert (copy_through(exemplars, alone)[36:44] < 0.3).sum() == 0
     assert complete_features(exemplars, alone, features, mask, [mask, mask])[1] == 1
+
+
+def test_the_most_complete_copy_is_completed_and_a_lesser_one_beside_it_left():
+    # Two exemplars with the same lips. The map copies two thirds of the second's at
+    # their place and, 8 px above, a quarter of the first's: the two thirds are
+    # completed, and the quarter, now beside whole lips of its colour, is left.
+    exemplars = [_exemplar_with_lips(), _exemplar_with_lips()]
+    features = [small_features(x, np.ones((80, 80), bool)) for x in exemplars]
+    mask = np.ones((80, 80), bool)
+    source = _identity(80)
+    source[36:44, :, 0] = 1
+    source[36:44, 42:60, 2] += 6  # columns 34-41 of 34-45: two thirds
+    source[30:34, 34:48, 1] += 8  # rows 38-41 of the first exemplar
+    source[30:34, 37:48, 2] += 9  # only columns 34-36: a quarter
+    shown = copy_through(exemplars, source)
+    assert (shown[30:34] < 0.3).sum() == 4 * 3 and (shown[38:42] < 0.3).sum() == 4 * 8
+    assert completion.PARTIAL_SHARE <= 0.25
+    completed_source, completed = complete_features(exemplars, source, features, mask, [mask, mask])
+    assert completed == 1
+    result = copy_through(exemplars, completed_source)
+    np.testing.assert_array_equal(result[36:44, 32:48], exemplars[1][36:44, 32:48])
+    assert (result[30:34] < 0.3).sum() == 4 * 3
 
 
 def test_a_feature_is_not_completed_over_another_part():
