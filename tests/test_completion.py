@@ -76,7 +76,8 @@ def test_an_eye_cut_from_a_larger_part_keeps_its_iris():
     image = _skin()
     image[16:20, 10:110] = 0.3
     image[20:28, 40:56] = 0.9  # an eye's white touching the band
-    image[22:26, 46:50] = 0.1  # its iris: a piece of its own, inside the white
+    image[22:26, 45:51] = 0.1  # its iris: a piece of its own, inside the white
+    image[23:25, 47:49] = 0.25  # and its pupil, inside the iris
     labels, n = small_features(image, np.ones((120, 120), bool))
     assert n == 1
     assert labels[24, 48] and (labels > 0).sum() == 8 * 16
