@@ -55,6 +55,8 @@ FEATURE_CONTRAST = 0.07
 MAX_REPEATS = 4
 #: The share of the pixels around a feature that must be of one colour (its ground).
 SURROUND_SHARE = 0.8
+#: The share of those pixels that must lie inside the object.
+INSIDE_SHARE = 0.75
 #: The host colour's median window, in pixels of the resolution it is taken at.
 HOST_WINDOW = 9
 #: An instance that copies at least this share of the feature's pixels counts as
@@ -297,8 +299,12 @@ def _stands_alone(colours, mask, labels, i, box, span, grounds=1):
     own = labels[y0:y1, x0:x1] == i
     edge = own & ~ndimage.binary_erosion(own)
     grown = ndimage.binary_dilation(own, iterations=r)
-    outside = grown & ~ndimage.binary_dilation(own, iterations=r - 1) & mask[y0:y1, x0:x1]
-    if not outside.any():
+    ring = grown & ~ndimage.binary_dilation(own, iterations=r - 1)
+    outside = ring & mask[y0:y1, x0:x1]
+    # A feature shows whole inside its object: one whose surroundings the outline
+    # cuts (a shirt's stripe at the neckline, a spot at the hair's edge) is a
+    # part's corner, not a feature.
+    if outside.sum() < INSIDE_SHARE * ring.sum():
         return False
     here = colours[y0:y1, x0:x1]
     ground = here[outside]

@@ -92,6 +92,17 @@ def test_a_one_pixel_line_cut_from_a_larger_part_is_no_feature():
     assert small_features(image, np.ones((120, 120), bool))[1] == 1
 
 
+def test_a_mark_cut_by_the_outline_is_no_feature():
+    # The same long dark mark well inside the object and 3 px from its outline, where
+    # what surrounds it on one side is outside: a part's corner, not a feature.
+    for top, expected in ((100, 1), (23, 0)):
+        image = _skin(240)
+        image[top : top + 4, 100:140] = 0.2
+        mask = np.ones((240, 240), bool)
+        mask[:20] = False
+        assert small_features(image, mask)[1] == expected
+
+
 def test_five_squares_are_a_texture_and_four_are_features():
     for count, expected in ((4, 4), (5, 0)):
         image = _skin()
