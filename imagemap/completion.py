@@ -13,7 +13,10 @@ labels): components of pixels whose YCbCr colour is at least
 iris belongs to its eye), that are
 
 - compact: no wider than ``FEATURE_EXTENT`` of the object's size (not a stripe,
-  a hairline or a sleeve);
+  a hairline or a sleeve); a feature touching a larger part that stands out too
+  (a brow touching the hair) is cut from it where the colour steps;
+- inside the object: at least ``INSIDE_SHARE`` of its surroundings (not a
+  stripe's corner cut by the outline);
 - on one ground, and ending at an edge: the pixels just outside are of one
   colour and differ from the feature's boundary (not a blush, whose colour fades
   over its width, nor a shirt's corner cut by a neckline);
@@ -23,11 +26,12 @@ iris belongs to its eye), that are
 :func:`complete_features` then looks, for each feature, at the pixels of the
 map that copy it. Where they lie together (one instance) and cover between
 ``PARTIAL_SHARE`` and ``COMPLETE_SHARE`` of it, the whole feature, with a rim of
-its surroundings, is copied at the mean offset of those pixels: the feature
-appears once, whole, where the cut copy had put it. Not where the rim would
-not match what the map shows there (a feature is completed on its own
-surroundings, never pasted over another part), and not beside a whole feature
-of the same colour (a piece of a second brow above the brow is a stray).
+its surroundings, is copied at the mean offset of those pixels (the most complete
+copies first): the feature appears once, whole, where the cut copy had put it.
+Not where the rim would not match what the map shows there (a feature is
+completed on its own surroundings, never pasted over another part), and not
+beside a whole feature of the same colour (a piece of a second brow above the
+brow is a stray).
 """
 
 from __future__ import annotations
@@ -144,9 +148,6 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
         h, w = box[0].stop - box[0].start, box[1].stop - box[1].start
         # Compact: a stripe or a hairline's band is long; a one-pixel speck is noise.
         keep[i] = max(h, w) <= extent and (labels[box] == i).sum() >= 4
-    # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
-    # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
-    # as texture and are left to it: completing some of them breaks its regularity.
     # A feature touching a larger part that also stands out (a brow touching the
     # hair) is one component with it, too wide to be a feature. Such components are
     # cut where the colour steps by half the feature contrast between neighbouring
@@ -161,6 +162,9 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     if wide:
         labels, n, keep = _pieces_of_wide(colours, labels, n, keep, np.isin(labels, wide), extent)
         boxes = ndimage.find_objects(labels, max_label=n)
+    # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
+    # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
+    # as texture and are left to it: completing some of them breaks its regularity.
     flat = labels.ravel()
     counts = np.maximum(np.bincount(flat, minlength=n + 1), 1).astype(np.float64)
     sums = [
