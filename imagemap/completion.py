@@ -143,23 +143,19 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     if n == 0:
         return labels.astype(np.int32), 0
     boxes = ndimage.find_objects(labels)
+    spans = np.array([0] + [_span(box) for box in boxes])
     keep = np.zeros(n + 1, bool)
     for i, box in enumerate(boxes, start=1):
-        h, w = box[0].stop - box[0].start, box[1].stop - box[1].start
         # Compact: a stripe or a hairline's band is long; a one-pixel speck is noise.
-        keep[i] = max(h, w) <= extent and (labels[box] == i).sum() >= 4
+        keep[i] = spans[i] <= extent and (labels[box] == i).sum() >= 4
     # A feature touching a larger part that also stands out (a brow touching the
     # hair) is one component with it, too wide to be a feature. Such components are
     # cut where the colour steps by half the feature contrast between neighbouring
     # pixels (the brow's edge against the hair; the hair's own shading steps far
     # less), and their compact pieces, holes filled, are candidates too.
-    wide = [
-        i
-        for i, box in enumerate(boxes, start=1)
-        if max(box[0].stop - box[0].start, box[1].stop - box[1].start) > extent
-    ]
+    wide = np.flatnonzero(spans > extent)
     first_piece = n + 1
-    if wide:
+    if len(wide):
         labels, n, keep = _pieces_of_wide(colours, labels, n, keep, np.isin(labels, wide), extent)
         boxes = ndimage.find_objects(labels, max_label=n)
     # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
@@ -183,14 +179,20 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
         keep[compact] = repeats <= MAX_REPEATS
     for i in np.flatnonzero(keep):
         box = boxes[i - 1]
-        span = max(box[0].stop - box[0].start, box[1].stop - box[1].start)
-        keep[i] = _stands_alone(colours, mask, labels, i, box, span, grounds=1 + (i >= first_piece))
+        keep[i] = _stands_alone(
+            colours, mask, labels, i, box, _span(box), grounds=1 + (i >= first_piece)
+        )
     # Numbered 1..n in order, each kept feature its own label (two pieces of one
     # cut component may touch).
     keep[0] = False
     lookup = np.zeros(n + 1, np.int32)
     lookup[keep] = np.arange(1, int(keep.sum()) + 1)
     return lookup[labels], int(keep.sum())
+
+
+def _span(box) -> int:
+    """The larger side of a box of slices."""
+    return max(box[0].stop - box[0].start, box[1].stop - box[1].start)
 
 
 def _pieces_of_wide(colours, labels, n, keep, region, extent):
