@@ -374,9 +374,10 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
 MIN_WINDOWS_ACROSS = 1.25
 #: A level is added while the next coarser one would still see the object this many
 #: windows across (the paper's 200x150 objects are about 2 to 3.5 windows across at
-#: its coarsest level): large maps get the pyramid their size calls for. At 2, busts
-#: at 4x (5 levels) lost most eyes, brows and lips to the coarse levels' layout.
-ADD_WINDOWS_ACROSS = 3.5
+#: its coarsest level): large maps get the pyramid their size calls for, and their
+#: coarsest level sees the object's layout as the paper's does (3.5 left busts at 4x
+#: with a coarsest level twice as fine as at 200x150: hair over the brows).
+ADD_WINDOWS_ACROSS = 3.0
 
 
 #: A level whose window spans less than this fraction of the object's size (square
@@ -437,11 +438,12 @@ def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = 
     The object's size is the square root of its area. A preset's coarsest level
     is dropped while the object, at that level, is less than
     ``MIN_WINDOWS_ACROSS`` windows across (a window larger than the object
-    matches nothing but the silhouette); levels are added (with the coarsest
-    window width) while the next coarser level would still see the object
-    ``ADD_WINDOWS_ACROSS`` windows across, so that the coarsest level sees the
-    object's layout at any resolution. The paper's three levels and 7/11/9
-    windows were set for 200x150 images; this keeps them there.
+    matches nothing but the silhouette); levels are added while the next coarser
+    level would still see the object ``ADD_WINDOWS_ACROSS`` windows across, so that
+    the coarsest level sees the object's layout at any resolution as at the paper's
+    size (the added levels are finer ones, see :func:`level_patch_sizes`). The
+    paper's three levels and 7/11/9 windows were set for 200x150 images; this keeps
+    them there.
 
     Examples
     --------
@@ -450,7 +452,7 @@ def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = 
     2
     >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
     >>> pyramid_levels(big, (7, 11, 9))
-    4
+    5
     """
     size = float(np.sqrt(mask.sum()))
     levels = len(patch_sizes)
@@ -463,8 +465,22 @@ def pyramid_levels(mask: np.ndarray, patch_sizes: tuple[int, ...], grow: bool = 
 
 
 def level_patch_sizes(patch_sizes: tuple[int, ...], levels: int) -> tuple[int, ...]:
-    """The preset's window widths cut or extended (coarsest width repeated) to ``levels``."""
-    return tuple(patch_sizes[:levels]) + (patch_sizes[-1],) * max(0, levels - len(patch_sizes))
+    """The preset's window widths (finest first) cut or extended to ``levels``.
+
+    Levels added for a large object are finer ones: the preset's widths stay at the
+    levels that see the object as its finest to coarsest levels do at the paper's
+    size, and the added levels below repeat its finest width.
+
+    Examples
+    --------
+    >>> level_patch_sizes((7, 11, 9), 5)
+    (7, 7, 7, 11, 9)
+    >>> level_patch_sizes((7, 11, 9), 2)
+    (7, 11)
+    """
+    if levels <= len(patch_sizes):
+        return tuple(patch_sizes[:levels])
+    return (patch_sizes[0],) * (levels - len(patch_sizes)) + tuple(patch_sizes)
 
 
 #: Percentile of |detail| inside the object taken as the detail band's unit: the
@@ -784,11 +800,11 @@ def colorize(
     engine_params = params.engine_params(
         len(chosen), *context_level_weights(mask, params.patch_sizes, params.wide_context_weight)
     )
-    if context_levels(mask, params.patch_sizes) > 0:
-        # The finest window spans under CONTEXT_FRACTION of the object: its relief alone
-        # holds no feature to match on (a 7 px window on a 30 px eye), and depth-only
-        # matches there would scatter palette patches over smooth regions.
-        engine_params = replace(engine_params, final_reseed=0.0)
+    # The features are drawn (final reseed, no example preference) at the finest level
+    # whose window spans at least CONTEXT_FRACTION of the object: the finest at the
+    # paper's size. A finer window's relief holds no feature to match on (a 7 px window
+    # on a 30 px eye), and depth-only matches there would scatter palette patches.
+    engine_params = replace(engine_params, feature_level=context_levels(mask, params.patch_sizes))
     result: EngineResult = synthesize(query, exemplar_levels, engine_params, seed=seed, quiet=quiet)
     # The pyramids are done with: freed before the copy finish, whose DCTs and
     # remade examples are the peak of a large map.

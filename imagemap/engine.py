@@ -193,7 +193,8 @@ class EngineParams:
         Additive cost of matching into each exemplar (empty: none), in the units of
         the window distance: a preference for some exemplars over others.
     exemplar_costs_at_finest : bool
-        Apply ``exemplar_costs`` at the finest level too. False: the coarser levels
+        Apply ``exemplar_costs`` at the finest level too (at ``feature_level`` and
+        every finer level, where that is not the finest). False: the coarser levels
         settle which exemplar each region comes from, and the finest level may take
         a small feature from any exemplar.
     guide_reseed : float
@@ -214,6 +215,13 @@ class EngineParams:
         fits the blurred estimate, and the finest level cannot bring it back. The matches
         that make the copy (``copy_source``) then follow the relief there; the
         voted appearance does not change.
+    feature_level : int
+        The level whose windows draw the small features: ``final_reseed`` runs after
+        its EM, and ``exemplar_costs_at_finest`` refers to it and the levels finer
+        (0: the finest). Where it is a coarser level (a large map, whose finest
+        windows span too little of the object to tell a feature's relief) the
+        appearance is voted again after the reseed, so that the finer levels start
+        from its matches and see its colours in their context.
     context_weights : tuple of float
         At every level but the coarsest, the coarser levels' result as extra guide
         bands, one weight per appearance band (empty or all 0: off; a band weighted 0
@@ -273,6 +281,7 @@ class EngineParams:
     quantize_features: bool = True
     guide_reseed: float = 0.0
     final_reseed: float = 0.0
+    feature_level: int = 0
     context_weights: tuple[float, ...] = ()
     context_levels: int | None = None
     context_level_weights: tuple[float, ...] = ()
@@ -293,6 +302,8 @@ class EngineParams:
             raise ValueError("guide_reseed must be in [0, 1)")
         if not 0 <= self.final_reseed < 1:
             raise ValueError("final_reseed must be in [0, 1)")
+        if self.feature_level < 0:
+            raise ValueError("feature_level must be >= 0")
         if self.stride < 1 or self.max_iterations < 0:
             raise ValueError("stride must be at least 1 and max_iterations at least 0")
         if self.appearance_pyramid not in APPEARANCE_PYRAMIDS:
@@ -1292,7 +1303,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
         level_params = params
-        if level == 0 and n_levels > 1 and not params.exemplar_costs_at_finest:
+        feature_level = min(params.feature_level, n_levels - 1)
+        if level <= feature_level and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
         query = query_levels[level]
         context = None
@@ -1389,7 +1401,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             if not better.any() or previous - value < params.tolerance * abs(previous):
                 break
             previous = value
-        if level == 0 and params.final_reseed > 0:
+        if level == feature_level and params.final_reseed > 0:
             matches = solver.reseed(
                 matches,
                 params.final_reseed,
@@ -1398,6 +1410,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 worst=FINAL_RESEED_WORST,
                 keep_detail=True,
             )
+            if level > 0:  # the finer levels start from these matches and see their colours
+                appearance = solver.vote(matches, appearance)
         if level == 0:  # the finest level's exact costs, while the bands are there
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)

@@ -153,8 +153,11 @@ def test_pyramid_grows_with_large_objects():
     assert pyramid_levels(square(80), sizes) == 3  # the paper's size: its 3 levels
     assert pyramid_levels(square(160), sizes) == 3
     assert pyramid_levels(square(300), sizes) == 4
+    assert pyramid_levels(square(480), sizes) == 5  # coarsest 30 px: 3.3 windows across
     assert pyramid_levels(square(640), sizes) == 5
-    assert level_patch_sizes(sizes, 5) == (7, 11, 9, 9, 9)
+    # The preset's widths stay at the levels that see the object as at the paper's size;
+    # the added finer levels repeat its finest width.
+    assert level_patch_sizes(sizes, 5) == (7, 7, 7, 11, 9)
     assert level_patch_sizes(sizes, 2) == (7, 11)
 
 

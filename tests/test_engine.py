@@ -167,3 +167,35 @@ def test_exemplar_costs_steer_the_source(blob_database, query_blob):
         exemplar = Mapping(guide=rng.random((20, 20)), appearance=rng.random((20, 20)))
         params = EngineParams(patch_sizes=(5,), exemplar_costs=(0.0, 1.0))
         synthesize([Mapping(guide=rng.random((20, 20)))], [[exemplar]], params)
+
+
+def test_feature_level_moves_the_final_reseed_and_the_free_levels(blob_database, query_blob):
+    """``feature_level`` is where a large map draws its features: the final reseed
+    follows that level's EM (its own trace unchanged, the finer level starting from
+    the new matches), and the exemplar costs stop there, not only at the finest."""
+    from imagemap.colorization import depth_mappings, example_mappings
+
+    depth, _ = query_blob
+    chosen = [blob_database[0], blob_database[3]]
+
+    def run(**overrides):
+        params = replace(PRESETS["busts"], patch_sizes=(5, 5)).engine_params(len(chosen))
+        params = replace(params, **overrides)
+        query = depth_mappings(depth, 2, 3.0, True)
+        exemplars = [example_mappings(e, 2, "gaussian", 3.0, True) for e in chosen]
+        return synthesize(query, exemplars, params, seed=0, quiet=True)
+
+    plain = run(final_reseed=0.0, exemplar_costs=())
+    at_finest = run(final_reseed=0.95, exemplar_costs=(), feature_level=0)
+    at_coarser = run(final_reseed=0.95, exemplar_costs=(), feature_level=1)
+    assert at_finest.objective == plain.objective  # after the last EM: only the copy moves
+    assert at_coarser.objective[1] == plain.objective[1]
+    assert at_coarser.objective[0] != plain.objective[0]
+
+    mask = depth > 0
+    costly = dict(exemplar_costs=(0.0, 100.0), exemplar_costs_at_finest=False)
+    finest_free = run(**costly, feature_level=0).source[..., 0][mask]
+    both_free = run(**costly, feature_level=1).source[..., 0][mask]
+    assert np.mean(both_free == 1) > np.mean(finest_free == 1)
+    with pytest.raises(ValueError, match="feature_level"):
+        EngineParams(feature_level=-1)
