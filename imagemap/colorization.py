@@ -114,15 +114,17 @@ class ColorizeParams:
         of their features instead of 67 % (see ``docs/presets.md``).
     example_preference : float
         Extra window cost per rank of an example in the selection (the nearest
-        example costs nothing, the second this much...), at every level but the
-        finest unless ``preference_at_finest``: the coarse levels then take each
-        region of the object from one example where it fits nearly as well (no
-        patch of the second example's palette in the middle of a shirt or a flank),
-        and the finest level still takes a small feature from whichever example
-        draws it. 0 is the paper's method.
+        example costs nothing, the second this much...), at the levels coarser
+        than the one that draws the small features (the finest at the paper's
+        size; on a large map the finest whose window spans ``CONTEXT_FRACTION`` of
+        the object) unless ``preference_at_finest``: the coarse levels then take
+        each region of the object from one example where it fits nearly as well
+        (no patch of the second example's palette in the middle of a shirt or a
+        flank), and the feature level still takes a small feature from whichever
+        example draws it. 0 is the paper's method.
     preference_at_finest : bool
-        Apply the preference at the finest level too: fewer and smaller seams
-        (crisper), fewer small features.
+        Apply the preference at the feature level and the finer levels too: fewer
+        and smaller seams (crisper), fewer small features.
     vote : {"copy", "mean", "mode"}
         How the matched windows make the map. ``"mean"``: the paper's M-step, every
         pixel the Gaussian-weighted mean of its windows' estimates (smooth, and
@@ -166,9 +168,11 @@ class ColorizeParams:
         quarter of the windows), matches on depth and position alone replace them
         for the copy when they fit in less than this fraction of the distance and
         carry at least as much appearance detail (the engine's ``final_reseed``;
-        0: off; not with ``vote="mean"``, whose map is the EM's vote, nor where the
-        finest window spans less than ``CONTEXT_FRACTION`` of the object, whose
-        relief it cannot tell apart there: large maps keep their finest matches).
+        0: off; not with ``vote="mean"``, whose map is the EM's vote). Where the
+        finest window spans less than ``CONTEXT_FRACTION`` of the object (a large
+        map), whose relief it cannot tell apart there, it follows the EM of the
+        finest level whose window spans that much, and the finer levels start from
+        its matches (the engine's ``feature_level``).
         The EM keeps what the coarser levels drew, and an eye or lips they blurred
         away fit no window of the blurred estimate: the copy then takes them where
         the relief says. On 36 generated busts (seed 1) 0.7 drew 91 % of eyes,
@@ -383,7 +387,8 @@ ADD_WINDOWS_ACROSS = 3.0
 #: A level whose window spans less than this fraction of the object's size (square
 #: root of its area) gets the coarser levels' colours as context. At 200x150 (objects
 #: 70-130 px) the finest window spans 0.05-0.1: no context, the paper's levels; at
-#: 800x600 the two finest levels of a bust (0.014, 0.045) and the finest of a fish.
+#: 800x600 the two finest levels of a bust (0.014, 0.029) or a fish. The finest level
+#: that spans more draws the features (the engine's ``feature_level``).
 CONTEXT_FRACTION = 0.05
 
 
