@@ -222,6 +222,10 @@ class EngineParams:
         windows span too little of the object to tell a feature's relief) the
         appearance is voted again after the reseed, so that the finer levels start
         from its matches and see its colours in their context.
+    refine_iterations : int
+        EM iterations (at most) at the levels finer than ``feature_level``: they
+        refine the layout that level drew rather than decide it again (a long EM
+        there wore brows that touch the hair down into it).
     context_weights : tuple of float
         At every level but the coarsest, the coarser levels' result as extra guide
         bands, one weight per appearance band (empty or all 0: off; a band weighted 0
@@ -282,6 +286,7 @@ class EngineParams:
     guide_reseed: float = 0.0
     final_reseed: float = 0.0
     feature_level: int = 0
+    refine_iterations: int = 2
     context_weights: tuple[float, ...] = ()
     context_levels: int | None = None
     context_level_weights: tuple[float, ...] = ()
@@ -304,6 +309,8 @@ class EngineParams:
             raise ValueError("final_reseed must be in [0, 1)")
         if self.feature_level < 0:
             raise ValueError("feature_level must be >= 0")
+        if self.refine_iterations < 1:
+            raise ValueError("refine_iterations must be >= 1")
         if self.stride < 1 or self.max_iterations < 0:
             raise ValueError("stride must be at least 1 and max_iterations at least 0")
         if self.appearance_pyramid not in APPEARANCE_PYRAMIDS:
@@ -1363,7 +1370,10 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 matches = solver.reseed(matches, params.guide_reseed, level_seed, rng)
         appearance = solver.vote(matches, appearance)
         previous = np.inf
-        for iteration in range(params.max_iterations):
+        iterations = params.max_iterations
+        if level < feature_level:
+            iterations = min(iterations, params.refine_iterations)
+        for iteration in range(iterations):
             solver.set_appearance(appearance)
             candidates = solver.search(
                 matches, init=False, seed=level_seed + 1 + iteration, rng=rng

@@ -197,5 +197,10 @@ def test_feature_level_moves_the_final_reseed_and_the_free_levels(blob_database,
     finest_free = run(**costly, feature_level=0).source[..., 0][mask]
     both_free = run(**costly, feature_level=1).source[..., 0][mask]
     assert np.mean(both_free == 1) > np.mean(finest_free == 1)
+    # The levels finer than the feature level refine it: a short EM.
+    assert len(at_coarser.objective[0]) <= 2 < len(plain.objective[0])
+    assert len(run(feature_level=1, refine_iterations=1).objective[0]) == 1
     with pytest.raises(ValueError, match="feature_level"):
         EngineParams(feature_level=-1)
+    with pytest.raises(ValueError, match="refine_iterations"):
+        EngineParams(refine_iterations=0)
