@@ -1295,6 +1295,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         limit = n_levels - 1 if params.context_levels is None else params.context_levels
         context_from = min(n_levels - 1, limit)
     kind = params.appearance_pyramid
+    feature_level = min(params.feature_level, n_levels - 1)
     query_colours = exemplar_colours = None
     for level in progress(range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet):
         exemplars = [levels[level] for levels in exemplar_levels]
@@ -1310,7 +1311,6 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         k = min(params.patch_sizes[level], smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
         level_params = params
-        feature_level = min(params.feature_level, n_levels - 1)
         if level <= feature_level and n_levels > 1 and not params.exemplar_costs_at_finest:
             level_params = replace(params, exemplar_costs=())
         query = query_levels[level]
