@@ -298,6 +298,7 @@ def seamless_copy(
     *,
     scale: float = 8.0,
     edge_support: float = 0.0,
+    mask: np.ndarray | None = None,
 ) -> np.ndarray:
     """Copy exemplar pixels through a source map, blending the seams in the gradient domain.
 
@@ -339,6 +340,11 @@ def seamless_copy(
     edge_support : float
         Share of a same-exemplar seam's step the reference must show for the step
         to be kept (0: every seam blended).
+    mask : ndarray of bool, (H, W), optional
+        The object. Across its outline the target difference is the reference's
+        own step: the outline is not a seam to blend across, so colours copied
+        beside the object (its margin) do not bleed into it (a narrow neck took a
+        tint of the shirt copied around it).
 
     Returns
     -------
@@ -358,6 +364,11 @@ def seamless_copy(
     has = source[..., 0] >= 0
     none_x = ~(has[:, 1:] & has[:, :-1])
     none_y = ~(has[1:] & has[:-1])
+    if mask is not None:  # the outline keeps the reference's step
+        if mask.shape != (h, w):
+            raise ValueError(f"mask {mask.shape} does not fit the reference {reference.shape}")
+        none_x |= mask[:, 1:] != mask[:, :-1]
+        none_y |= mask[1:] != mask[:-1]
     groups = _source_groups(exemplars, source)
     # One channel at a time (a third of the memory of all at once), and within a channel
     # one side's gradient at a time; the reference is made float64 a channel at a time.

@@ -846,7 +846,12 @@ def colorize(
                 for exemplar, example in zip(exemplars, chosen, strict=True)
             ]
             source, completed = completion.complete_features(
-                exemplars, source, features, mask, [example.mask for example in chosen]
+                exemplars,
+                source,
+                features,
+                mask,
+                [example.mask for example in chosen],
+                relief=(depth, [example.depth for example in chosen]),
             )
             del features  # label maps: not held through the blend, the finish's peak
             log.info("small features completed: %d", completed)
@@ -861,7 +866,7 @@ def colorize(
         size = float(np.sqrt(mask.sum()))
         scale = max(params.blend_scale * size, 1.0)
         ycbcr = seamless_copy(
-            exemplars, source, ycbcr, scale=scale, edge_support=params.edge_support
+            exemplars, source, ycbcr, scale=scale, edge_support=params.edge_support, mask=mask
         )
     image = to_rgb(ycbcr)
     image[~mask] = 0.0

@@ -32,6 +32,13 @@ Not where the rim would not match what the map shows there (a feature is
 completed on its own surroundings, never pasted over another part), and not
 beside a whole feature of the same colour (a piece of a second brow above the
 brow is a stray).
+
+A feature can also be skipped whole: the map copies the skin around an eye from
+around the example's eye, at offsets near one another, and fills the eye's place
+with plain skin from elsewhere (a large map's finer levels wear an eye down this
+way). Where the map copies ``SKIPPED_RING_SHARE`` of a feature's ring and nothing
+of it, the feature is completed too, at the offset where its relief fits the
+query's depth best (``SKIPPED_RELIEF_FIT``), under the same tests.
 """
 
 from __future__ import annotations
@@ -69,6 +76,14 @@ COMPLETE_SHARE = 0.8
 #: An instance copying less than this share is a stray fragment, not an attempt to
 #: draw the feature: left alone too.
 PARTIAL_SHARE = 0.2
+#: A feature none of whose pixels the map copies is still completed where the map
+#: copies at least this share of its ring (the pixels within half its width around
+#: it) at one offset: its surroundings were taken and it was skipped.
+SKIPPED_RING_SHARE = 0.3
+#: Given the reliefs, a skipped feature is completed only where the exemplar's relief
+#: of it and its ring correlates at least this well with the query's at the place
+#: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7).
+SKIPPED_RELIEF_FIT = 0.9
 #: Pixels of surroundings copied with the feature around it.
 RIM = 2
 #: The rim's largest mean colour difference (YCbCr) from what the map shows there.
@@ -339,6 +354,7 @@ class _Instance(NamedTuple):
     span: int  # its width, in pixels
     covered: int  # how many of its pixels the map's pixels copy
     colour: np.ndarray  # its mean colour
+    offset: tuple[int, int] | None = None  # where to copy it (a skipped one), else the mean
 
 
 def _within(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]) -> bool:
@@ -351,8 +367,9 @@ def complete_features(
     features: list[tuple[np.ndarray, int]],
     object_mask: np.ndarray,
     exemplar_masks: list[np.ndarray],
+    relief: tuple[np.ndarray, list[np.ndarray]] | None = None,
 ) -> tuple[np.ndarray, int]:
-    """A source map in which every partly copied small feature is copied whole.
+    """A source map in which every partly copied (or skipped) small feature is copied whole.
 
     Parameters
     ----------
@@ -366,6 +383,9 @@ def complete_features(
         The query's object: a completed feature must lie inside it.
     exemplar_masks : list of ndarray of bool
         The exemplars' objects: a completed feature's rim must come from inside.
+    relief : (ndarray, list of ndarray), optional
+        The query's depth and the exemplars' depths: a skipped feature (see
+        :func:`_skipped_instances`) is placed where its relief fits the query's.
 
     Returns
     -------
@@ -388,6 +408,7 @@ def complete_features(
     inside = ndimage.binary_erosion(object_mask, iterations=1)
     rim = ndimage.generate_binary_structure(2, 1)
     instances = _instances(exemplars, source, features)
+    instances += _skipped_instances(source, features, exemplars, exemplar_masks, relief)
     # Where the map already shows a whole feature, and its colour: a partial copy
     # beside a whole feature of the same colour (a piece of a second brow above the
     # brow, of a second eye beside the eye) is a stray, not a feature to complete.
@@ -408,8 +429,11 @@ def complete_features(
         k, f, ys, xs, size, span = item.k, item.f, item.ys, item.xs, item.size, item.span
         if len(ys) < PARTIAL_SHARE * size or item.covered >= COMPLETE_SHARE * size:
             continue
-        dy = int(np.rint(np.mean(source[ys, xs, 1] - ys)))
-        dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
+        if item.offset is not None:
+            dy, dx = item.offset
+        else:
+            dy = int(np.rint(np.mean(source[ys, xs, 1] - ys)))
+            dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
         ty, tx = item.fy - dy, item.fx - dx
         if not _within(ty, tx, (height, width)) or not inside[ty, tx].all():
             continue
@@ -460,6 +484,118 @@ def complete_features(
         completed += 1
         log.debug("feature %d of exemplar %d completed at y %d x %d", f, k, ty.mean(), tx.mean())
     return source, completed
+
+
+def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None):
+    """Features whose surroundings the map copies around one place, without them: an
+    eye's ring of skin copied around a hole that other offsets filled with plain skin.
+
+    For each feature, its ring (the pixels within half its width around it, inside its
+    exemplar) is looked up in the source map. Where the map copies at least
+    ``SKIPPED_RING_SHARE`` of the ring's pixels at offsets within half the feature's
+    width of their median, the feature belongs near there. With ``relief`` (the
+    query's depth and the exemplars' depths) the offset is then the one, within half
+    the feature's width, at which the exemplar's relief of the feature and its ring
+    correlates best with the query's (an eye goes on the eye's bulge), and the
+    feature is left out unless that correlation reaches ``SKIPPED_RELIEF_FIT``
+    (the relief must say where it goes). Where no pixel
+    the feature would cover at that offset copies a feature of any exemplar, the
+    feature is an instance with nothing of it covered: :func:`complete_features`
+    copies it there, under the same tests as a cut one.
+    """
+    height, width = source.shape[:2]
+    index = source[..., 0]
+    has_feature = np.zeros((height, width), bool)  # the map's pixels copying any feature
+    for k, (labels, _) in enumerate(features):
+        here = np.nonzero(index == k)
+        has_feature[here] = labels[source[..., 1][here], source[..., 2][here]] > 0
+    found = []
+    for k, (labels, n) in enumerate(features):
+        if n == 0:
+            continue
+        here = np.flatnonzero(index == k)
+        sy, sx = source[..., 1].ravel()[here], source[..., 2].ravel()[here]
+        for f, box in enumerate(ndimage.find_objects(labels), start=1):
+            if box is None:
+                continue
+            fy, fx = np.nonzero(labels[box] == f)
+            fy, fx = fy + box[0].start, fx + box[1].start
+            span = int(max(np.ptp(fy), np.ptp(fx))) + 1
+            reach = max(span // 2, 1)
+            y0, x0 = max(box[0].start - reach, 0), max(box[1].start - reach, 0)
+            y1 = min(box[0].stop + reach, labels.shape[0])
+            x1 = min(box[1].stop + reach, labels.shape[1])
+            feature = labels[y0:y1, x0:x1] == f
+            ring = ndimage.binary_dilation(feature, iterations=reach) & ~feature
+            ring &= exemplar_masks[k][y0:y1, x0:x1]
+            n_ring = int(ring.sum())
+            if n_ring == 0:
+                continue
+            inside = (sy >= y0) & (sy < y1) & (sx >= x0) & (sx < x1)
+            pick = here[inside][ring[sy[inside] - y0, sx[inside] - x0]]
+            if len(pick) < SKIPPED_RING_SHARE * n_ring:
+                continue
+            ys, xs = np.divmod(pick, width)
+            dy = source[..., 1].ravel()[pick] - ys
+            dx = source[..., 2].ravel()[pick] - xs
+            my, mx = int(np.median(dy)), int(np.median(dx))
+            near = (np.abs(dy - my) <= reach) & (np.abs(dx - mx) <= reach)
+            covered = np.unique(
+                source[..., 1].ravel()[pick[near]] * labels.shape[1]
+                + source[..., 2].ravel()[pick[near]]
+            ).size
+            if covered < SKIPPED_RING_SHARE * n_ring:
+                continue
+            if relief is not None:
+                my, mx, fit = _register(
+                    relief[0], relief[1][k], feature | ring, y0, x0, my, mx, reach
+                )
+                if fit < SKIPPED_RELIEF_FIT:  # the relief does not say where it goes
+                    continue
+            ty, tx = fy - my, fx - mx
+            if not _within(ty, tx, (height, width)) or has_feature[ty, tx].any():
+                continue
+            colour = exemplars[k][fy, fx].mean(0)
+            # The ring's pixels, moved to the chosen offset, stand for the instance (its
+            # mean offset is where complete_features puts the feature).
+            ry, rx = np.nonzero(ring)
+            ry, rx = ry + y0 - my, rx + x0 - mx
+            keep = (ry >= 0) & (rx >= 0) & (ry < height) & (rx < width)
+            found.append(
+                _Instance(k, f, ry[keep], rx[keep], fy, fx, len(fy), span, 0, colour, (my, mx))
+            )
+    return found
+
+
+def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
+    """The offset within ``reach`` of (dy, dx) at which the exemplar's relief over
+    ``region`` (a box at y0, x0 of the exemplar) correlates best with the query's, and
+    that correlation: normalized cross-correlation of the depths' detail (minus a
+    Gaussian of the region's width), so that the objects' overall depth and scale do
+    not count (-1 where the search would leave the query)."""
+    h, w = region.shape
+    sigma = max(h, w) / 2.0
+    ey, ex = np.nonzero(region)
+    ex_detail = exemplar_depth - ndimage.gaussian_filter(exemplar_depth, sigma)
+    a = ex_detail[ey + y0, ex + x0]
+    a = a - a.mean()
+    qy0, qx0 = y0 - dy - reach, x0 - dx - reach
+    qy1, qx1 = qy0 + h + 2 * reach, qx0 + w + 2 * reach
+    if qy0 < 0 or qx0 < 0 or qy1 > query_depth.shape[0] or qx1 > query_depth.shape[1]:
+        return dy, dx, -1.0
+    pad = int(3 * sigma) + 1
+    py0, px0 = max(qy0 - pad, 0), max(qx0 - pad, 0)
+    patch = query_depth[py0 : qy1 + pad, px0 : qx1 + pad]
+    q_detail = (patch - ndimage.gaussian_filter(patch, sigma))[qy0 - py0 :, qx0 - px0 :]
+    best, best_score = (dy, dx), -np.inf
+    for sy in range(2 * reach + 1):
+        for sx in range(2 * reach + 1):
+            b = q_detail[ey + sy, ex + sx]
+            b = b - b.mean()
+            score = float(a @ b) / (np.sqrt(float(a @ a) * float(b @ b)) + 1e-12)
+            if score > best_score:
+                best, best_score = (dy + reach - sy, dx + reach - sx), score
+    return best[0], best[1], best_score
 
 
 def _instances(exemplars, source, features) -> list[_Instance]:

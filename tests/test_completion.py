@@ -232,3 +232,53 @@ def test_mismatched_inputs_are_refused_with_their_shapes():
         complete_features([exemplar, exemplar], _identity(80), features, mask, [mask])
     with pytest.raises(ValueError, match=r"\(80, 80, 3\).*\(40, 40\)"):
         complete_features([exemplar], _identity(80), features, mask[:40, :40], [mask])
+
+
+def _textured_skin_with_lips(size=80, seed=5):
+    """Lips on a faintly textured skin (the texture makes offsets tell apart)."""
+    rng = np.random.default_rng(seed)
+    exemplar = _exemplar_with_lips(size) + 0.01 * rng.standard_normal((size, size, 1))
+    return exemplar.astype(np.float32)
+
+
+def test_a_skipped_feature_is_copied_where_its_surroundings_were():
+    # The map copies the skin around the lips at offset 0 but fills the lips' place
+    # with skin from elsewhere: none of the lips copied, all of their ring.
+    exemplar = _textured_skin_with_lips()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    assert features[0][1] == 1
+    mask = np.ones((80, 80), bool)
+    source = _identity(80)
+    source[37:43, 33:47, 1] += 25  # the lips' place from skin 25 rows below
+    assert (copy_through([exemplar], source) < 0.3).sum() == 0
+    completed_source, completed = complete_features([exemplar], source, features, mask, [mask])
+    assert completed == 1
+    whole = copy_through([exemplar], completed_source)
+    np.testing.assert_array_equal(whole[38:42, 34:46], exemplar[38:42, 34:46])
+    # Skin copied from far away around the place (no ring copied): nothing to complete.
+    elsewhere = _identity(80)
+    elsewhere[28:52, 22:58, 1] += 25
+    assert complete_features([exemplar], elsewhere, features, mask, [mask])[1] == 0
+
+
+def test_a_skipped_feature_goes_where_its_relief_fits():
+    # The query's bump under the lips lies 3 px lower and 2 px further right than
+    # the exemplar's: given the reliefs, the lips follow it.
+    exemplar = _textured_skin_with_lips()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    mask = np.ones((80, 80), bool)
+    yy, xx = np.mgrid[0:80, 0:80]
+
+    def bump(y, x):
+        return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 / 8.0 + (xx - x) ** 2 / 30.0))
+
+    exemplar_depth, query_depth = bump(39.5, 39.5), bump(42.5, 41.5)
+    source = _identity(80)
+    source[37:46, 33:49, 1] += 25
+    relief = (query_depth, [exemplar_depth])
+    completed_source, completed = complete_features(
+        [exemplar], source, features, mask, [mask], relief=relief
+    )
+    assert completed == 1
+    whole = copy_through([exemplar], completed_source)
+    np.testing.assert_array_equal(whole[41:45, 36:48], exemplar[38:42, 34:46])

@@ -90,6 +90,25 @@ def test_seamless_copy_keeps_a_coherent_copy_and_hides_a_palette_seam():
     np.testing.assert_allclose(none, reference, atol=1e-6)
 
 
+def test_colours_copied_beside_the_object_do_not_bleed_across_its_outline():
+    # A narrow neck (columns 20..27) copied from one example's skin, the margin around
+    # it from another example's shirt; the reference is the voted neck inside and the
+    # copy outside, as colorize makes it.
+    skin, shirt = np.full((40, 48, 1), 0.3), np.full((40, 48, 1), 0.8)
+    source = identity_source((40, 48))
+    source[..., 0] = 1
+    mask = np.zeros((40, 48), bool)
+    mask[:, 20:28] = True
+    source[mask, 0] = 0
+    reference = np.where(mask[..., None], 0.3, 0.8)
+    tint = lambda out: float(np.abs(out[mask] - 0.3).max())  # noqa: E731
+    # Treated as a seam between two palettes, the shirt's colour spreads into the neck.
+    assert tint(seamless_copy([skin, shirt], source, reference, scale=6.0)) > 0.05
+    assert tint(seamless_copy([skin, shirt], source, reference, scale=6.0, mask=mask)) < 1e-4
+    with pytest.raises(ValueError, match="mask"):
+        seamless_copy([skin, shirt], source, reference, mask=mask[:, :40])
+
+
 def _sleeve_and_hand(exemplars=1, low=0.2, high=0.8):
     """A map copied from a textured exemplar whose left half is dark (a sleeve) and
     right half bright (a hand): the output's left half from the sleeve, its right half
