@@ -49,6 +49,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy import ndimage, sparse, spatial
 from scipy.sparse import csgraph
+from skimage.feature import match_template
 
 from imagemap.blend import copy_through, fill_background
 
@@ -78,7 +79,7 @@ COMPLETE_SHARE = 0.8
 PARTIAL_SHARE = 0.2
 #: A feature none of whose pixels the map copies is still completed where the map
 #: copies at least this share of its ring (the pixels within half its width around
-#: it) at one offset: its surroundings were taken and it was skipped.
+#: it) at offsets near one another: its surroundings were taken and it was skipped.
 SKIPPED_RING_SHARE = 0.3
 #: Given the reliefs, a skipped feature is completed only where the exemplar's relief
 #: of it and its ring correlates at least this well with the query's at the place
@@ -569,33 +570,38 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
 
 def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
     """The offset within ``reach`` of (dy, dx) at which the exemplar's relief over
-    ``region`` (a box at y0, x0 of the exemplar) correlates best with the query's, and
-    that correlation: normalized cross-correlation of the depths' detail (minus a
-    Gaussian of the region's width), so that the objects' overall depth and scale do
-    not count (-1 where the search would leave the query)."""
+    ``region``'s box (at y0, x0 of the exemplar) correlates best with the query's, and
+    that correlation: normalized cross-correlation
+    (:func:`skimage.feature.match_template`) of the depths' detail (minus a Gaussian of
+    the box's width), so that the objects' overall depth and scale do not count (-1
+    where the search would leave the query or the exemplar)."""
     h, w = region.shape
     sigma = max(h, w) / 2.0
-    ey, ex = np.nonzero(region)
-    ex_detail = exemplar_depth - ndimage.gaussian_filter(exemplar_depth, sigma)
-    a = ex_detail[ey + y0, ex + x0]
-    a = a - a.mean()
-    qy0, qx0 = y0 - dy - reach, x0 - dx - reach
-    qy1, qx1 = qy0 + h + 2 * reach, qx0 + w + 2 * reach
-    if qy0 < 0 or qx0 < 0 or qy1 > query_depth.shape[0] or qx1 > query_depth.shape[1]:
-        return dy, dx, -1.0
     pad = int(3 * sigma) + 1
-    py0, px0 = max(qy0 - pad, 0), max(qx0 - pad, 0)
-    patch = query_depth[py0 : qy1 + pad, px0 : qx1 + pad]
-    q_detail = (patch - ndimage.gaussian_filter(patch, sigma))[qy0 - py0 :, qx0 - px0 :]
-    best, best_score = (dy, dx), -np.inf
-    for sy in range(2 * reach + 1):
-        for sx in range(2 * reach + 1):
-            b = q_detail[ey + sy, ex + sx]
-            b = b - b.mean()
-            score = float(a @ b) / (np.sqrt(float(a @ a) * float(b @ b)) + 1e-12)
-            if score > best_score:
-                best, best_score = (dy + reach - sy, dx + reach - sx), score
-    return best[0], best[1], best_score
+
+    def detail(depth, top, left, height, width):
+        # The depth's detail over a box, filtered over the box and a margin only.
+        b0, b1 = max(top - pad, 0), max(left - pad, 0)
+        patch = np.asarray(depth[b0 : top + height + pad, b1 : left + width + pad], np.float64)
+        patch = patch - ndimage.gaussian_filter(patch, sigma)
+        return patch[top - b0 : top - b0 + height, left - b1 : left - b1 + width]
+
+    qy0, qx0 = y0 - dy - reach, x0 - dx - reach
+    qh, qw = h + 2 * reach, w + 2 * reach
+    if (
+        qy0 < 0
+        or qx0 < 0
+        or qy0 + qh > query_depth.shape[0]
+        or qx0 + qw > query_depth.shape[1]
+        or y0 + h > exemplar_depth.shape[0]
+        or x0 + w > exemplar_depth.shape[1]
+    ):
+        return dy, dx, -1.0
+    template = detail(exemplar_depth, y0, x0, h, w)
+    window = detail(query_depth, qy0, qx0, qh, qw)
+    scores = match_template(window, template)  # (2 reach + 1) squared offsets
+    sy, sx = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    return dy + reach - int(sy), dx + reach - int(sx), float(scores[sy, sx])
 
 
 def _instances(exemplars, source, features) -> list[_Instance]:
