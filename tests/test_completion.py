@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from imagemap import completion
 from imagemap.blend import copy_through
@@ -282,3 +283,22 @@ def test_a_skipped_feature_goes_where_its_relief_fits():
     assert completed == 1
     whole = copy_through([exemplar], completed_source)
     np.testing.assert_array_equal(whole[41:45, 36:48], exemplar[38:42, 34:46])
+
+
+def test_relief_registration_finds_a_moved_relief_with_full_correlation():
+    # The query's relief is the exemplar's moved by (3, -2); searched from 2 px off in
+    # each direction, the registration finds the move, with a correlation of nearly 1, over a
+    # ring-shaped region (the masked correlation ignores the box's corners).
+    rng = np.random.default_rng(2)
+    exemplar_depth = ndimage.gaussian_filter(rng.random((90, 90)), 2)
+    query_depth = np.roll(exemplar_depth, (-3, 2), axis=(0, 1))
+    yy, xx = np.mgrid[0:21, 0:21]
+    region = np.hypot(yy - 10, xx - 10) <= 10
+    # The box's corners, outside the region, are something else in the query.
+    corners = query_depth[27:48, 32:53]
+    corners[~region] = rng.random(int((~region).sum()))
+    dy, dx, fit = completion._register(
+        query_depth, exemplar_depth, region, 30, 30, 3 + 2, -2 - 2, reach=4
+    )
+    assert (dy, dx) == (3, -2)
+    assert fit > 0.999
