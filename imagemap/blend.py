@@ -343,8 +343,7 @@ def seamless_copy(
     mask : ndarray of bool, (H, W), optional
         The object. Across its outline the target difference is the reference's
         own step: the outline is not a seam to blend across, so colours copied
-        beside the object (its margin) do not bleed into it (a narrow neck took a
-        tint of the shirt copied around it).
+        beside the object (its margin) do not bleed into it.
 
     Returns
     -------

@@ -504,16 +504,11 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
     copies it there, under the same tests as a cut one.
     """
     height, width = source.shape[:2]
-    index = source[..., 0]
-    has_feature = np.zeros((height, width), bool)  # the map's pixels copying any feature
-    for k, (labels, _) in enumerate(features):
-        here = np.nonzero(index == k)
-        has_feature[here] = labels[source[..., 1][here], source[..., 2][here]] > 0
     found = []
     for k, (labels, n) in enumerate(features):
         if n == 0:
             continue
-        here = np.flatnonzero(index == k)
+        here = np.flatnonzero(source[..., 0] == k)
         sy, sx = source[..., 1].ravel()[here], source[..., 2].ravel()[here]
         for f, box in enumerate(ndimage.find_objects(labels), start=1):
             if box is None:
@@ -531,19 +526,15 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
             n_ring = int(ring.sum())
             if n_ring == 0:
                 continue
-            inside = (sy >= y0) & (sy < y1) & (sx >= x0) & (sx < x1)
-            pick = here[inside][ring[sy[inside] - y0, sx[inside] - x0]]
+            inside = np.flatnonzero((sy >= y0) & (sy < y1) & (sx >= x0) & (sx < x1))
+            pick = inside[ring[sy[inside] - y0, sx[inside] - x0]]  # the map's ring copies
             if len(pick) < SKIPPED_RING_SHARE * n_ring:
                 continue
-            ys, xs = np.divmod(pick, width)
-            dy = source[..., 1].ravel()[pick] - ys
-            dx = source[..., 2].ravel()[pick] - xs
+            ys, xs = np.divmod(here[pick], width)
+            dy, dx = sy[pick] - ys, sx[pick] - xs
             my, mx = int(np.median(dy)), int(np.median(dx))
-            near = (np.abs(dy - my) <= reach) & (np.abs(dx - mx) <= reach)
-            covered = np.unique(
-                source[..., 1].ravel()[pick[near]] * labels.shape[1]
-                + source[..., 2].ravel()[pick[near]]
-            ).size
+            near = pick[(np.abs(dy - my) <= reach) & (np.abs(dx - mx) <= reach)]
+            covered = np.unique(sy[near] * labels.shape[1] + sx[near]).size
             if covered < SKIPPED_RING_SHARE * n_ring:
                 continue
             if relief is not None:
@@ -553,11 +544,11 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
                 if fit < SKIPPED_RELIEF_FIT:  # the relief does not say where it goes
                     continue
             ty, tx = fy - my, fx - mx
-            if not _within(ty, tx, (height, width)) or has_feature[ty, tx].any():
+            if not _within(ty, tx, (height, width)) or _copies_feature(source, features, ty, tx):
                 continue
             colour = exemplars[k][fy, fx].mean(0)
-            # The ring's pixels, moved to the chosen offset, stand for the instance (its
-            # mean offset is where complete_features puts the feature).
+            # The ring's pixels at the chosen offset stand for the map's pixels of the
+            # instance; the offset itself says where complete_features copies it.
             ry, rx = np.nonzero(ring)
             ry, rx = ry + y0 - my, rx + x0 - mx
             keep = (ry >= 0) & (rx >= 0) & (ry < height) & (rx < width)
@@ -565,6 +556,16 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
                 _Instance(k, f, ry[keep], rx[keep], fy, fx, len(fy), span, 0, colour, (my, mx))
             )
     return found
+
+
+def _copies_feature(source, features, ys, xs) -> bool:
+    """Whether any of the map's pixels (ys, xs) copies a feature of any exemplar."""
+    e, sy, sx = source[ys, xs, 0], source[ys, xs, 1], source[ys, xs, 2]
+    for k, (labels, _) in enumerate(features):
+        at = e == k
+        if (labels[sy[at], sx[at]] > 0).any():
+            return True
+    return False
 
 
 def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
