@@ -79,11 +79,14 @@ PARTIAL_SHARE = 0.2
 #: A feature none of whose pixels the map copies is still completed where the map
 #: copies at least this share of its ring (the pixels within half its width around
 #: it) at offsets near one another: its surroundings were taken and it was skipped.
-SKIPPED_RING_SHARE = 0.3
+SKIPPED_RING_SHARE = 0.2
 #: Given the reliefs, a skipped feature is completed only where the exemplar's relief
 #: of it and its ring correlates at least this well with the query's at the place
 #: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7).
 SKIPPED_RELIEF_FIT = 0.9
+#: A skipped feature is not completed where this share of its place already stands
+#: out from its surroundings in the map: something is drawn there.
+SKIPPED_PLACE_SHOWN = 0.3
 #: Pixels of surroundings copied with the feature around it.
 RIM = 2
 #: The rim's largest mean colour difference (YCbCr) from what the map shows there.
@@ -552,10 +555,33 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
             ry, rx = np.nonzero(ring)
             ry, rx = ry + y0 - my, rx + x0 - mx
             keep = (ry >= 0) & (rx >= 0) & (ry < height) & (rx < width)
+            if _shows_something(exemplars, source, ty, tx, ry[keep], rx[keep]):
+                continue
             found.append(
                 _Instance(k, f, ry[keep], rx[keep], fy, fx, len(fy), span, 0, colour, (my, mx))
             )
     return found
+
+
+def _shows_something(exemplars, source, ys, xs, ring_ys, ring_xs) -> bool:
+    """Whether the map already shows something at (ys, xs) that stands out from what it
+    shows on the ring around: at least ``SKIPPED_PLACE_SHOWN`` of those pixels
+    ``FEATURE_CONTRAST`` or more from the ring's median colour (an eye the copy drew
+    from pixels that no feature detection found). Independent of the detection."""
+    here = source[ys, xs][None]
+    around = source[ring_ys, ring_xs][None]
+    if (here[..., 0] < 0).any() or len(ring_ys) == 0:
+        return True
+    shown = copy_through(exemplars, here)[0]
+    ground = np.median(copy_through(exemplars, around)[0], axis=0)
+    stands_out = np.sqrt(((shown - ground) ** 2).sum(-1)) >= FEATURE_CONTRAST
+    log.debug(
+        "skipped feature at y %d x %d: %.2f of its place stands out",
+        ys.mean(),
+        xs.mean(),
+        stands_out.mean(),
+    )
+    return bool(stands_out.mean() >= SKIPPED_PLACE_SHOWN)
 
 
 def _copies_feature(source, features, ys, xs) -> bool:

@@ -262,6 +262,29 @@ def test_a_skipped_feature_is_copied_where_its_surroundings_were():
     assert complete_features([exemplar], elsewhere, features, mask, [mask])[1] == 0
 
 
+def test_a_skipped_feature_is_not_pasted_over_what_the_map_already_shows_there():
+    # The lips' ring is copied, and their place is filled from a second exemplar whose
+    # dark mark there (an eye, say) its feature detection did not find: the map
+    # already shows something at that place, and the lips are not pasted over it.
+    lips = _textured_skin_with_lips()
+    other = _textured_skin_with_lips(seed=6)
+    other[38:42, 34:46] = 0.35  # a mark no detection labelled
+    mask = np.ones((80, 80), bool)
+    features = [small_features(lips, mask), (np.zeros((80, 80), np.int32), 0)]
+    source = _identity(80)
+    source[38:42, 34:46, 0] = 1  # the lips' place copies the mark
+    assert (copy_through([lips, other], source)[38:42, 34:46] == other[38:42, 34:46]).all()
+    completed_source, completed = complete_features(
+        [lips, other], source, features, mask, [mask, mask]
+    )
+    assert completed == 0
+    np.testing.assert_array_equal(completed_source, source)
+    # The same place filled from the second exemplar's plain skin: the lips are drawn.
+    plain = source.copy()
+    plain[38:42, 34:46, 1] += 25
+    assert complete_features([lips, other], plain, features, mask, [mask, mask])[1] == 1
+
+
 def test_a_skipped_feature_goes_where_its_relief_fits():
     # The query's bump under the lips lies 3 px lower and 2 px further right than
     # the exemplar's: given the reliefs, the lips follow it.
