@@ -434,7 +434,11 @@ def complete_features(
     # and the second, a whole one now beside it, is left.
     for item in sorted(instances, key=lambda item: (-item.covered / item.size, -item.size)):
         k, f, ys, xs, size, span = item.k, item.f, item.ys, item.xs, item.size, item.span
-        if len(ys) < PARTIAL_SHARE * size or item.covered >= COMPLETE_SHARE * size:
+        if item.covered >= COMPLETE_SHARE * size:
+            continue
+        # A cut copy of under PARTIAL_SHARE is a stray fragment. A skipped feature (its
+        # pixels are its ring's at the chosen offset) passed its own ring-share test.
+        if item.offset is None and len(ys) < PARTIAL_SHARE * size:
             continue
         if item.offset is not None:
             dy, dx = item.offset
