@@ -497,6 +497,15 @@ def complete_features(
     return source, completed
 
 
+def _feature_pixels(labels, box, f):
+    """Feature ``f``'s pixels in its exemplar (inside its ``box``), its width in
+    pixels, and half that (at least 1): how far its ring and its copies reach."""
+    fy, fx = np.nonzero(labels[box] == f)
+    fy, fx = fy + box[0].start, fx + box[1].start
+    span = int(max(np.ptp(fy), np.ptp(fx))) + 1
+    return fy, fx, span, max(span // 2, 1)
+
+
 def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None):
     """Features whose surroundings the map copies around one place, without them: an
     eye's ring of skin copied around a hole that other offsets filled with plain skin.
@@ -525,10 +534,7 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
         for f, box in enumerate(ndimage.find_objects(labels), start=1):
             if box is None:
                 continue
-            fy, fx = np.nonzero(labels[box] == f)
-            fy, fx = fy + box[0].start, fx + box[1].start
-            span = int(max(np.ptp(fy), np.ptp(fx))) + 1
-            reach = max(span // 2, 1)
+            fy, fx, span, reach = _feature_pixels(labels, box, f)
             y0, x0 = max(box[0].start - reach, 0), max(box[1].start - reach, 0)
             y1 = min(box[0].stop + reach, labels.shape[0])
             x1 = min(box[1].stop + reach, labels.shape[1])
@@ -670,10 +676,7 @@ def _instances(exemplars, source, features) -> list[_Instance]:
         copying, which = copying[order], which[order]
         starts = np.searchsorted(which, np.arange(n + 2))
         for f in np.unique(which):
-            fy, fx = np.nonzero(labels[boxes[f - 1]] == f)
-            fy, fx = fy + boxes[f - 1][0].start, fx + boxes[f - 1][1].start
-            span = int(max(np.ptp(fy), np.ptp(fx))) + 1
-            reach = max(span // 2, 1)
+            fy, fx, span, reach = _feature_pixels(labels, boxes[f - 1], f)
             cy, cx = np.divmod(copying[starts[f] : starts[f + 1]], width)
             # Work in the box around this feature's copies: a feature is small.
             y0, x0 = max(cy.min() - reach, 0), max(cx.min() - reach, 0)
