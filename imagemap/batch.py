@@ -196,6 +196,7 @@ ENGINE_MODULES = (
     "engine",
     "io",
     "mesh",
+    "palettes",
     "pyramid",
     "raycast",
     "render",

@@ -299,6 +299,7 @@ def seamless_copy(
     scale: float = 8.0,
     edge_support: float = 0.0,
     mask: np.ndarray | None = None,
+    edge_reference: np.ndarray | None = None,
 ) -> np.ndarray:
     """Copy exemplar pixels through a source map, blending the seams in the gradient domain.
 
@@ -390,7 +391,14 @@ def seamless_copy(
     del norms
     edges = None
     if strongest is not None:
-        edges = _supported_edges(groups, has, source, reference, edge_support, strongest)
+        edges = _supported_edges(
+            groups,
+            has,
+            source,
+            reference if edge_reference is None else edge_reference,
+            edge_support,
+            strongest,
+        )
     del strongest
     lam = 1.0 / scale**2
     # -L is diagonal in the DCT-II basis: eigenvalues (2 - 2cos(pi u / H)) + (2 - 2cos(pi v / W)).

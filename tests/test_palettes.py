@@ -1,0 +1,119 @@
+"""One palette per part: a part copied from two examples is shifted into one example's colours."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imagemap.palettes import even_palettes, palette_clusters
+
+SIZE = 64
+SKIN_A, SHIRT_A = (0.62, 0.45, 0.56), (0.30, 0.62, 0.40)
+SKIN_B, SHIRT_B = (0.50, 0.48, 0.57), (0.20, 0.30, 0.70)
+STRIPE = (0.15, 0.52, 0.50)
+
+
+def _object():
+    mask = np.zeros((SIZE, SIZE), bool)
+    mask[4:60, 12:52] = True
+    return mask
+
+
+def _example(skin, shirt, seed, neckline=32):
+    """Skin above the neckline, shirt below, with a little smooth grain."""
+    rng = np.random.default_rng(seed)
+    image = np.empty((SIZE, SIZE, 3), np.float32)
+    image[:neckline] = skin
+    image[neckline:] = shirt
+    yy, xx = np.mgrid[0:SIZE, 0:SIZE]
+    image += (0.01 * np.sin(xx / 5.0 + seed) * np.cos(yy / 7.0))[..., None]
+    image += rng.normal(0, 0.004, image.shape).astype(np.float32)
+    return image
+
+
+def _identity(example_of):
+    source = np.zeros((SIZE, SIZE, 3), np.int32)
+    source[..., 0] = example_of
+    source[..., 1], source[..., 2] = np.mgrid[0:SIZE, 0:SIZE]
+    return source
+
+
+def test_palette_clusters_find_the_parts_of_a_plain_example():
+    mask = _object()
+    labels, means, _ = palette_clusters(_example(SKIN_A, SHIRT_A, 0), mask)
+    # However the grain splits the colours, the skin and the shirt end up in one cluster each.
+    assert len(np.unique(labels[mask])) == 2
+    assert labels[10, 20] != labels[50, 20]
+    np.testing.assert_allclose(means[labels[10, 20]], SKIN_A, atol=0.01)
+
+
+def test_the_smaller_share_of_a_part_takes_the_larger_share_s_colours():
+    mask = _object()
+    a, b = _example(SKIN_A, SHIRT_A, 0), _example(SKIN_B, SHIRT_B, 1)
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[4:32, 40:52] = 1  # a strip of B's skin on the right of the face
+    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
+    assert shift is not None
+    from_b = example_of == 1
+    # B's skin is moved onto A's: the face is one skin.
+    np.testing.assert_allclose(shift[from_b].mean(0), np.subtract(SKIN_A, SKIN_B), atol=0.01)
+    # A's pixels keep their colours.
+    assert np.abs(shift[mask & ~from_b]).max() == 0
+
+
+def test_a_part_in_the_place_of_another_s_part_of_another_colour_is_not_matched():
+    # B wears its shirt on top and its skin below: B's shirt covers A's skin's place,
+    # but A's skin is not the nearest of A's colours to it. A shirt is not shifted into
+    # a skin tone, nor a skin into a shirt's colour.
+    mask = _object()
+    a = _example(SKIN_A, SHIRT_A, 0)
+    b = _example(SHIRT_B, SKIN_B, 1)
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[4:32, 40:52] = 1  # B's shirt among A's skin
+    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
+    assert shift is None or np.abs(shift).max() == 0
+
+
+def test_a_thin_pattern_is_not_recoloured():
+    # Dark one-pixel stripes in B's skin: they are not a part of their own (shifting one
+    # colour of a pattern and not the other would change its contrast), and far from the
+    # skin's colours, so they keep their colour while the skin around them is shifted.
+    mask = _object()
+    a = _example(SKIN_A, SHIRT_A, 0)
+    b = _example(SKIN_B, SHIRT_B, 1)
+    stripes = np.zeros((SIZE, SIZE), bool)
+    stripes[6:32:6, 36:52] = True
+    b[stripes] = STRIPE
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[4:32, 40:52] = 1
+    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
+    assert shift is not None
+    from_b = example_of == 1
+    assert np.abs(shift[stripes & from_b]).max() < 0.01
+    np.testing.assert_allclose(
+        shift[from_b & ~stripes].mean(0), np.subtract(SKIN_A, SKIN_B), atol=0.01
+    )
+
+
+def test_a_pattern_is_not_recoloured():
+    # B's upper half is a pattern of two-pixel stripes in two tones, both nearer to A's
+    # skin than to its shirt; shifting one tone into A's skin and not the other would
+    # change the pattern's contrast, so neither moves.
+    mask = _object()
+    a = _example(SKIN_A, SHIRT_A, 0)
+    b = _example(SKIN_B, SHIRT_B, 1)
+    b[0:32:4] = b[1:32:4] = (0.42, 0.46, 0.57)
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[4:32, 40:52] = 1
+    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
+    assert shift is None or np.abs(shift).max() == 0
+
+
+def test_one_example_changes_nothing_and_the_same_seed_gives_the_same_shift():
+    mask = _object()
+    a, b = _example(SKIN_A, SHIRT_A, 0), _example(SKIN_B, SHIRT_B, 1)
+    assert even_palettes([a], [mask], _identity(np.zeros((SIZE, SIZE), np.int32)), mask) is None
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[4:32, 40:52] = 1
+    first = even_palettes([a, b], [mask, mask], _identity(example_of), mask, seed=3)
+    again = even_palettes([a, b], [mask, mask], _identity(example_of), mask, seed=3)
+    np.testing.assert_array_equal(first, again)
