@@ -76,6 +76,7 @@ class BatchOptions:
     example_preference: float | None = None
     edge_support: float | None = None
     complete_features: bool | None = None
+    even_palettes: bool | None = None
     seed: int = 0
     views: tuple[View, ...] = (FRONT,)
     size: tuple[int, int] = DEFAULT_SIZE
@@ -105,6 +106,7 @@ class BatchOptions:
             "example_preference": self.example_preference,
             "edge_support": self.edge_support,
             "complete_features": self.complete_features,
+            "even_palettes": self.even_palettes,
         }
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap import completion
+from imagemap import completion, palettes
 from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import (
@@ -47,7 +47,6 @@ from imagemap.engine import (
     synthesize,
 )
 from imagemap.io import InputError, validate_depth
-from imagemap.palettes import even_palettes
 from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
 from imagemap.validate import check_colorize_arguments, check_float, check_int
 
@@ -726,6 +725,7 @@ def colorize(
     appearance_pyramid: str | None = None,
     edge_support: float | None = None,
     complete_features: bool | None = None,
+    even_palettes: bool | None = None,
     seed: int = 0,
     quiet: bool = True,
 ) -> ColorizeResult:
@@ -758,6 +758,9 @@ def colorize(
     complete_features : bool, optional
         Copy whole the examples' small features that the copy cut (overrides the
         preset; see :mod:`imagemap.completion`).
+    even_palettes : bool, optional
+        Shift a part copied from two examples (a face's skin) into one example's
+        colours (overrides the preset; see :mod:`imagemap.palettes`).
     seed : int
         The same seed gives the same bytes.
     quiet : bool
@@ -783,6 +786,7 @@ def colorize(
         appearance_pyramid=appearance_pyramid,
         edge_support=edge_support,
         complete_features=complete_features,
+        even_palettes=even_palettes,
     )
     depth = validate_depth(depth)
     if len(database) == 0:
@@ -870,7 +874,7 @@ def colorize(
             log.info("small features completed: %d", completed)
         shift = None
         if params.even_palettes:
-            shift = even_palettes(
+            shift = palettes.even_palettes(
                 exemplars, [example.mask for example in chosen], source, mask, seed=seed
             )
         # Outside the object the voted map is whatever the windows left there (zero where

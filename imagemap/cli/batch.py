@@ -70,9 +70,9 @@ def add_mesh_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_colorize_options(parser: argparse.ArgumentParser) -> None:
-    """--m, --backend, --example-preference, --edge-support, --no-feature-completion and
-    --seed: one definition for ``imagemap synthesize`` and ``imagemap batch``, so their
-    checks cannot drift apart."""
+    """--m, --backend, --example-preference, --edge-support, --no-feature-completion,
+    --even-palettes and --seed: one definition for ``imagemap synthesize`` and
+    ``imagemap batch``, so their checks cannot drift apart."""
     from imagemap.cli import BACKEND_NAMES
 
     parser.add_argument(
@@ -107,6 +107,16 @@ def add_colorize_options(parser: argparse.ArgumentParser) -> None:
         help="leave an example's eye, lips or brow as the copy cut it (by default a small "
         "feature copied only in part, say lips cut into a lozenge where two offsets meet, "
         "is copied whole)",
+    )
+    parser.add_argument(
+        "--even-palettes",
+        dest="even_palettes",
+        action="store_const",
+        const=True,
+        default=None,
+        help="where the map shows one part (a face's skin, a plain shirt) in two examples' "
+        "colours, shift the smaller share into the larger's: one skin tone from face to neck "
+        "(off by default; docs/presets.md)",
     )
     parser.add_argument(
         "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
@@ -194,6 +204,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         example_preference=args.example_preference,
         edge_support=args.edge_support,
         complete_features=args.complete_features,
+        even_palettes=args.even_palettes,
         quiet=args.quiet or not sys.stderr.isatty(),
     )
     seconds = time.perf_counter() - start
@@ -281,6 +292,7 @@ def run_batch_cli(args: argparse.Namespace) -> int:
         example_preference=args.example_preference,
         edge_support=args.edge_support,
         complete_features=args.complete_features,
+        even_palettes=args.even_palettes,
         seed=args.seed,
         views=views_of(args),
         size=args.size,

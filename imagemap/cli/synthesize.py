@@ -355,6 +355,7 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
             appearance_pyramid=args.appearance_pyramid,
             edge_support=args.edge_support,
             complete_features=args.complete_features,
+            even_palettes=args.even_palettes,
             seed=args.seed,
             quiet=batch or not interactive,
         )
