@@ -41,7 +41,7 @@ from scipy.cluster.vq import kmeans2
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import EDGE_FLOOR
 
-__all__ = ["even_palettes", "palette_clusters"]
+__all__ = ["even_palettes", "example_parts", "palette_clusters"]
 
 N_COLOURS = 6
 """Colour clusters per example before merging: room for a few large parts (skin, hair,
@@ -55,8 +55,9 @@ two parts (``imagemap.blend.EDGE_FLOOR``; smaller steps are shading and grain)."
 SAMPLE = 20000
 """Pixels the clusters are fitted on (all of them are then assigned)."""
 
-MIN_SHARE = 0.02
-"""A cluster under this share of its example's object is no part (a feature, a spot)."""
+MIN_SHARE = 0.05
+"""A connected piece of one colour under this share of its example's object is no part
+(a feature, a spot, one check of a shirt)."""
 
 SOLID_RADIUS = 0.03
 """A part is solid where it is farther than this share of the object's size (square root
@@ -69,6 +70,14 @@ generated busts at 200 x 150 the skins reach 0.61 to 0.89, a checked shirt's col
 
 MIN_OVERLAP = 0.5
 """Share of the smaller of two footprints the two must share to be one part."""
+
+REACH = 0.05
+"""A pixel this share of the object's size from a part (in its example) takes 0.6 of the
+part's shift, at twice the distance 0.14 (Gaussian fall-off)."""
+
+COLOUR_RATIO = 2.0
+"""Two parts in the same place are one part unless the other example has a part this
+many times nearer in colour."""
 
 _FAR = 1e3  # the mean of a cluster merged away: no pixel is near it
 _MIN_RADIUS = 0.01  # a flat colour's spread, for the weights (channels in [0, 1])
@@ -145,18 +154,48 @@ def _cluster_stats(colours, assigned, k):
     return means, radii, sizes
 
 
-def _solid(labels, mask, k):
-    """Per cluster: whether it is a solid part rather than a pattern (``MIN_SOLID``)."""
-    radius = SOLID_RADIUS * np.sqrt(mask.sum())
-    solid = np.zeros(k, bool)
-    for c in range(k):
-        own = labels == c
-        n = own.sum()
-        if n:
-            # Surviving an erosion by the radius: farther than it from the cluster's edge.
-            inner = ndimage.distance_transform_edt(own) > radius
-            solid[c] = inner.sum() >= MIN_SOLID * n
-    return solid
+def example_parts(exemplar, mask, *, seed=0):
+    """An example's large parts: solid connected pieces of one colour cluster.
+
+    A cluster alone is not a part: a checked shirt's middle tone can be the skin's
+    colour. A part is a connected piece of one cluster of at least ``MIN_SHARE`` of
+    the object, solid (``MIN_SOLID`` of it farther than ``SOLID_RADIUS`` x size from
+    its edge).
+
+    Returns
+    -------
+    parts : ndarray of int32, (H, W)
+        Part per pixel (-1: none).
+    means : ndarray of float32, (n_parts, C)
+    spreads : ndarray of float32, (n_parts,)
+        The 95th percentile of each part's distances to its mean.
+    """
+    labels, _, _ = palette_clusters(exemplar, mask, seed=seed)
+    colours = np.asarray(exemplar, dtype=np.float32)
+    size = np.sqrt(mask.sum())
+    parts = np.full(mask.shape, -1, np.int32)
+    means, spreads = [], []
+    for c in range(labels.max() + 1):
+        pieces, n_pieces = ndimage.label(labels == c)
+        if not n_pieces:
+            continue
+        areas = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
+        for piece in np.flatnonzero(areas >= MIN_SHARE * mask.sum()):
+            if piece == 0:
+                continue
+            own = pieces == piece
+            if (ndimage.distance_transform_edt(own)[own] > SOLID_RADIUS * size).mean() < MIN_SOLID:
+                continue
+            parts[own] = len(means)
+            values = colours[own]
+            means.append(values.mean(0))
+            spreads.append(np.quantile(np.sqrt(((values - means[-1]) ** 2).sum(1)), 0.95))
+    n_channels = colours.shape[2]
+    return (
+        parts,
+        np.array(means, np.float32).reshape(-1, n_channels),
+        np.array(spreads, np.float32),
+    )
 
 
 def even_palettes(exemplars, masks, source, mask, *, seed=0):
@@ -184,72 +223,72 @@ def even_palettes(exemplars, masks, source, mask, *, seed=0):
     n = len(exemplars)
     if n < 2:
         return None
-    clusters = [palette_clusters(e, m, seed=seed) for e, m in zip(exemplars, masks, strict=True)]
-    k = clusters[0][1].shape[0]
-    # Each example's clusters placed on the query by centroid alignment.
+    found = [example_parts(e, m, seed=seed) for e, m in zip(exemplars, masks, strict=True)]
+    # Each example's parts placed on the query by centroid alignment.
     footprints = []
-    for (labels, _, _), m in zip(clusters, masks, strict=True):
-        moved = translate((labels + 1).astype(np.float32), centroid_shift(m, mask), mask.shape)
+    for (parts, _, _), m in zip(found, masks, strict=True):
+        moved = translate((parts + 1).astype(np.float32), centroid_shift(m, mask), mask.shape)
         footprints.append(np.rint(moved).astype(np.int64)[mask] - 1)
-    # Which clusters the copy takes, and how much of each.
+    # Which parts the copy takes, and how much of each.
     inside = mask & (source[..., 0] >= 0)
     e = source[..., 0][inside]
     ys, xs = source[..., 1][inside], source[..., 2][inside]
-    used = np.full(len(e), -1, np.int64)
+    counts = []
     for a in range(n):
         here = e == a
-        used[here] = clusters[a][0][ys[here], xs[here]]
-    counts = np.zeros((n, k), np.int64)
-    ok = used >= 0
-    np.add.at(counts, (e[ok], used[ok]), 1)
-    is_part = [
-        (np.bincount(c[0][c[0] >= 0], minlength=k) >= MIN_SHARE * m.sum()) & _solid(c[0], m, k)
-        for c, m in zip(clusters, masks, strict=True)
-    ]
-    shifts = np.zeros((n, k, exemplars[0].shape[2]), np.float32)
+        used = found[a][0][ys[here], xs[here]]
+        counts.append(np.bincount(used[used >= 0], minlength=len(found[a][1])))
+    shifts = [np.zeros_like(means) for _, means, _ in found]
     for b in range(n):
-        for j in np.flatnonzero(is_part[b] & (counts[b] > 0)):
-            best, best_count = None, counts[b, j]  # a partner must be the larger share
+        for j in np.flatnonzero(counts[b]):
+            best, best_count = None, counts[b][j]  # a partner must be the larger share
             for a in range(n):
-                if a == b:
+                if a == b or not len(found[a][1]):
                     continue
+                k_a, k_b = len(found[a][1]), len(found[b][1])
                 both = (footprints[a] >= 0) & (footprints[b] >= 0)
-                table = np.zeros((k, k), np.int64)
+                table = np.zeros((k_a, k_b), np.int64)
                 np.add.at(table, (footprints[a][both], footprints[b][both]), 1)
-                i = int(table[:, j].argmax())
-                if not is_part[a][i] or int(table[i].argmax()) != j:
+                i = int(table[:, j].argmax())  # the same place: the largest overlap...
+                # ...and not much farther in colour than the other's nearest part (a
+                # shirt where the other example has skin is no skin; two skins can be as
+                # far apart in lightness as a skin and its hair).
+                gaps = np.sqrt(((found[a][1] - found[b][1][j]) ** 2).sum(1))
+                if gaps[i] > COLOUR_RATIO * gaps.min():
                     continue
-                # ...and the nearest in colour of the other's parts (a shirt where the
-                # other example has skin is no skin).
-                parts = np.flatnonzero(is_part[a])
-                gaps = ((clusters[a][1][parts] - clusters[b][1][j]) ** 2).sum(1)
-                if parts[gaps.argmin()] != i:
-                    continue
+                # ...covering at least half of the smaller of the two.
                 smaller = min((footprints[a] == i).sum(), (footprints[b] == j).sum())
-                if table[i, j] >= MIN_OVERLAP * smaller and counts[a, i] > best_count:
-                    best, best_count = (a, i), counts[a, i]
+                if table[i, j] >= MIN_OVERLAP * smaller and counts[a][i] > best_count:
+                    best, best_count = (a, i), counts[a][i]
             if best is not None:
                 a, i = best
-                shifts[b, j] = clusters[a][1][i] - clusters[b][1][j]
-    if not shifts.any():
+                shifts[b][j] = found[a][1][i] - found[b][1][j]
+    if not any(s.any() for s in shifts):
         return None
-    # Each copied pixel's shift is a smooth function of its colour: a pixel within a
-    # shifted cluster's spread takes its shift, one between two clusters a blend of
-    # theirs, and one far from every cluster (an eye, a lip) keeps its colour.
+    # A copied pixel takes a shifted part's shift as a smooth function of its colour and
+    # of its distance to the part in its example: full within the part's colour spread
+    # and inside or next to it (the blush and shading within a face), falling off in
+    # colour (an eye, the lips keep theirs) and in distance (a pixel of the same colour
+    # elsewhere, a check of a shirt, is not that part).
     values = np.zeros((len(e), exemplars[0].shape[2]), np.float32)
     for b in range(n):
-        if not shifts[b].any():
+        parts, means, spreads = found[b]
+        moved = np.flatnonzero(np.abs(shifts[b]).sum(1) > 0)
+        if not len(moved):
             continue
-        _, means, spreads = clusters[b]
         here = np.flatnonzero(e == b)
         colours = np.asarray(exemplars[b], dtype=np.float32)[ys[here], xs[here]]
-        weights = np.zeros((len(here), k), np.float32)
-        for c in np.flatnonzero(means[:, 0] < _FAR):
-            beyond = np.maximum(np.sqrt(((colours - means[c]) ** 2).sum(1)) - spreads[c], 0)
-            width = max(0.5 * float(spreads[c]), _MIN_RADIUS)
-            weights[:, c] = np.exp(-0.5 * (beyond / width) ** 2)
+        reach = REACH * np.sqrt(masks[b].sum())
+        weights = np.zeros((len(here), len(moved)), np.float32)
+        for column, j in enumerate(moved):
+            beyond = np.maximum(np.sqrt(((colours - means[j]) ** 2).sum(1)) - spreads[j], 0)
+            width = max(0.5 * float(spreads[j]), _MIN_RADIUS)
+            distance = ndimage.distance_transform_edt(parts != j)[ys[here], xs[here]]
+            weights[:, column] = np.exp(
+                -0.5 * (beyond / width) ** 2 - 0.5 * (distance / reach) ** 2
+            )
         weights /= np.maximum(weights.sum(1, keepdims=True), 1.0)
-        values[here] = weights @ shifts[b]
+        values[here] = weights @ shifts[b][moved]
     shift = np.zeros(source.shape[:2] + exemplars[0].shape[2:], np.float32)
     shift[inside] = values
     return shift

@@ -10,6 +10,8 @@ SIZE = 64
 SKIN_A, SHIRT_A = (0.62, 0.45, 0.56), (0.30, 0.62, 0.40)
 SKIN_B, SHIRT_B = (0.50, 0.48, 0.57), (0.20, 0.30, 0.70)
 STRIPE = (0.15, 0.52, 0.50)
+SHIRT_NEAR_A = (0.26, 0.58, 0.44)  # a shirt of nearly A's colour
+HAIR = (0.15, 0.50, 0.55)
 
 
 def _object():
@@ -62,11 +64,11 @@ def test_the_smaller_share_of_a_part_takes_the_larger_share_s_colours():
 
 def test_a_part_in_the_place_of_another_s_part_of_another_colour_is_not_matched():
     # B wears its shirt on top and its skin below: B's shirt covers A's skin's place,
-    # but A's skin is not the nearest of A's colours to it. A shirt is not shifted into
-    # a skin tone, nor a skin into a shirt's colour.
+    # but A's shirt is far nearer in colour to it. A shirt is not shifted into a skin
+    # tone, nor a skin into a shirt's colour.
     mask = _object()
     a = _example(SKIN_A, SHIRT_A, 0)
-    b = _example(SHIRT_B, SKIN_B, 1)
+    b = _example(SHIRT_NEAR_A, SKIN_B, 1)
     example_of = np.zeros((SIZE, SIZE), np.int32)
     example_of[4:32, 40:52] = 1  # B's shirt among A's skin
     shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
@@ -96,14 +98,31 @@ def test_a_thin_pattern_is_not_recoloured():
 
 def test_a_pattern_is_not_recoloured():
     # B's upper half is a pattern of two-pixel stripes in two tones, both nearer to A's
-    # skin than to its shirt; shifting one tone into A's skin and not the other would
-    # change the pattern's contrast, so neither moves.
+    # skin than to its shirt, the darker joined into one piece as large as a part;
+    # shifting one tone into A's skin and not the other would change the pattern's
+    # contrast, so neither moves: a thin piece is no part.
     mask = _object()
     a = _example(SKIN_A, SHIRT_A, 0)
     b = _example(SKIN_B, SHIRT_B, 1)
     b[0:32:4] = b[1:32:4] = (0.42, 0.46, 0.57)
+    b[4:32, 12:14] = (0.42, 0.46, 0.57)  # the stripes joined into one large piece: a comb
     example_of = np.zeros((SIZE, SIZE), np.int32)
     example_of[4:32, 40:52] = 1
+    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
+    assert shift is None or np.abs(shift).max() == 0
+
+
+def test_a_part_that_mostly_lies_elsewhere_is_not_matched():
+    # A: hair, skin, shirt from top to bottom. B's skin is a narrow strip from top to
+    # bottom: under half of it lies where A has skin, so it is not the face's part, though
+    # A's skin is where it overlaps most and nearest in colour.
+    mask = _object()
+    a = _example(SKIN_A, SHIRT_A, 0, neckline=42)
+    a[:18] = HAIR
+    b = _example(SHIRT_B, SHIRT_B, 1)
+    b[:, 12:20] = SKIN_B
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[18:42, 12:20] = 1
     shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
     assert shift is None or np.abs(shift).max() == 0
 
