@@ -120,6 +120,19 @@ def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, a
     assert seen == [expected]
 
 
+def _count_calls(monkeypatch, module, name):
+    """Replace ``module.name`` with a wrapper that records each call; return the record."""
+    calls = []
+    original = getattr(module, name)
+
+    def recording(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, recording)
+    return calls
+
+
 @pytest.mark.parametrize("command", ["synthesize", "batch"])
 @pytest.mark.parametrize("argv, expected", [([], 1), (["--no-feature-completion"], 0)])
 def test_feature_completion_can_be_switched_off(
@@ -127,14 +140,7 @@ def test_feature_completion_can_be_switched_off(
 ):
     import imagemap.completion
 
-    calls = []
-    original = imagemap.completion.complete_features
-
-    def recording(*args, **kwargs):
-        calls.append(1)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(imagemap.completion, "complete_features", recording)
+    calls = _count_calls(monkeypatch, imagemap.completion, "complete_features")
     assert _run_one(command, files, tmp_path, argv) == 0
     assert len(calls) == expected
 
@@ -146,14 +152,7 @@ def test_even_palettes_is_switched_on_by_its_option(
 ):
     import imagemap.palettes
 
-    calls = []
-    original = imagemap.palettes.even_palettes
-
-    def recording(*args, **kwargs):
-        calls.append(1)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(imagemap.palettes, "even_palettes", recording)
+    calls = _count_calls(monkeypatch, imagemap.palettes, "even_palettes")
     assert _run_one(command, files, tmp_path, argv) == 0
     assert len(calls) == expected
 

@@ -39,6 +39,18 @@ def _identity(example_of):
     return source
 
 
+def _shift_with_b_in(a, b, rows, cols):
+    """even_palettes of a copy from A with a box of B (rows, cols) on the same object."""
+    mask = _object()
+    example_of = np.zeros((SIZE, SIZE), np.int32)
+    example_of[rows, cols] = 1
+    return even_palettes([a, b], [mask, mask], _identity(example_of), mask)
+
+
+def _unshifted(shift):
+    return shift is None or np.abs(shift).max() == 0
+
+
 def test_palette_clusters_find_the_parts_of_a_plain_example():
     mask = _object()
     labels, means, _ = palette_clusters(_example(SKIN_A, SHIRT_A, 0), mask)
@@ -66,13 +78,10 @@ def test_a_part_in_the_place_of_another_s_part_of_another_colour_is_not_matched(
     # B wears its shirt on top and its skin below: B's shirt covers A's skin's place,
     # but A's shirt is far nearer in colour to it. A shirt is not shifted into a skin
     # tone, nor a skin into a shirt's colour.
-    mask = _object()
     a = _example(SKIN_A, SHIRT_A, 0)
     b = _example(SHIRT_NEAR_A, SKIN_B, 1)
-    example_of = np.zeros((SIZE, SIZE), np.int32)
-    example_of[4:32, 40:52] = 1  # B's shirt among A's skin
-    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
-    assert shift is None or np.abs(shift).max() == 0
+    # B's shirt among A's skin
+    assert _unshifted(_shift_with_b_in(a, b, slice(4, 32), slice(40, 52)))
 
 
 def test_a_thin_pattern_is_not_recoloured():
@@ -101,30 +110,22 @@ def test_a_pattern_is_not_recoloured():
     # skin than to its shirt, the darker joined into one piece as large as a part;
     # shifting one tone into A's skin and not the other would change the pattern's
     # contrast, so neither moves: a thin piece is no part.
-    mask = _object()
     a = _example(SKIN_A, SHIRT_A, 0)
     b = _example(SKIN_B, SHIRT_B, 1)
     b[0:32:4] = b[1:32:4] = (0.42, 0.46, 0.57)
     b[4:32, 12:14] = (0.42, 0.46, 0.57)  # the stripes joined into one large piece: a comb
-    example_of = np.zeros((SIZE, SIZE), np.int32)
-    example_of[4:32, 40:52] = 1
-    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
-    assert shift is None or np.abs(shift).max() == 0
+    assert _unshifted(_shift_with_b_in(a, b, slice(4, 32), slice(40, 52)))
 
 
 def test_a_part_that_mostly_lies_elsewhere_is_not_matched():
     # A: hair, skin, shirt from top to bottom. B's skin is a narrow strip from top to
     # bottom: under half of it lies where A has skin, so it is not the face's part, though
     # A's skin is where it overlaps most and nearest in colour.
-    mask = _object()
     a = _example(SKIN_A, SHIRT_A, 0, neckline=42)
     a[:18] = HAIR
     b = _example(SHIRT_B, SHIRT_B, 1)
     b[:, 12:20] = SKIN_B
-    example_of = np.zeros((SIZE, SIZE), np.int32)
-    example_of[18:42, 12:20] = 1
-    shift = even_palettes([a, b], [mask, mask], _identity(example_of), mask)
-    assert shift is None or np.abs(shift).max() == 0
+    assert _unshifted(_shift_with_b_in(a, b, slice(18, 42), slice(12, 20)))
 
 
 def test_one_example_changes_nothing_and_the_same_seed_gives_the_same_shift():
