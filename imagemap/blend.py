@@ -345,6 +345,10 @@ def seamless_copy(
         The object. Across its outline the target difference is the reference's
         own step: the outline is not a seam to blend across, so colours copied
         beside the object (its margin) do not bleed into it.
+    edge_reference : ndarray, (H, W, C), optional
+        The map the ``edge_support`` test reads instead of ``reference`` (when the
+        reference was recoloured, e.g. by :func:`imagemap.palettes.even_palettes`,
+        an edge is still judged on the colours as voted). Default: ``reference``.
 
     Returns
     -------

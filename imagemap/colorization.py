@@ -327,7 +327,6 @@ class ColorizeParams:
 
 #: Class presets after the paper's Table 1 (m and patch widths as published;
 #: weights restated per band standard deviation, see ``docs/presets.md``).
-
 PRESETS: dict[str, ColorizeParams] = {
     "humans": ColorizeParams(m=1, patch_sizes=(7, 9, 9), position_weight=3.0),
     "busts": ColorizeParams(m=2, patch_sizes=(7, 11, 9), position_weight=1.0),
@@ -872,11 +871,6 @@ def colorize(
             )
             del features  # label maps: not held through the blend, the finish's peak
             log.info("small features completed: %d", completed)
-        shift = None
-        if params.even_palettes:
-            shift = palettes.even_palettes(
-                exemplars, [example.mask for example in chosen], source, mask, seed=seed
-            )
         # Outside the object the voted map is whatever the windows left there (zero where
         # no window reached: black in YCbCr terms is green); the blend must not pull the
         # object's edge towards it, so the reference there is the copy itself.
@@ -886,11 +880,15 @@ def colorize(
             if outside.any():
                 ycbcr[rows][outside] = copy_through(exemplars, source[rows][outside][None])[0]
         edge_reference = None
-        if shift is not None:
-            # The edges kept are judged on the colours as copied: a part shifted next to
-            # one that is not must not lose its edge.
-            edge_reference = ycbcr.copy()
-            ycbcr += shift
+        if params.even_palettes:
+            shift = palettes.even_palettes(
+                exemplars, [example.mask for example in chosen], source, mask, seed=seed
+            )
+            if shift is not None:
+                # The edges kept are judged on the colours as copied: a part shifted next
+                # to one that is not must not lose its edge.
+                edge_reference = ycbcr.copy()
+                ycbcr += shift
             del shift
         size = float(np.sqrt(mask.sum()))
         scale = max(params.blend_scale * size, 1.0)

@@ -3,13 +3,14 @@
 A map copied from two examples often shows one part in two palettes where the examples
 meet: a face in one skin tone above a neck in another. The gradient-domain blend
 (:func:`imagemap.blend.seamless_copy`) spreads the step between them over a few pixels,
-but the two tones stay. Here each example's colours are clustered; a cluster of one
-example and a cluster of another are *the same part* when they cover the same place of
-the object (their footprints, centroid-aligned on the query, overlap, each the other's
-best match); and where the copy shows both, the pixels of the smaller share are shifted
-by the difference of the two clusters' mean colours. Only solid parts are shifted (skin,
-a plain garment), not the colours of a pattern (stripes, spots), whose contrast a shift of
-one colour would change, nor colours far from every part (an eye, the lips).
+but the two tones stay. Here each example's colours are clustered, and its *parts* are
+the large, solid connected pieces of one cluster (skin, a plain garment; not the colours
+of a pattern, whose contrast a shift of one colour would change). A part of one example
+and a part of another are *the same part* when the other's is the one its footprint
+(centroid-aligned on the query) overlaps most, over half of the smaller footprint, and
+no part of the other example is much nearer in colour. Where the copy shows both, the
+pixels of the smaller share are shifted by the difference of the two parts' mean
+colours; colours far from the part (an eye, the lips) keep theirs.
 
 The shifts move the blend's reference, not the copied pixels: the copy's detail (its
 gradients) is kept, and only the colour the blend pulls each region towards changes.
@@ -102,8 +103,6 @@ def palette_clusters(exemplar, mask, *, n_colours=N_COLOURS, seed=0):
         Cluster per pixel (-1 outside the object).
     means : ndarray of float32, (n_colours, C)
         Each cluster's mean colour (far away for a cluster merged into another).
-    spreads : ndarray of float32, (n_colours,)
-        The 95th percentile of each cluster's distances to its mean (0 when merged away).
     """
     colours = np.asarray(exemplar, dtype=np.float32)[mask]
     rng = np.random.default_rng(seed)
@@ -127,10 +126,7 @@ def palette_clusters(exemplar, mask, *, n_colours=N_COLOURS, seed=0):
         assigned[assigned == gone] = keep
     labels = np.full(mask.shape, -1, np.int32)
     labels[mask] = assigned
-    spreads = np.zeros(n_colours, np.float32)
-    for c in np.flatnonzero(sizes):
-        spreads[c] = np.quantile(np.sqrt(((colours[assigned == c] - means[c]) ** 2).sum(1)), 0.95)
-    return labels, means, spreads
+    return labels, means
 
 
 def _nearest(colours, centres):
@@ -170,7 +166,7 @@ def example_parts(exemplar, mask, *, seed=0):
     spreads : ndarray of float32, (n_parts,)
         The 95th percentile of each part's distances to its mean.
     """
-    labels, _, _ = palette_clusters(exemplar, mask, seed=seed)
+    labels, _ = palette_clusters(exemplar, mask, seed=seed)
     colours = np.asarray(exemplar, dtype=np.float32)
     size = np.sqrt(mask.sum())
     parts = np.full(mask.shape, -1, np.int32)
@@ -180,14 +176,21 @@ def example_parts(exemplar, mask, *, seed=0):
         if not n_pieces:
             continue
         areas = np.bincount(pieces.ravel(), minlength=n_pieces + 1)
+        boxes = ndimage.find_objects(pieces)
         for piece in np.flatnonzero(areas >= MIN_SHARE * mask.sum()):
             if piece == 0:
                 continue
-            own = pieces == piece
+            # The piece's box and a pixel around it (all not the piece): the distance to
+            # its edge is the same as over the whole image.
+            box = tuple(
+                slice(max(s.start - 1, 0), min(s.stop + 1, n))
+                for s, n in zip(boxes[piece - 1], mask.shape, strict=True)
+            )
+            own = pieces[box] == piece
             if (ndimage.distance_transform_edt(own)[own] > SOLID_RADIUS * size).mean() < MIN_SOLID:
                 continue
-            parts[own] = len(means)
-            values = colours[own]
+            parts[box][own] = len(means)
+            values = colours[box][own]
             means.append(values.mean(0))
             spreads.append(np.quantile(np.sqrt(((values - means[-1]) ** 2).sum(1)), 0.95))
     n_channels = colours.shape[2]
@@ -238,17 +241,25 @@ def even_palettes(exemplars, masks, source, mask, *, seed=0):
         here = e == a
         used = found[a][0][ys[here], xs[here]]
         counts.append(np.bincount(used[used >= 0], minlength=len(found[a][1])))
+    areas = [
+        np.bincount(f[f >= 0], minlength=len(p[1])) for f, p in zip(footprints, found, strict=True)
+    ]
+    tables = {}  # (a, b): pixels of the query under a's part i and b's part j
+    for a in range(n):
+        for b in range(n):
+            if a != b and len(found[a][1]) and len(found[b][1]):
+                both = (footprints[a] >= 0) & (footprints[b] >= 0)
+                table = np.zeros((len(found[a][1]), len(found[b][1])), np.int64)
+                np.add.at(table, (footprints[a][both], footprints[b][both]), 1)
+                tables[a, b] = table
     shifts = [np.zeros_like(means) for _, means, _ in found]
     for b in range(n):
         for j in np.flatnonzero(counts[b]):
             best, best_count = None, counts[b][j]  # a partner must be the larger share
             for a in range(n):
-                if a == b or not len(found[a][1]):
+                if (a, b) not in tables:
                     continue
-                k_a, k_b = len(found[a][1]), len(found[b][1])
-                both = (footprints[a] >= 0) & (footprints[b] >= 0)
-                table = np.zeros((k_a, k_b), np.int64)
-                np.add.at(table, (footprints[a][both], footprints[b][both]), 1)
+                table = tables[a, b]
                 i = int(table[:, j].argmax())  # the same place: the largest overlap...
                 # ...and not much farther in colour than the other's nearest part (a
                 # shirt where the other example has skin is no skin; two skins can be as
@@ -257,7 +268,7 @@ def even_palettes(exemplars, masks, source, mask, *, seed=0):
                 if gaps[i] > COLOUR_RATIO * gaps.min():
                     continue
                 # ...covering at least half of the smaller of the two.
-                smaller = min((footprints[a] == i).sum(), (footprints[b] == j).sum())
+                smaller = min(areas[a][i], areas[b][j])
                 if table[i, j] >= MIN_OVERLAP * smaller and counts[a][i] > best_count:
                     best, best_count = (a, i), counts[a][i]
             if best is not None:

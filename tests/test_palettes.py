@@ -53,7 +53,7 @@ def _unshifted(shift):
 
 def test_palette_clusters_find_the_parts_of_a_plain_example():
     mask = _object()
-    labels, means, _ = palette_clusters(_example(SKIN_A, SHIRT_A, 0), mask)
+    labels, means = palette_clusters(_example(SKIN_A, SHIRT_A, 0), mask)
     # However the grain splits the colours, the skin and the shirt end up in one cluster each.
     assert len(np.unique(labels[mask])) == 2
     assert labels[10, 20] != labels[50, 20]
