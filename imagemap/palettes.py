@@ -37,7 +37,6 @@ import warnings
 
 import numpy as np
 from scipy import ndimage
-from scipy.cluster.vq import kmeans2
 
 from imagemap.align import centroid_shift, translate
 from imagemap.blend import EDGE_FLOOR
@@ -104,6 +103,8 @@ def palette_clusters(exemplar, mask, *, n_colours=N_COLOURS, seed=0):
     means : ndarray of float32, (n_colours, C)
         Each cluster's mean colour (far away for a cluster merged into another).
     """
+    from scipy.cluster.vq import kmeans2  # only with the option on: not on every start
+
     colours = np.asarray(exemplar, dtype=np.float32)[mask]
     rng = np.random.default_rng(seed)
     sample = colours[rng.choice(len(colours), min(len(colours), SAMPLE), replace=False)]

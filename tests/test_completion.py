@@ -325,3 +325,16 @@ def test_relief_registration_finds_a_moved_relief_with_full_correlation():
     )
     assert (dy, dx) == (3, -2)
     assert fit > 0.999
+
+
+def test_fft_correlation_matches_scipy_signal():
+    from scipy import signal
+
+    from imagemap.completion import _correlate_valid
+
+    rng = np.random.default_rng(3)
+    shapes = (((40, 50), (9, 13)), ((31, 31), (31, 31)), ((60, 20), (5, 20)))
+    for image_shape, kernel_shape in shapes:
+        image, kernel = rng.standard_normal(image_shape), rng.standard_normal(kernel_shape)
+        expected = signal.correlate(image, kernel, mode="valid")
+        np.testing.assert_allclose(_correlate_valid(image, kernel), expected, atol=1e-10)
