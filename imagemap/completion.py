@@ -91,6 +91,17 @@ SKIPPED_RELIEF_FIT = 0.9
 #: A skipped feature is not completed where this share of its place already stands
 #: out from its surroundings in the map: something is drawn there.
 SKIPPED_PLACE_SHOWN = 0.3
+#: Two copies of one feature at offsets this share of its width apart (and more than
+#: ``DOUBLE_TOLERANCE`` px) that copy some of the same pixels draw it twice (an eye
+#: with two pupils, seen at 512x512 on an ellipsoid fish with a large eye).
+DOUBLE_SHIFT = 0.25
+#: Offsets within this many pixels of the main copy's belong to it.
+DOUBLE_TOLERANCE = 2
+#: A double is redrawn from its main copy only when that copy holds at least this
+#: share of the feature (and under ``COMPLETE_SHARE``: a whole copy with a few
+#: displaced pixels is a ragged edge, left to the seams), and the copies overlap in
+#: at least ``PARTIAL_SHARE`` of it.
+DOUBLE_MAIN = 0.5
 #: Pixels of surroundings copied with the feature around it.
 RIM = 2
 #: The rim's largest mean colour difference (YCbCr) from what the map shows there.
@@ -414,6 +425,7 @@ def complete_features(
     height, width = source.shape[:2]
     inside = ndimage.binary_erosion(object_mask, iterations=1)
     rim = ndimage.generate_binary_structure(2, 1)
+    source = _undouble(exemplars, source, features, object_mask, exemplar_masks)
     instances = _instances(exemplars, source, features)
     instances += _skipped_instances(source, features, exemplars, exemplar_masks, relief)
     # Where the map already shows a whole feature, and its colour: a partial copy
@@ -495,6 +507,61 @@ def complete_features(
         completed += 1
         log.debug("feature %d of exemplar %d completed at y %d x %d", f, k, ty.mean(), tx.mean())
     return source, completed
+
+
+def _undouble(exemplars, source, features, object_mask, exemplar_masks) -> np.ndarray:
+    """A source map in which no feature is drawn twice over itself.
+
+    Where the map copies one feature at two offsets so far apart that the copies
+    overlap in the feature's own pixels (the lower half of an eye again below the
+    eye: two pupils), and no copy is whole, the displaced copy's pixels, and those
+    around them copied at its offset within a quarter of the feature's width, take
+    the main copy's offset (the one most of the feature's pixels came from). The
+    main copy is then completed like any cut feature."""
+    source = np.array(source, dtype=np.int32, copy=True)
+    height, width = source.shape[:2]
+    for item in _instances(exemplars, source, features):
+        k, ys, xs = item.k, item.ys, item.xs
+        offsets = np.stack([source[ys, xs, 1] - ys, source[ys, xs, 2] - xs], axis=1)
+        distinct, counts = np.unique(offsets, axis=0, return_counts=True)
+        main = distinct[np.argmax(counts)]
+        threshold = max(DOUBLE_TOLERANCE + 1, item.span * DOUBLE_SHIFT)
+        far = np.abs(offsets - main).max(1) >= threshold
+        if not far.any():
+            continue
+        columns = features[k][0].shape[1]
+        covers = [
+            np.unique(source[ys[part], xs[part], 1] * columns + source[ys[part], xs[part], 2])
+            for part in (~far, far)
+        ]
+        doubled = np.intersect1d(*covers, assume_unique=True).size
+        if not DOUBLE_MAIN * item.size <= len(covers[0]) < COMPLETE_SHARE * item.size:
+            continue
+        if doubled < PARTIAL_SHARE * item.size:
+            continue  # the displaced copy fills in what the main one lacks: no double
+        # The displaced copy and what it brought along: pixels near it at its offsets.
+        reach = max(RIM, item.span // 4)
+        y0, x0 = max(ys.min() - reach, 0), max(xs.min() - reach, 0)
+        y1, x1 = min(ys.max() + reach + 1, height), min(xs.max() + reach + 1, width)
+        box = source[y0:y1, x0:x1]
+        by, bx = np.mgrid[y0:y1, x0:x1]
+        box_offsets = np.stack([box[..., 1] - by, box[..., 2] - bx], axis=-1)
+        along = np.zeros(box.shape[:2], bool)
+        for offset in distinct[np.abs(distinct - main).max(1) >= threshold]:
+            along |= np.abs(box_offsets - offset).max(-1) <= DOUBLE_TOLERANCE
+        along &= box[..., 0] == k
+        seeds = np.zeros(box.shape[:2], bool)
+        seeds[ys[far] - y0, xs[far] - x0] = True
+        along &= ndimage.binary_dilation(seeds, iterations=reach)
+        along &= object_mask[y0:y1, x0:x1]
+        ry, rx = np.nonzero(along)
+        ry, rx = ry + y0, rx + x0
+        sy, sx = ry + main[0], rx + main[1]
+        if not _within(sy, sx, exemplar_masks[k].shape) or not exemplar_masks[k][sy, sx].all():
+            continue
+        source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
+        log.debug("feature %d of exemplar %d drawn twice: %d pixels recopied", item.f, k, len(ry))
+    return source
 
 
 def _feature_pixels(labels, box, f):

@@ -338,3 +338,36 @@ def test_fft_correlation_matches_scipy_signal():
         image, kernel = rng.standard_normal(image_shape), rng.standard_normal(kernel_shape)
         expected = signal.correlate(image, kernel, mode="valid")
         np.testing.assert_allclose(_correlate_valid(image, kernel), expected, atol=1e-10)
+
+
+def _exemplar_with_eye(size=80, radius=6):
+    """Flat skin with a dark disc (an eye) of the given radius at (40, 40)."""
+    exemplar = _skin(size)
+    yy, xx = np.mgrid[0:size, 0:size]
+    exemplar[(yy - 40) ** 2 + (xx - 40) ** 2 <= radius**2] = 0.1
+    return exemplar
+
+
+def test_a_feature_copied_twice_over_itself_is_drawn_once():
+    # The map copies the eye (rows 34-46) in place down to row 41, then rows 42-47 from
+    # 5 rows higher up: rows 37-42 of the eye again below its upper part, an "8".
+    # Neither copy is whole.
+    exemplar = _exemplar_with_eye()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    assert features[0][1] == 1
+    eye = int((exemplar < 0.3).sum())
+    mask = np.ones((80, 80), bool)
+    source = _identity(80)
+    source[42:48, :, 1] -= 5
+    doubled = copy_through([exemplar], source)
+    assert (doubled < 0.3).sum() > eye  # more eye than the eye has
+    result_source, _ = complete_features([exemplar], source, features, mask, [mask])
+    result = copy_through([exemplar], result_source)
+    np.testing.assert_array_equal(result, exemplar)  # one eye, in its place
+    # Displaced by less than a quarter of the eye's width (13 px): a ragged edge, not
+    # a double, left to the seams.
+    ragged = _identity(80)
+    ragged[42:48, :, 1] -= 2
+    assert 2 < completion.DOUBLE_SHIFT * 13
+    kept, _ = complete_features([exemplar], ragged, features, mask, [mask])
+    np.testing.assert_array_equal(kept[42:48], ragged[42:48])
