@@ -425,8 +425,9 @@ def complete_features(
     height, width = source.shape[:2]
     inside = ndimage.binary_erosion(object_mask, iterations=1)
     rim = ndimage.generate_binary_structure(2, 1)
-    source = _undouble(exemplars, source, features, object_mask, exemplar_masks)
     instances = _instances(exemplars, source, features)
+    if _undouble(source, instances, features, object_mask, exemplar_masks):
+        instances = _instances(exemplars, source, features)  # the recopied pixels moved
     instances += _skipped_instances(source, features, exemplars, exemplar_masks, relief)
     # Where the map already shows a whole feature, and its colour: a partial copy
     # beside a whole feature of the same colour (a piece of a second brow above the
@@ -509,18 +510,20 @@ def complete_features(
     return source, completed
 
 
-def _undouble(exemplars, source, features, object_mask, exemplar_masks) -> np.ndarray:
-    """A source map in which no feature is drawn twice over itself.
+def _undouble(source, instances, features, object_mask, exemplar_masks) -> int:
+    """Recopy, in ``source`` (in place), every feature drawn twice over itself; return
+    how many were.
 
     Where the map copies one feature at two offsets so far apart that the copies
     overlap in the feature's own pixels (the lower half of an eye again below the
     eye: two pupils), and no copy is whole, the displaced copy's pixels, and those
     around them copied at its offset within a quarter of the feature's width, take
     the main copy's offset (the one most of the feature's pixels came from). The
-    main copy is then completed like any cut feature."""
-    source = np.array(source, dtype=np.int32, copy=True)
+    main copy is then completed like any cut feature. ``instances``: the map's
+    :func:`_instances`."""
     height, width = source.shape[:2]
-    for item in _instances(exemplars, source, features):
+    recopied = 0
+    for item in instances:
         k, ys, xs = item.k, item.ys, item.xs
         offsets = np.stack([source[ys, xs, 1] - ys, source[ys, xs, 2] - xs], axis=1)
         distinct, counts = np.unique(offsets, axis=0, return_counts=True)
@@ -560,8 +563,9 @@ def _undouble(exemplars, source, features, object_mask, exemplar_masks) -> np.nd
         if not _within(sy, sx, exemplar_masks[k].shape) or not exemplar_masks[k][sy, sx].all():
             continue
         source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
+        recopied += 1
         log.debug("feature %d of exemplar %d drawn twice: %d pixels recopied", item.f, k, len(ry))
-    return source
+    return recopied
 
 
 def _feature_pixels(labels, box, f):
