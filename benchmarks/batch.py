@@ -42,8 +42,8 @@ def _throughput(inputs, db, options, **kwargs) -> dict:
 def _per_object_costs(root: Path) -> dict:
     import numpy as np
 
-    from imagemap.colorization import example_mappings, pyramid_levels
     from imagemap.database import Database
+    from imagemap.depth.pipeline import example_mappings, pyramid_levels
     from imagemap.io import read_depth
 
     def load_all(database):

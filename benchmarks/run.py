@@ -500,9 +500,9 @@ _FLOOR_CHILD = (
     "import re, sys, time\n"
     "start = time.perf_counter()\n"
     "import numpy as np\n"
-    "import imagemap.cli, imagemap.colorization\n"
+    "import imagemap.cli, imagemap.depth.pipeline\n"
     "imported = time.perf_counter()\n"
-    "from imagemap import _kernels\n"
+    "from imagemap.core import kernels as _kernels\n"
     "z = np.zeros((2, 3), np.float32)\n"
     "_kernels.feature_distances(z, z, np.zeros(2, np.int64), 3)\n"
     "loaded = time.perf_counter()\n"
@@ -664,7 +664,7 @@ def run_scaling(data_dir: Path, settings: Settings, trace: bool) -> list[dict]:
 def run_quality(data_dir: Path, settings: Settings, backend: str) -> dict:
     """Leave-one-out mean CIEDE2000 of the full method on a small fish class."""
     from imagemap import Database
-    from imagemap.colorization import PRESETS
+    from imagemap.depth.pipeline import PRESETS
     from imagemap.evaluation import leave_one_out, summarize
 
     class_dir = fish_class(data_dir, settings.quality_size, count=settings.quality_count, holdout=0)

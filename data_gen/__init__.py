@@ -1,7 +1,7 @@
 """Procedural example classes (fish, busts, humans) rendered with trimesh ray casting.
 
 Each instance is a triangle mesh built from randomized shape parameters, coloured by
-procedural functions of its surface (:mod:`imagemap.procedural`), and rendered by an
+procedural functions of its surface (:mod:`data_gen.procedural`), and rendered by an
 orthographic ray cast into a depth map (nearer = larger, background 0), an unlit
 image-map and a part-label map, in the database format :mod:`imagemap.database` reads.
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from data_gen.core import ObjectClass, SurfaceHits, hsv, mix, smoothstep
 from data_gen.geometry import assemble, ellipsoid, limb, sphere_component
-from imagemap.procedural import fbm, marble, stripes
+from data_gen.procedural import fbm, marble, stripes
 
 __all__ = ["BUSTS"]
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from data_gen.core import ObjectClass, SurfaceHits, hsv, mix, smoothstep
 from data_gen.geometry import Component, _outward, assemble, ellipsoid, sphere_component
-from imagemap.procedural import fbm, marble, spots, stripes
+from data_gen.procedural import fbm, marble, spots, stripes
 
 __all__ = ["FISH"]
 

@@ -14,7 +14,7 @@ import trimesh
 
 from data_gen.core import ObjectClass, SurfaceHits, hsv, mix
 from data_gen.geometry import assemble, ellipsoid, limb
-from imagemap.procedural import fbm, spots, stripes
+from data_gen.procedural import fbm, spots, stripes
 
 __all__ = ["HUMANS"]
 

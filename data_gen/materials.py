@@ -60,9 +60,9 @@ from functools import partial
 import numpy as np
 from scipy import ndimage
 
+from data_gen.procedural import color_ramp, fbm, stripes, worley
+from data_gen.procedural import wood as wood_rings
 from imagemap.io import InputError
-from imagemap.procedural import color_ramp, fbm, stripes, worley
-from imagemap.procedural import wood as wood_rings
 
 __all__ = [
     "EASY_MATERIALS",

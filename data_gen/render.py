@@ -1,9 +1,9 @@
-"""Orthographic ray casting: moved to :mod:`imagemap.raycast` (one renderer for both).
+"""Orthographic ray casting: moved to :mod:`imagemap.mesh.raycast` (one renderer for both).
 
 Kept so that ``from data_gen.render import cast_orthographic`` still works.
 """
 
-from imagemap.raycast import (
+from imagemap.mesh.raycast import (
     OrthographicView,
     RayHits,
     cast_orthographic,

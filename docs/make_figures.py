@@ -21,7 +21,7 @@ from PIL import Image, ImageDraw
 
 from data_gen import make_instance
 from imagemap import Database, Example, colorize
-from imagemap.colorization import PRESETS
+from imagemap.depth.pipeline import PRESETS
 from imagemap.evaluation import _copy_nearest
 from imagemap.io import write_image
 

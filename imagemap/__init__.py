@@ -8,7 +8,7 @@ The Python API takes and returns NumPy arrays:
 >>> result.image, result.provenance, result.cost                  # doctest: +SKIP
 
 Imports are lazy (PEP 562): ``import imagemap`` loads nothing heavy, and a name
-such as ``imagemap.colorize`` or a submodule such as ``imagemap.budget`` is
+such as ``imagemap.colorize`` or a submodule such as ``imagemap.depth.budget`` is
 imported on first use. So ``imagemap --help`` does not pay for scikit-image,
 SciPy or numba, and ``from imagemap import colorize`` works as always.
 
@@ -23,17 +23,17 @@ from typing import TYPE_CHECKING
 
 #: Public name -> the module that defines it (imported on first access).
 _LAZY = {
-    "PRESETS": "imagemap.colorization",
-    "ColorizeParams": "imagemap.colorization",
-    "ColorizeResult": "imagemap.colorization",
-    "colorize": "imagemap.colorization",
-    "select_examples": "imagemap.colorization",
+    "PRESETS": "imagemap.depth.pipeline",
+    "ColorizeParams": "imagemap.depth.pipeline",
+    "ColorizeResult": "imagemap.depth.pipeline",
+    "colorize": "imagemap.depth.pipeline",
+    "select_examples": "imagemap.depth.pipeline",
     "Database": "imagemap.database",
     "Example": "imagemap.database",
-    "EngineParams": "imagemap.engine",
-    "EngineResult": "imagemap.engine",
-    "Mapping": "imagemap.engine",
-    "synthesize": "imagemap.engine",
+    "EngineParams": "imagemap.core.engine",
+    "EngineResult": "imagemap.core.engine",
+    "Mapping": "imagemap.core.engine",
+    "synthesize": "imagemap.core.engine",
     "InputError": "imagemap.errors",
     "read_depth": "imagemap.io",
     "read_image": "imagemap.io",
@@ -65,15 +65,15 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # what type checkers and editors see
-    from imagemap.colorization import (
+    from imagemap.core.engine import EngineParams, EngineResult, Mapping, synthesize
+    from imagemap.database import Database, Example
+    from imagemap.depth.pipeline import (
         PRESETS,
         ColorizeParams,
         ColorizeResult,
         colorize,
         select_examples,
     )
-    from imagemap.database import Database, Example
-    from imagemap.engine import EngineParams, EngineResult, Mapping, synthesize
     from imagemap.errors import InputError
     from imagemap.io import read_depth, read_image, write_image
     from imagemap.mesh import colorize_mesh, export_textured, render_mesh
@@ -82,7 +82,7 @@ if TYPE_CHECKING:  # what type checkers and editors see
 
 
 def __getattr__(name: str):
-    """Import a public name, a submodule (``imagemap.budget``) or ``__version__`` on first use."""
+    """Import a public name, a submodule (``imagemap.batch``) or ``__version__`` on first use."""
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)
     elif name == "__version__":

@@ -2,7 +2,7 @@
 
 Objects are aligned by the centroids of their foreground, as in Hassner & Basri,
 *Automatic Depth-Map Colorization* (Eurographics 2006), Sec. 2.3.
-Example selection (:func:`imagemap.colorization.select_examples`), the
+Example selection (:func:`imagemap.depth.pipeline.select_examples`), the
 ``copy_nearest`` baseline and the faulty rule of the evaluation
 (:mod:`imagemap.metrics`, :mod:`imagemap.evaluation`) and the preview of
 ``imagemap synthesize`` all use these functions. Shifts are rounded to whole
@@ -117,7 +117,7 @@ def aligned_source(source_mask: np.ndarray, target_mask: np.ndarray, index: int 
 
     Each target pixel gets ``index`` and the source pixel pasted onto it, or example
     -1 where no source object pixel lands (coordinates clipped at 0), in the layout of
-    :attr:`imagemap.colorization.ColorizeResult.source`.
+    :attr:`imagemap.depth.pipeline.ColorizeResult.source`.
 
     Examples
     --------

@@ -40,17 +40,15 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from imagemap.database import Database
+from imagemap.database import Database, database_at_view, prepare_database
 from imagemap.io import InputError, atomic_path
 from imagemap.mesh import (
     DEFAULT_SIZE,
     FRONT,
     MESH_SUFFIXES,
     View,
-    database_at_view,
     file_digest,
     parse_views,
-    prepare_database,
 )
 
 __all__ = ["BatchOptions", "BatchSummary", "Job", "plan_jobs", "prepare_databases", "run_batch"]
@@ -189,20 +187,13 @@ def _outputs_of(job: Job) -> list[Path]:
 #: The modules whose code shapes a map or a texture. A batch resumed after one of them
 #: changed (an upgrade) redoes its objects rather than mix two engines' outputs.
 ENGINE_MODULES = (
-    "_kernels",
     "align",
-    "blend",
-    "colorization",
-    "completion",
+    "core",
     "database",
-    "engine",
+    "depth",
     "io",
     "mesh",
-    "palettes",
-    "pyramid",
-    "raycast",
     "render",
-    "search",
 )
 
 
@@ -215,9 +206,17 @@ def engine_digest() -> str:
     import imagemap
 
     digest = hashlib.sha256()
+    package = Path(__file__).parent
     try:
         for name in ENGINE_MODULES:
-            digest.update(Path(__file__).with_name(f"{name}.py").read_bytes())
+            # A module, or every module of a subpackage in a fixed order.
+            files = [package / f"{name}.py"] if (package / f"{name}.py").exists() else []
+            files = files or sorted((package / name).rglob("*.py"))
+            if not files:
+                raise OSError(name)
+            for path in files:
+                digest.update(path.relative_to(package).as_posix().encode())
+                digest.update(path.read_bytes())
     except OSError:  # no source files (a frozen install)
         return f"version {imagemap.__version__}"
     return digest.hexdigest()[:16]
@@ -258,7 +257,7 @@ def prepare_databases(database: Database, options: BatchOptions) -> dict[str, Da
 
 def process_job(job: Job, databases: dict[str, Database], options: BatchOptions) -> dict:
     """Synthesize one object and write its outputs, then its manifest (all atomically)."""
-    from imagemap.colorization import colorize
+    from imagemap.depth.pipeline import colorize
     from imagemap.io import read_depth, write_image
     from imagemap.mesh import colorize_mesh, export_textured, load_mesh
 

@@ -9,173 +9,19 @@ database costs nothing until its examples are needed.
 
 from __future__ import annotations
 
-import json
 import os
 import re
-from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 
-import numpy as np
+from imagemap.example import Example
+from imagemap.io import InputError
+from imagemap.mesh.examples import MeshExample, mesh_examples
+from imagemap.mesh.views import View
 
-from imagemap.io import (
-    InputError,
-    _load_raw,
-    _to_unit_float,
-    read_depth,
-    read_image,
-    validate_depth,
-)
-
-__all__ = ["Database", "Example", "check_database"]
+__all__ = ["Database", "Example", "check_database", "database_at_view", "prepare_database"]
 
 _DEPTH_RE = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
 _IMAGE_RE = re.compile(r"^(?P<name>.+)_image\.(?:png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
-
-
-@dataclass
-class Example:
-    """One example mapping: a depth map and its image-map (and labels if present).
-
-    Build from files with :meth:`Database.from_directory`, or from arrays with
-    :meth:`from_arrays`. Arrays are read on first access and cached.
-    """
-
-    name: str
-    depth_path: Path | None = None
-    image_path: Path | None = None
-    labels_path: Path | None = None
-    json_path: Path | None = None
-    _arrays: dict = field(default_factory=dict, repr=False)
-
-    @classmethod
-    def from_arrays(
-        cls,
-        name: str,
-        depth: np.ndarray,
-        image: np.ndarray,
-        labels: np.ndarray | None = None,
-    ) -> Example:
-        """An example held in memory.
-
-        Parameters
-        ----------
-        name : str
-            The example's name.
-        depth : ndarray, (H, W)
-            Larger is nearer; 0 or NaN is background.
-        image : ndarray, (H, W, 3)
-            The image-map: float in [0, 1], or uint8 (divided by 255) or uint16
-            (divided by 65535). Other integer types, values outside [0, 1], NaN or
-            infinite values are refused (:class:`InputError` naming the example).
-        labels : ndarray of int, (H, W), optional
-            Part ids.
-        """
-        if not isinstance(name, str) or not name:
-            raise InputError(f"example name must be a non-empty string, got {name!r}")
-        depth = validate_depth(depth, name=f"example {name!r}")
-        image = _image_from_array(np.asarray(image), f"example {name!r}")
-        if image.ndim != 3 or image.shape[2] != 3 or image.shape[:2] != depth.shape:
-            raise InputError(
-                f"example {name!r}: image {image.shape} does not match depth {depth.shape} "
-                "(expected (H, W, 3) of the depth's size)"
-            )
-        arrays = {"depth": depth, "image": image}
-        if labels is not None:
-            labels = np.asarray(labels)
-            if labels.shape != depth.shape or labels.dtype.kind not in "biu":
-                raise InputError(
-                    f"example {name!r}: labels must be integers of the depth's shape "
-                    f"{depth.shape}, got {labels.dtype} {labels.shape}"
-                )
-            arrays["labels"] = labels.astype(np.int32)
-        return cls(name=name, _arrays=arrays)
-
-    @cached_property
-    def depth(self) -> np.ndarray:
-        if "depth" in self._arrays:
-            return self._arrays["depth"]
-        return read_depth(self.depth_path)
-
-    @cached_property
-    def image(self) -> np.ndarray:
-        if "image" in self._arrays:
-            return self._arrays["image"]
-        image = read_image(self.image_path)
-        if image.shape[:2] != self.depth.shape:
-            raise InputError(
-                f"{self.image_path}: image is {image.shape[1]}x{image.shape[0]} but its depth "
-                f"{self.depth_path.name} is {self.depth.shape[1]}x{self.depth.shape[0]}"
-            )
-        return image
-
-    @cached_property
-    def labels(self) -> np.ndarray | None:
-        if "labels" in self._arrays:
-            return self._arrays["labels"]
-        if self.labels_path is None:
-            return None
-        labels = _load_raw(self.labels_path)
-        if labels.ndim == 3:
-            labels = labels[..., 0]
-        if labels.dtype.kind not in "biu":
-            raise InputError(
-                f"{self.labels_path}: part labels must be integers, got {labels.dtype}"
-            )
-        if labels.shape != self.depth.shape:
-            raise InputError(f"{self.labels_path}: labels {labels.shape} differ from the depth")
-        return labels.astype(np.int32)
-
-    @cached_property
-    def info(self) -> dict:
-        """The instance's JSON sidecar (parts, colours, parameters), or {}."""
-        if self.json_path is None:
-            return {}
-        try:
-            info = json.loads(self.json_path.read_text())
-        except (OSError, ValueError) as exc:
-            raise InputError(f"{self.json_path}: cannot be read as JSON ({exc})") from exc
-        if not isinstance(info, dict):
-            raise InputError(f"{self.json_path}: expected a JSON object, got {type(info).__name__}")
-        return info
-
-    @property
-    def mask(self) -> np.ndarray:
-        return self.depth > 0
-
-    @cached_property
-    def selection_stats(self) -> tuple[np.ndarray, float]:
-        """(centroid (y, x) of the foreground, sum of squared depth): what example
-        selection needs of this example, computed once (not once per query)."""
-        from scipy import ndimage
-
-        depth = self.depth
-        centroid = np.array(ndimage.center_of_mass(depth > 0), dtype=np.float64)
-        return centroid, float(np.square(depth, dtype=np.float64).sum())
-
-
-def _image_from_array(image: np.ndarray, name: str) -> np.ndarray:
-    """An image-map array as float32 in [0, 1]: uint8 / 255, uint16 / 65535, floats checked."""
-    if image.dtype == bool or not (
-        np.issubdtype(image.dtype, np.integer) or np.issubdtype(image.dtype, np.floating)
-    ):
-        raise InputError(
-            f"{name}: image must be float in [0, 1], uint8 or uint16, got {image.dtype}"
-        )
-    if np.issubdtype(image.dtype, np.integer) and image.dtype not in (np.uint8, np.uint16):
-        raise InputError(
-            f"{name}: image of {image.dtype}: give float in [0, 1], uint8 (0-255) or uint16"
-        )
-    image = _to_unit_float(image, name)
-    if not np.all(np.isfinite(image)):
-        raise InputError(f"{name}: image has NaN or infinite values")
-    low, high = float(image.min(initial=0.0)), float(image.max(initial=0.0))
-    if low < 0.0 or high > 1.0:
-        raise InputError(
-            f"{name}: image values span [{low:g}, {high:g}]; expected [0, 1] "
-            "(divide 0-255 values by 255, or pass a uint8 array)"
-        )
-    return image
 
 
 class Database:
@@ -213,8 +59,6 @@ class Database:
         Textured meshes in it (``NAME.glb``, ``.obj``, ``.ply``...) are examples too,
         rendered from ``view`` at ``size`` (W, H) on first use (see :mod:`imagemap.mesh`).
         """
-        from imagemap.mesh import mesh_examples
-
         examples, problems = _scan(Path(path))
         meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
         examples, problems = examples + meshes, problems + mesh_problems
@@ -359,8 +203,6 @@ def check_database(
     >>> rows[0]["name"], rows[0]["source"], problems  # doctest: +SKIP
     ('fish_000', 'images', [])
     """
-    from imagemap.mesh import mesh_examples
-
     examples, problems = _scan(Path(path))
     meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
     examples, problems = examples + meshes, problems + mesh_problems
@@ -390,3 +232,27 @@ def check_database(
     if not examples and not problems:
         problems.append(f"{path}: no examples found")
     return rows, problems
+
+
+def database_at_view(
+    database: Database, view: View, size: tuple[int, int] | None = None
+) -> Database:
+    """The database with its mesh examples rendered from ``view`` (pictures unchanged)."""
+    examples = [
+        e.at_view(view, size) if isinstance(e, MeshExample) else e for e in database.examples
+    ]
+    return Database(examples, source=database.source)
+
+
+def prepare_database(database: Database) -> Database:
+    """Load every example's arrays now, so the database pickles with its data.
+
+    Returns a database of in-memory examples (the same names and arrays): shipped
+    to workers once, it is never read from disk or rendered again.
+    """
+    examples = []
+    for example in database:
+        prepared = Example.from_arrays(example.name, example.depth, example.image, example.labels)
+        prepared.__dict__["info"] = dict(example.info)
+        examples.append(prepared)
+    return Database(examples, source=database.source)

@@ -62,9 +62,9 @@ from multiprocessing import get_context
 import numpy as np
 
 from imagemap.align import aligned_source, paste_aligned
-from imagemap.blend import copy_through, fill_background
-from imagemap.colorization import PRESETS, ColorizeParams, colorize, select_examples
+from imagemap.core.blend import copy_through, fill_background
 from imagemap.database import Database, Example
+from imagemap.depth.pipeline import PRESETS, ColorizeParams, colorize, select_examples
 from imagemap.io import InputError
 from imagemap.metrics import (
     FaultyRule,

@@ -663,7 +663,7 @@ def fine_energy(image: np.ndarray, mask: np.ndarray) -> float:
 
     The object is eroded by two pixels so that the silhouette is not counted.
     """
-    from imagemap.pyramid import laplacian_pyramid
+    from imagemap.core.pyramid import laplacian_pyramid
 
     luma = color.rgb2gray(np.clip(image, 0, 1)).astype(np.float32)
     band = laplacian_pyramid(luma, 2)[0]

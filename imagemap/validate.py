@@ -116,13 +116,13 @@ def check_colorize_arguments(
     Called as ``check_colorize_arguments(**locals())`` on the first line of
     ``colorize`` (arguments it does not check are ignored). Raises
     :class:`InputError` naming the argument, then runs the memory guard
-    (:func:`imagemap.budget.guard_colorize`), so a run too large for this machine
+    (:func:`imagemap.depth.budget.guard_colorize`), so a run too large for this machine
     is refused before it starts.
     """
-    from imagemap import budget
-    from imagemap.colorization import PRESETS, ColorizeParams
+    from imagemap.core.engine import BACKENDS
     from imagemap.database import Database
-    from imagemap.engine import BACKENDS
+    from imagemap.depth import budget
+    from imagemap.depth.pipeline import PRESETS, ColorizeParams
 
     if isinstance(depth, (str, os.PathLike)):
         raise InputError(

@@ -106,16 +106,16 @@ def _run_one(command, files, tmp_path, argv):
 @pytest.mark.parametrize("command", ["synthesize", "batch"])
 @pytest.mark.parametrize("argv, expected", [([], 0.3), (["--edge-support", "0"], 0.0)])
 def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, argv, expected):
-    import imagemap.colorization
+    import imagemap.depth.pipeline
 
     seen = []
-    original = imagemap.colorization.seamless_copy
+    original = imagemap.depth.pipeline.seamless_copy
 
     def recording(*args, **kwargs):
         seen.append(kwargs["edge_support"])
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(imagemap.colorization, "seamless_copy", recording)
+    monkeypatch.setattr(imagemap.depth.pipeline, "seamless_copy", recording)
     assert _run_one(command, files, tmp_path, argv) == 0
     assert seen == [expected]
 
@@ -138,9 +138,9 @@ def _count_calls(monkeypatch, module, name):
 def test_feature_completion_can_be_switched_off(
     files, tmp_path, monkeypatch, command, argv, expected
 ):
-    import imagemap.completion
+    import imagemap.depth.completion
 
-    calls = _count_calls(monkeypatch, imagemap.completion, "complete_features")
+    calls = _count_calls(monkeypatch, imagemap.depth.completion, "complete_features")
     assert _run_one(command, files, tmp_path, argv) == 0
     assert len(calls) == expected
 
@@ -150,9 +150,9 @@ def test_feature_completion_can_be_switched_off(
 def test_even_palettes_is_switched_on_by_its_option(
     files, tmp_path, monkeypatch, command, argv, expected
 ):
-    import imagemap.palettes
+    import imagemap.depth.palettes
 
-    calls = _count_calls(monkeypatch, imagemap.palettes, "even_palettes")
+    calls = _count_calls(monkeypatch, imagemap.depth.palettes, "even_palettes")
     assert _run_one(command, files, tmp_path, argv) == 0
     assert len(calls) == expected
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from imagemap import Database, Example, colorize, select_examples
-from imagemap.colorization import PRESETS, to_rgb, to_ycbcr
+from imagemap.depth.pipeline import PRESETS, to_rgb, to_ycbcr
 from imagemap.io import InputError
 
 
@@ -61,7 +61,7 @@ def test_ycbcr_round_trip_and_presets_follow_table_1():
 
 def test_pyramid_depth_follows_object_size():
     """Three levels where the coarsest still sees the object 1.25 windows across."""
-    from imagemap.colorization import pyramid_levels
+    from imagemap.depth.pipeline import pyramid_levels
 
     def square(side):
         mask = np.zeros((400, 400), bool)

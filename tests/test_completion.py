@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from imagemap import completion
-from imagemap.blend import copy_through
-from imagemap.completion import complete_features, small_features
+from imagemap.core.blend import copy_through
+from imagemap.depth import completion
+from imagemap.depth.completion import complete_features, small_features
 
 SKIN = 0.5
 
@@ -330,7 +330,7 @@ def test_relief_registration_finds_a_moved_relief_with_full_correlation():
 def test_fft_correlation_matches_scipy_signal():
     from scipy import signal
 
-    from imagemap.completion import _correlate_valid
+    from imagemap.depth.completion import _correlate_valid
 
     rng = np.random.default_rng(3)
     shapes = (((40, 50), (9, 13)), ((31, 31), (31, 31)), ((60, 20), (5, 20)))

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from imagemap import ColorizeParams, Database, Example, blend, colorize
-from imagemap.blend import coherent_edges, copy_through, merge_regions, seamless_copy
-from imagemap.colorization import PRESETS, level_patch_sizes, pyramid_levels
+from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap.core import blend
+from imagemap.core.blend import coherent_edges, copy_through, merge_regions, seamless_copy
+from imagemap.depth.pipeline import PRESETS, level_patch_sizes, pyramid_levels
 from imagemap.metrics import (
     blur_ratio,
     feature_components,
@@ -345,7 +346,7 @@ def test_the_mean_vote_is_the_ems_own_map_whatever_the_final_reseed(blob_databas
 
 
 def test_silhouette_band_is_a_clipped_signed_distance():
-    from imagemap.colorization import SILHOUETTE_RANGE, _silhouette_band
+    from imagemap.depth.pipeline import SILHOUETTE_RANGE, _silhouette_band
 
     mask = np.zeros((20, 20), bool)
     mask[5:15, 5:15] = True
@@ -356,7 +357,7 @@ def test_silhouette_band_is_a_clipped_signed_distance():
 
 
 def test_guide_reseed_must_be_a_fraction():
-    from imagemap.engine import EngineParams
+    from imagemap.core.engine import EngineParams
 
     with pytest.raises(ValueError, match="guide_reseed"):
         EngineParams(guide_reseed=1.5)
@@ -393,8 +394,8 @@ def test_context_is_the_coarser_levels_colours_on_the_finer_grid():
     """For Laplacian bands the running collapse gives each level's Gaussian level
     (known answer, up to rounding), and brought to the finer grid it is what the
     coarser levels sum to there: the finer Gaussian level minus its own band."""
-    from imagemap.engine import Mapping, _coarse_colours, _context
-    from imagemap.pyramid import gaussian_pyramid, laplacian_pyramid
+    from imagemap.core.engine import Mapping, _coarse_colours, _context
+    from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid
 
     image = np.random.default_rng(0).random((37, 50, 3)).astype(np.float32)
     bands, gaussians = laplacian_pyramid(image, 4), gaussian_pyramid(image, 4)
@@ -409,7 +410,7 @@ def test_context_is_the_coarser_levels_colours_on_the_finer_grid():
 
 
 def test_only_fine_levels_of_large_objects_get_context():
-    from imagemap.colorization import context_levels
+    from imagemap.depth.pipeline import context_levels
 
     small = np.zeros((150, 200), bool)
     small[40:110, 60:140] = True  # a 75 px object, the paper's scale
@@ -420,7 +421,7 @@ def test_only_fine_levels_of_large_objects_get_context():
     params = ColorizeParams().engine_params(2, 1)
     assert params.context_levels == 1 and len(params.context_weights) == 3
     # Every level but the coarsest gets the weak context; the fine ones the full one.
-    from imagemap.colorization import context_level_weights
+    from imagemap.depth.pipeline import context_level_weights
 
     assert context_level_weights(small, (7, 11, 9), 0.25) == (2, (0.25, 0.25, 0.0))
     assert context_level_weights(big, (7, 11, 9, 9), 0.25) == (3, (1.0, 0.25, 0.25, 0.0))
@@ -429,7 +430,7 @@ def test_only_fine_levels_of_large_objects_get_context():
 
 def _busts_mappings(blob_database, query_blob, levels=3):
     """The query's and the first two examples' mappings with the busts preset's bands."""
-    from imagemap.colorization import depth_mappings, example_mappings
+    from imagemap.depth.pipeline import depth_mappings, example_mappings
 
     clip = PRESETS["busts"].detail_clip
     query = depth_mappings(query_blob[0], levels, clip, True)
@@ -438,7 +439,7 @@ def _busts_mappings(blob_database, query_blob, levels=3):
 
 
 def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
-    from imagemap.engine import synthesize
+    from imagemap.core.engine import synthesize
 
     params = PRESETS["busts"]
     query, exemplars = _busts_mappings(blob_database, query_blob)
@@ -457,7 +458,7 @@ def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
 def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_blob):
     """With context on every fine level the EM still never raises its target, and the
     same seed gives the same bytes; without it the map differs (it is used)."""
-    from imagemap.engine import synthesize
+    from imagemap.core.engine import synthesize
 
     params = PRESETS["busts"]
     query, exemplars = _busts_mappings(blob_database, query_blob)
@@ -547,7 +548,7 @@ def test_the_blend_keeps_the_rim_at_the_copys_colours(blob_database, query_blob)
     """Outside the object the voted map holds whatever the windows left there (zeros
     on plain colour levels: green in YCbCr); the blend's reference there is the copy,
     so the rim keeps the copied colours (it had drifted 0.16 towards the zeros)."""
-    from imagemap.colorization import _example_ycbcr, to_ycbcr
+    from imagemap.depth.pipeline import _example_ycbcr, to_ycbcr
 
     depth, _ = query_blob
     result = colorize(depth, blob_database, "busts", seed=0)
@@ -565,7 +566,7 @@ def test_the_blend_keeps_the_rim_at_the_copys_colours(blob_database, query_blob)
 def test_example_mappings_refuse_the_old_boolean(blob_database):
     """``example_mappings`` took ``use_pyramid=True`` where it now takes a pyramid name:
     a leftover bool is refused rather than read silently as plain colours."""
-    from imagemap.colorization import example_mappings
+    from imagemap.depth.pipeline import example_mappings
 
     example = blob_database.examples[0]
     with pytest.raises(ValueError, match="appearance_pyramid"):

@@ -7,8 +7,8 @@ import pytest
 from scipy import ndimage
 
 from imagemap import ColorizeParams, Database, Example, colorize
-from imagemap.colorization import PRESETS
-from imagemap.engine import EngineParams, Mapping, synthesize
+from imagemap.core.engine import EngineParams, Mapping, synthesize
+from imagemap.depth.pipeline import PRESETS
 
 
 def slab(shape, top_left, size, left_colour=(0.9, 0.1, 0.1), right_colour=(0.1, 0.1, 0.9)):
@@ -85,7 +85,7 @@ def test_same_seed_same_bytes_and_seed_matters(blob_database, query_blob):
 @pytest.mark.parametrize("threads", [1, 3])
 def test_same_bytes_at_any_thread_count(blob_database, query_blob, monkeypatch, threads):
     """The kernels' work split follows the thread count; the result must not."""
-    from imagemap import _kernels
+    from imagemap.core import kernels as _kernels
 
     depth, _ = query_blob
     reference = colorize(depth, blob_database, "busts", seed=3)
@@ -173,7 +173,7 @@ def test_feature_level_moves_the_final_reseed_and_the_free_levels(blob_database,
     """``feature_level`` is where a large map draws its features: the final reseed
     follows that level's EM (its own trace unchanged, the finer level starting from
     the new matches), and the exemplar costs stop there, not only at the finest."""
-    from imagemap.colorization import depth_mappings, example_mappings
+    from imagemap.depth.pipeline import depth_mappings, example_mappings
 
     depth, _ = query_blob
     chosen = [blob_database[0], blob_database[3]]

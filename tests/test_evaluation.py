@@ -141,7 +141,7 @@ def test_report_files_and_links(class_evaluation, tmp_path):
 
 
 def test_method_params_of_the_baselines():
-    from imagemap.colorization import PRESETS
+    from imagemap.depth.pipeline import PRESETS
 
     fish = PRESETS["fish"]
     assert method_params("full", fish) == fish

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import imagemap
-from imagemap import budget
 from imagemap.cli import main
 from imagemap.database import Database, Example, check_database
+from imagemap.depth import budget
 from imagemap.io import InputError, read_depth, write_image
 
 
@@ -199,7 +199,7 @@ def test_unwritable_output_is_refused_before_any_work(world, capsys, monkeypatch
     def no_work(*args, **kwargs):
         raise AssertionError("synthesis started before the outputs were checked")
 
-    monkeypatch.setattr(imagemap.colorization, "colorize", no_work)
+    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", no_work)
     before = snapshot(world["root"])
     code, message = cli(synth(world, *build(world), batch=case.startswith("batch")), capsys)
     assert code == 2, message
@@ -517,7 +517,7 @@ def test_api_list_of_examples_is_not_a_database(blob_database, query_blob):
     with pytest.raises(InputError, match="Database"):
         Database([1, 2])
     with pytest.raises(InputError, match="^m:"):
-        imagemap.colorization.select_examples(query_blob[0], blob_database, m=1.5)
+        imagemap.depth.pipeline.select_examples(query_blob[0], blob_database, m=1.5)
 
 
 def test_api_depth_path_instead_of_array(blob_database):
@@ -574,7 +574,7 @@ def test_memory_estimate_grows_with_the_query():
 
 
 def test_batch_goes_on_past_a_failing_object(world, capsys, monkeypatch):
-    real = imagemap.colorization.colorize
+    real = imagemap.depth.pipeline.colorize
     query_depth = read_depth(world["query"])
 
     def failing(depth, *args, **kwargs):
@@ -582,7 +582,7 @@ def test_batch_goes_on_past_a_failing_object(world, capsys, monkeypatch):
             raise ValueError("engine exploded on this one")
         return real(depth, *args, **kwargs)
 
-    monkeypatch.setattr(imagemap.colorization, "colorize", failing)
+    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", failing)
     out, report = world["root"] / "maps", world["root"] / "batch.json"
     argv = synth(world, "-o", str(out), "--report", str(report), batch=True)
     code, message = cli(argv, capsys)
@@ -594,7 +594,7 @@ def test_batch_goes_on_past_a_failing_object(world, capsys, monkeypatch):
 
 
 def test_batch_interrupted_keeps_what_finished(world, capsys, monkeypatch):
-    real = imagemap.colorization.colorize
+    real = imagemap.depth.pipeline.colorize
     calls = []
 
     def interrupt_second(*args, **kwargs):
@@ -603,7 +603,7 @@ def test_batch_interrupted_keeps_what_finished(world, capsys, monkeypatch):
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(imagemap.colorization, "colorize", interrupt_second)
+    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", interrupt_second)
     out = world["root"] / "maps"
     code, message = cli(synth(world, "-o", str(out), batch=True), capsys)
     assert code == 130 and "1 of 2 maps written" in message

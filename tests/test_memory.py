@@ -5,8 +5,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from imagemap import engine
-from imagemap.engine import (
+from imagemap.core import engine
+from imagemap.core.engine import (
     EngineParams,
     Mapping,
     _LevelSolver,
@@ -196,9 +196,9 @@ def test_release_search_keeps_what_votes_and_dense_maps_need():
 def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
     from dataclasses import replace
 
-    from imagemap import budget
-    from imagemap.colorization import PRESETS, pyramid_levels
     from imagemap.database import Database, Example
+    from imagemap.depth import budget
+    from imagemap.depth.pipeline import PRESETS, pyramid_levels
 
     rng = np.random.default_rng(0)
     depth = np.zeros((600, 800), np.float32)
@@ -216,7 +216,7 @@ def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
 
 def _pyramid_scene(size, seed, n_levels=2):
     """A query pyramid and two exemplar pyramids (fresh arrays, held by the lists alone)."""
-    from imagemap.pyramid import gaussian_pyramid
+    from imagemap.core.pyramid import gaussian_pyramid
 
     def pyramid(seed, appearance):
         rng = np.random.default_rng(seed)
@@ -272,7 +272,7 @@ def test_handed_over_pyramids_are_freed_level_by_level_with_the_same_result():
 
 def test_exact_index_makes_its_distance_block_in_place():
     """One block-sized float32 array (not the product, its double and their difference)."""
-    from imagemap.search import ExactIndex
+    from imagemap.core.search import ExactIndex
 
     rng = np.random.default_rng(0)
     data = rng.standard_normal((2000, 8)).astype(np.float32)

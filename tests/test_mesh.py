@@ -236,7 +236,9 @@ def test_meshes_in_a_database_are_rendered_once_and_cached(tmp_path, monkeypatch
     cached = list((cache / "meshes").glob("ball-*.npz"))
     assert len(cached) == 1
     # A second open reads the cache: no mesh is loaded.
-    monkeypatch.setattr("imagemap.mesh.load_mesh", lambda path: pytest.fail("rendered again"))
+    monkeypatch.setattr(
+        "imagemap.mesh.examples.load_mesh", lambda path: pytest.fail("rendered again")
+    )
     again = Database.from_directory(db_dir, view="front", size=(40, 30))["ball"]
     np.testing.assert_array_equal(again.depth, example.depth)
     monkeypatch.undo()

@@ -20,8 +20,8 @@ from imagemap.btf.moving_average import (
     synthesize_band,
     synthesize_smooth_textures,
 )
+from imagemap.core.pyramid import collapse_laplacian, laplacian_pyramid
 from imagemap.io import InputError
-from imagemap.pyramid import collapse_laplacian, laplacian_pyramid
 from imagemap.render import direction_from_angles, normals_from_height
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imagemap.palettes import even_palettes, palette_clusters
+from imagemap.depth.palettes import even_palettes, palette_clusters
 
 SIZE = 64
 SKIN_A, SHIRT_A = (0.62, 0.45, 0.56), (0.30, 0.62, 0.40)

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imagemap.io import InputError
-from imagemap.procedural import (
+from data_gen.procedural import (
     color_ramp,
     fbm,
     marble,
@@ -17,6 +16,7 @@ from imagemap.procedural import (
     wood,
     worley,
 )
+from imagemap.io import InputError
 
 
 @pytest.fixture

@@ -18,10 +18,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from imagemap import validate
-from imagemap.colorization import centroid_shift, to_rgb, to_ycbcr, translate
-from imagemap.engine import EngineParams, Mapping, synthesize
-from imagemap.io import InputError, validate_depth
-from imagemap.pyramid import (
+from imagemap.core.engine import EngineParams, Mapping, synthesize
+from imagemap.core.pyramid import (
     collapse_laplacian,
     expand,
     gaussian_pyramid,
@@ -29,6 +27,8 @@ from imagemap.pyramid import (
     level_shapes,
     mask_pyramid,
 )
+from imagemap.depth.pipeline import centroid_shift, to_rgb, to_ycbcr, translate
+from imagemap.io import InputError, validate_depth
 
 FAST = settings(
     max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True
@@ -100,7 +100,7 @@ def test_full_mask_stays_full(h, w, levels):
     st.integers(0, 2**32 - 1),
 )
 def test_pca_basis_is_orthonormal_and_projection_bounded(n, dim, keep, seed):
-    from imagemap import engine
+    from imagemap.core import engine
 
     fit = getattr(engine, "_fit_pca", None)
     if fit is None:

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from imagemap.engine import EngineParams, Mapping, _LevelSolver, _Timer
-from imagemap.pyramid import (
+from imagemap.core.engine import EngineParams, Mapping, _LevelSolver, _Timer
+from imagemap.core.pyramid import (
     collapse_laplacian,
     gaussian_pyramid,
     laplacian_pyramid,

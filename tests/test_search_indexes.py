@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imagemap.search import INDEX_BACKENDS, ExactIndex, make_index
+from imagemap.core.search import INDEX_BACKENDS, ExactIndex, make_index
 
 
 @pytest.mark.parametrize("dims", [6, 40])

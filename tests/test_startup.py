@@ -50,7 +50,8 @@ def test_a_synthesis_does_not_import_scipy_signal_or_stats():
     # scipy.signal pulls in scipy.stats: 0.45 s and 33 MB of every fresh
     # `imagemap synthesize` for three FFT correlations (completion._correlate_valid).
     loaded = _modules_after(
-        "import imagemap.cli, imagemap.colorization, imagemap.completion, imagemap.palettes",
+        "import imagemap.cli, imagemap.depth.pipeline, imagemap.depth.completion, "
+        "imagemap.depth.palettes",
         top_level=False,
     )
     assert "scipy.ndimage" in loaded  # the probe sees submodules
@@ -76,15 +77,15 @@ def test_public_names_are_importable_and_lazy_submodules_resolve():
     for name in imagemap.__all__:
         assert getattr(imagemap, name) is not None
     assert imagemap.InputError is imagemap.io.InputError
-    with imagemap.budget.memory_check(False):  # a submodule, reached as an attribute
+    with imagemap.depth.budget.memory_check(False):  # a submodule, reached as an attribute
         pass
     with pytest.raises(AttributeError, match="no_such_thing"):
         imagemap.no_such_thing  # noqa: B018
 
 
 def test_option_choices_match_the_library():
-    from imagemap.colorization import PRESETS
-    from imagemap.engine import APPEARANCE_PYRAMIDS, BACKENDS
+    from imagemap.core.engine import APPEARANCE_PYRAMIDS, BACKENDS
+    from imagemap.depth.pipeline import PRESETS
     from imagemap.evaluation import METHODS
 
     assert PRESET_NAMES == tuple(sorted(PRESETS))

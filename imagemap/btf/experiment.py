@@ -514,7 +514,7 @@ def run_experiment(
 
 def _warm_up_pynndescent(seed: int) -> None:
     """Compile pynndescent's numba code once, so that no method's time includes it."""
-    from imagemap.search import PynndescentIndex
+    from imagemap.core.search import PynndescentIndex
 
     rng = np.random.default_rng(seed)
     for dims in (14, 126):

@@ -54,7 +54,7 @@ log = logging.getLogger("imagemap")
 CONSTRAINT_THETA = 22.0
 CONSTRAINT_AZIMUTHS = (0.0, 90.0, 180.0, 270.0)
 
-#: The pixel-wise method's searches (:data:`imagemap.search.INDEX_BACKENDS`).
+#: The pixel-wise method's searches (:data:`imagemap.core.search.INDEX_BACKENDS`).
 PIXELWISE_BACKENDS = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 
 #: Former names of the pixel-wise search (``search=``) -> the index that ran them.
@@ -72,7 +72,7 @@ class PixelwiseParams:
     ws, wc : float
         Weights of the surface descriptors and the colours.
     backend : {"pca_kdtree", "kdtree", "exact", "pynndescent"}
-        The nearest-neighbour index (:func:`imagemap.search.make_index`).
+        The nearest-neighbour index (:func:`imagemap.core.search.make_index`).
         "pca_kdtree": vectors of more than 16 dimensions are reduced by PCA (fit on
         the sample) to 16, then searched exactly with a k-d tree. "kdtree": exact, a
         k-d tree up to 16 dimensions, chunked brute force (BLAS) beyond. "exact":
@@ -135,7 +135,7 @@ def ExtrapolationParams(  # noqa: N802 - the deprecated class name
 
 @dataclass(frozen=True)
 class TextureOptimizationParams:
-    """Texture optimization (Kwatra et al. 2005) through :mod:`imagemap.engine`.
+    """Texture optimization (Kwatra et al. 2005) through :mod:`imagemap.core.engine`.
 
     Parameters
     ----------
@@ -228,7 +228,7 @@ def prepare_scans(
 def _search(sample: np.ndarray, target: np.ndarray, params: PixelwiseParams) -> np.ndarray:
     """Index of the nearest sample row for every target row (Eq. 6): (n,), or (n, K)
     for ``params.neighbours`` = K > 1."""
-    from imagemap.search import make_index
+    from imagemap.core.search import make_index
 
     # Bands with weight 0 are 0 everywhere: they cost time and change nothing.
     used = np.any(sample != 0, axis=0) | np.any(target != 0, axis=0)
@@ -325,11 +325,11 @@ def texture_optimization(
     -------
     btf : BTF
         Shares the sample's U.
-    result : imagemap.engine.EngineResult
+    result : imagemap.core.engine.EngineResult
         Source map, costs and timings of the engine.
     """
-    from imagemap.engine import EngineParams, Mapping, synthesize
-    from imagemap.pyramid import gaussian_pyramid
+    from imagemap.core.engine import EngineParams, Mapping, synthesize
+    from imagemap.core.pyramid import gaussian_pyramid
 
     kwargs = {"ws": params.ws, "wc": params.wc}
     sample_guide = constraint_bands(sample_images, **kwargs)

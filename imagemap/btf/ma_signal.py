@@ -70,7 +70,7 @@ def inverse_karhunen_loeve(bands: np.ndarray, mean: np.ndarray, basis: np.ndarra
 
 # ------------------------------------------------------------------ periodic pyramid collapse
 def _expand_wrap(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Bilinear 2x upsampling like :func:`imagemap.pyramid.expand`, wrapping at the borders.
+    """Bilinear 2x upsampling like :func:`imagemap.core.pyramid.expand`, wrapping at the borders.
 
     Synthetic factors are periodic; wrapping keeps the collapsed texture tileable.
     """

@@ -52,8 +52,8 @@ from imagemap.btf.ma_signal import (  # noqa: F401 - re-exported, and _expand_wr
     segment_subspaces,
     synthesize_band,
 )
+from imagemap.core.pyramid import laplacian_pyramid, level_shapes
 from imagemap.io import InputError, read_npz, write_npz
-from imagemap.pyramid import laplacian_pyramid, level_shapes
 from imagemap.render import normals_from_height
 
 __all__ = [

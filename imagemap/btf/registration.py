@@ -492,7 +492,7 @@ def orient_to_sample(
     costs : hypothesis -> mean nearest-neighbour distance
     """
     from imagemap.btf.constraints import constraint_bands, stack_neighbourhood
-    from imagemap.search import make_index
+    from imagemap.core.search import make_index
 
     if len(target_images) != 4 or len(sample_images) != 4:
         raise InputError("target_images, sample_images: four images each")

@@ -27,15 +27,15 @@ import sys
 
 from imagemap.errors import InputError
 
-#: ``sorted(imagemap.colorization.PRESETS)``: the ``--preset`` choices.
+#: ``sorted(imagemap.depth.pipeline.PRESETS)``: the ``--preset`` choices.
 PRESET_NAMES = ("busts", "fish", "humans")
-#: ``imagemap.engine.BACKENDS``: the ``--backend`` choices.
+#: ``imagemap.core.engine.BACKENDS``: the ``--backend`` choices.
 BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
 #: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 #: ``imagemap.evaluation.METHODS``: the ``imagemap evaluate --methods`` names, in report order.
 METHOD_NAMES = ("full", "copy_nearest", "one_pass", "mean_vote", "no_position", "laplacian")
-#: ``imagemap.engine.APPEARANCE_PYRAMIDS``: the ``--appearance-pyramid`` choices.
+#: ``imagemap.core.engine.APPEARANCE_PYRAMIDS``: the ``--appearance-pyramid`` choices.
 APPEARANCE_PYRAMID_NAMES = ("gaussian", "laplacian")
 
 SUBCOMMAND_MODULES = [

@@ -260,10 +260,10 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
 
 
 def run_synthesize(args: argparse.Namespace) -> int:
-    from imagemap.budget import guard_colorize
     from imagemap.cli import map_large_blocks
     from imagemap.cli.batch import is_mesh_request, run_mesh_synthesize
     from imagemap.database import Database
+    from imagemap.depth.budget import guard_colorize
     from imagemap.io import read_depth
     from imagemap.progress import progress
 
@@ -333,8 +333,8 @@ def run_synthesize(args: argparse.Namespace) -> int:
 
 def _synthesize_one(args, job, depth, database, examples, background, batch) -> dict:
     """One map: synthesize, build every output, write them all-or-nothing."""
-    from imagemap.budget import memory_check
-    from imagemap.colorization import colorize
+    from imagemap.depth.budget import memory_check
+    from imagemap.depth.pipeline import colorize
     from imagemap.io import image_writer
     from imagemap.outputs import write_all
 

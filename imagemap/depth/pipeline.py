@@ -27,18 +27,16 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap import completion, palettes
 from imagemap.align import centroid as _centroid
 from imagemap.align import centroid_shift, translate
-from imagemap.blend import (
+from imagemap.core.blend import (
     copy_through,
     fill_background,
     merge_regions,
     place_seams,
     seamless_copy,
 )
-from imagemap.database import Database, Example
-from imagemap.engine import (
+from imagemap.core.engine import (
     APPEARANCE_PYRAMIDS,
     EngineParams,
     EngineResult,
@@ -46,8 +44,15 @@ from imagemap.engine import (
     ReleasableLevels,
     synthesize,
 )
+from imagemap.core.pyramid import (
+    collapse_laplacian,
+    gaussian_pyramid,
+    laplacian_pyramid,
+    mask_pyramid,
+)
+from imagemap.database import Database, Example
+from imagemap.depth import completion, palettes
 from imagemap.io import InputError, validate_depth
-from imagemap.pyramid import collapse_laplacian, gaussian_pyramid, laplacian_pyramid, mask_pyramid
 from imagemap.validate import check_colorize_arguments, check_float, check_int
 
 __all__ = [
@@ -131,7 +136,7 @@ class ColorizeParams:
         blurred where they disagree). ``"copy"`` (default): the same hard EM, then
         every pixel copied from the exemplar pixel most of its windows agree on,
         with the seams between sources blended in the gradient domain
-        (:func:`imagemap.blend.seamless_copy`): crisp stripes, edges and eyes.
+        (:func:`imagemap.core.blend.seamless_copy`): crisp stripes, edges and eyes.
         ``"mode"``: copying already inside the EM iterations (the engine's
         ``vote="mode"``), then the same finish.
     blend_scale : float
@@ -142,7 +147,7 @@ class ColorizeParams:
         object. Larger keeps more of the copy.
     seam_smoothness : float
         Weight of the seam costs when the copy's sources are rearranged so that
-        seams fall where the sources agree (:func:`imagemap.blend.place_seams`; 0:
+        seams fall where the sources agree (:func:`imagemap.core.blend.place_seams`; 0:
         off).
     grow_pyramid : bool
         Add pyramid levels for large objects (see :func:`pyramid_levels`); False
@@ -200,7 +205,7 @@ class ColorizeParams:
     merge_regions : bool
         After the seam placement, let whole stray patches of another source that
         sit off the voted colours take a touching region's source
-        (:func:`imagemap.blend.merge_regions`). Off by default: on the generated
+        (:func:`imagemap.core.blend.merge_regions`). Off by default: on the generated
         classes it raised the blur ratio (fish 0.87 to 0.89, busts 0.74 to 0.78)
         but lost bust features (objects with all features 75 % to 67 %); see
         ``docs/presets.md``.
@@ -209,7 +214,7 @@ class ColorizeParams:
     complete_features : bool
         After the seams are placed, copy whole every small feature of an example
         (an eye, lips, a brow: found from its colours, see
-        :mod:`imagemap.completion`) that the map copies only in part, at the mean
+        :mod:`imagemap.depth.completion`) that the map copies only in part, at the mean
         offset of the part: two offsets meeting inside lips had left a lozenge of
         lips. On the generated classes (12 objects, seed 0) busts drew every
         feature in 100 % of objects instead of 92 %, and at 4x the size in 83 %
@@ -219,7 +224,7 @@ class ColorizeParams:
         Where the copy changes source within one example, keep its own step if
         it is an edge (twice as strong as the texture on either side) and the
         voted map shows the same change, over the four pixels around it, at this
-        share of its size or more (:func:`imagemap.blend.seamless_copy`; 0: every
+        share of its size or more (:func:`imagemap.core.blend.seamless_copy`; 0: every
         seam blended). A part boundary that falls on a seam (a sleeve from one
         place, the hand from another) then stays one pixel sharp instead of being
         spread over the blend scale. 0.3 accepts the voted edge up to about two
@@ -231,7 +236,7 @@ class ColorizeParams:
     even_palettes : bool
         Where the copy shows one part (a face's skin, a plain shirt) in two
         examples' colours, shift the smaller share into the larger's colours
-        before the blend (:func:`imagemap.palettes.even_palettes`): one skin
+        before the blend (:func:`imagemap.depth.palettes.even_palettes`): one skin
         tone from face to neck instead of two. Only solid parts found in the
         same place and nearest in colour in both examples are shifted, never a
         pattern's colours or a small feature. Needs ``m`` >= 2; only with
@@ -756,10 +761,10 @@ def colorize(
         for the copy to keep it sharp (overrides the preset; 0 blends every seam).
     complete_features : bool, optional
         Copy whole the examples' small features that the copy cut (overrides the
-        preset; see :mod:`imagemap.completion`).
+        preset; see :mod:`imagemap.depth.completion`).
     even_palettes : bool, optional
         Shift a part copied from two examples (a face's skin) into one example's
-        colours (overrides the preset; see :mod:`imagemap.palettes`).
+        colours (overrides the preset; see :mod:`imagemap.depth.palettes`).
     seed : int
         The same seed gives the same bytes.
     quiet : bool

@@ -136,7 +136,7 @@ def place_seams(
     -------
     ndarray of int32, (H, W, 3)
     """
-    from imagemap import _kernels
+    from imagemap.core import kernels as _kernels
 
     packed, shapes = _packed(exemplars)
     yy, xx = np.ogrid[0 : source.shape[0], 0 : source.shape[1]]
@@ -238,7 +238,7 @@ def merge_regions(
     >>> int(merged[..., 0].max())
     0
     """
-    from imagemap import _kernels
+    from imagemap.core import kernels as _kernels
 
     reference = np.ascontiguousarray(reference, dtype=np.float32)
     if source.shape[:2] != reference.shape[:2] or source.shape[2] != 3:
@@ -347,14 +347,14 @@ def seamless_copy(
         beside the object (its margin) do not bleed into it.
     edge_reference : ndarray, (H, W, C), optional
         The map the ``edge_support`` test reads instead of ``reference`` (when the
-        reference was recoloured, e.g. by :func:`imagemap.palettes.even_palettes`,
+        reference was recoloured, e.g. by :func:`imagemap.depth.palettes.even_palettes`,
         an edge is still judged on the colours as voted). Default: ``reference``.
 
     Returns
     -------
     ndarray, (H, W, C) float32
     """
-    from imagemap.engine import _trim_heap
+    from imagemap.core.engine import _trim_heap
 
     _trim_heap()  # the caller's freed temporaries (seam placement): not kept resident
     reference = np.asarray(reference)

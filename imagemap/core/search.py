@@ -17,7 +17,7 @@ One interface, interchangeable implementations (as trimesh's ray module):
 and the BTF pixel-wise method (``PixelwiseParams.backend``) both name their search
 with these words. The engine's default, ``"patchmatch"``, is not an index: it
 searches the exemplar image domain warm-started from the previous matches (see
-``imagemap._kernels``).
+``imagemap.core.kernels``).
 """
 
 from __future__ import annotations

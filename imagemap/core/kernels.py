@@ -723,7 +723,7 @@ def seam_sweeps(exemplars, shapes, reference, label_e, label_y, label_x, smooth,
             )
 
 
-# -- region moves on a source map (imagemap.blend.merge_regions) -------------------
+# -- region moves on a source map (imagemap.core.blend.merge_regions) -------------------
 
 
 @njit(cache=True, nogil=True)
@@ -870,7 +870,7 @@ def region_moves(
     keep_detail,
     palette_only,
 ):
-    """One round of region moves (see :func:`imagemap.blend.merge_regions`), in place.
+    """One round of region moves (see :func:`imagemap.core.blend.merge_regions`), in place.
 
     ``order[starts[r]:starts[r + 1]]`` are region r's flat pixel indices;
     candidate c proposes that region ``cand_region[c]`` take the label of the

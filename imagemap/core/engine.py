@@ -47,10 +47,10 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import ndimage
 from threadpoolctl import threadpool_limits
 
-from imagemap import _kernels
+from imagemap.core import kernels as _kernels
+from imagemap.core.pyramid import collapse_laplacian, expand
+from imagemap.core.search import make_index
 from imagemap.progress import progress
-from imagemap.pyramid import collapse_laplacian, expand
-from imagemap.search import make_index
 
 __all__ = [
     "BACKENDS",

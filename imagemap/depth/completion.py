@@ -53,7 +53,7 @@ import numpy as np
 from scipy import fft, ndimage, sparse, spatial
 from scipy.sparse import csgraph
 
-from imagemap.blend import copy_through, fill_background
+from imagemap.core.blend import copy_through, fill_background
 
 __all__ = ["complete_features", "small_features"]
 

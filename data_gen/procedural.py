@@ -21,7 +21,7 @@ Value ranges
 Example
 -------
 >>> import numpy as np
->>> from imagemap.procedural import fbm, marble, color_ramp
+>>> from data_gen.procedural import fbm, marble, color_ramp
 >>> yy, xx = np.mgrid[0:64, 0:64] / 64.0
 >>> points = np.stack([xx, yy], axis=-1)
 >>> fbm(points, octaves=5, seed=1, frequency=4.0).shape

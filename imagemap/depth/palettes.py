@@ -2,7 +2,7 @@
 
 A map copied from two examples often shows one part in two palettes where the examples
 meet: a face in one skin tone above a neck in another. The gradient-domain blend
-(:func:`imagemap.blend.seamless_copy`) spreads the step between them over a few pixels,
+(:func:`imagemap.core.blend.seamless_copy`) spreads the step between them over a few pixels,
 but the two tones stay. Here each example's colours are clustered, and its *parts* are
 the large, solid connected pieces of one cluster (skin, a plain garment; not the colours
 of a pattern, whose contrast a shift of one colour would change). A part of one example
@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from imagemap.align import centroid_shift, translate
-from imagemap.blend import EDGE_FLOOR
+from imagemap.core.blend import EDGE_FLOOR
 
 __all__ = ["even_palettes", "example_parts", "palette_clusters"]
 
@@ -50,7 +50,7 @@ are merged, so a plain map ends with one cluster per part."""
 
 PART_STEP = EDGE_FLOOR
 """Clusters whose means are closer than this are one part: the smallest step between
-two parts (``imagemap.blend.EDGE_FLOOR``; smaller steps are shading and grain)."""
+two parts (``imagemap.core.blend.EDGE_FLOOR``; smaller steps are shading and grain)."""
 
 SAMPLE = 20000
 """Pixels the clusters are fitted on (all of them are then assigned)."""

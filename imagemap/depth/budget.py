@@ -15,7 +15,7 @@ dimension, also measured.
 synthesize``) refuses a run whose estimate exceeds the memory available now
 (``MemAvailable`` of ``/proc/meminfo``, or a cgroup limit), with the estimate and
 the way out. Switch it off with ``imagemap synthesize --no-memory-check``, with
-``with imagemap.budget.memory_check(False): ...`` in Python, or with the
+``with imagemap.depth.budget.memory_check(False): ...`` in Python, or with the
 environment variable ``IMAGEMAP_NO_MEMORY_CHECK=1``.
 """
 
@@ -229,7 +229,7 @@ def _enabled() -> bool:
 
 
 def _resolve_params(preset, m):
-    from imagemap.colorization import PRESETS, ColorizeParams
+    from imagemap.depth.pipeline import PRESETS, ColorizeParams
 
     if isinstance(preset, ColorizeParams):
         params = preset
@@ -248,7 +248,7 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
     Without ``examples`` the ``m`` largest examples stand for the automatic selection
     (an upper bound).
     """
-    from imagemap.colorization import level_patch_sizes, pyramid_levels
+    from imagemap.depth.pipeline import level_patch_sizes, pyramid_levels
 
     n, patch_sizes, pca_fraction, guide_bands = _resolve_params(preset, m)
     mask = np.asarray(depth) > 0
@@ -325,6 +325,6 @@ def guard_colorize(
             f"{_format_bytes(available)} of memory is available: use a smaller depth map "
             f"(longest side about {fit} pixels or less would fit), fewer or smaller examples "
             "(--m 1), or run anyway with --no-memory-check "
-            "(Python: with imagemap.budget.memory_check(False))"
+            "(Python: with imagemap.depth.budget.memory_check(False))"
         )
     return estimate
