@@ -44,6 +44,7 @@ __all__ = [
     "BTF",
     "compress",
     "relative_error",
+    "check_directions",
     "directions_to_vectors",
 ]
 
@@ -82,10 +83,37 @@ def directions_to_vectors(directions: np.ndarray) -> np.ndarray:
     )
 
 
-def _directions(value, name: str) -> np.ndarray:
+#: Largest polar angle of a light or view direction (degrees): 90 is the horizon; a BTF
+#: samples the hemisphere above the surface (the Bonn files reach 75).
+MAX_THETA = 90.0
+
+
+def check_directions(value, name: str) -> np.ndarray:
+    """(n, 2) (theta, phi) degrees as float32, or InputError naming ``name``.
+
+    theta must lie in [0, :data:`MAX_THETA`] and phi be finite: a NaN direction would be
+    picked by :meth:`BTF.nearest_light` (every comparison with NaN is false).
+
+    Example
+    -------
+    >>> check_directions([[22.0, 90.0]], "light_dirs").tolist()
+    [[22.0, 90.0]]
+    """
     array = np.asarray(value, dtype=np.float32)
     if array.ndim != 2 or array.shape[1] != 2 or array.shape[0] < 1:
         raise InputError(f"{name}: expected (n, 2) (theta, phi) in degrees, got {array.shape}")
+    bad = ~np.isfinite(array).all(axis=1)
+    if bad.any():
+        raise InputError(
+            f"{name}: direction {int(np.argmax(bad))} is not finite ({array[bad][0].tolist()})"
+        )
+    outside = (array[:, 0] < 0) | (array[:, 0] > MAX_THETA)
+    if outside.any():
+        index = int(np.argmax(outside))
+        raise InputError(
+            f"{name}: direction {index} has theta {float(array[index, 0]):g} degrees, "
+            f"outside 0..{MAX_THETA:g} (the hemisphere above the surface)"
+        )
     return array
 
 
@@ -126,15 +154,28 @@ class BTF:
         self.eigen_abrdfs = np.asarray(self.eigen_abrdfs, dtype=np.float32)
         self.singular_values = np.asarray(self.singular_values, dtype=np.float32).reshape(-1)
         self.eigentextures = np.asarray(self.eigentextures, dtype=np.float32)
-        self.light_dirs = _directions(self.light_dirs, "light_dirs")
-        self.view_dirs = _directions(self.view_dirs, "view_dirs")
+        self.light_dirs = check_directions(self.light_dirs, "light_dirs")
+        self.view_dirs = check_directions(self.view_dirs, "view_dirs")
         self.channels = tuple(str(c) for c in self.channels)
         self.color_mean = np.asarray(self.color_mean, dtype=np.float32).reshape(-1)
         self.color_matrix = np.asarray(self.color_matrix, dtype=np.float32)
         if self.color_model not in COLOR_MODELS:
             raise InputError(f"color_model: {self.color_model!r} is not one of {COLOR_MODELS}")
-        if self.eigentextures.ndim != 3:
-            raise InputError(f"eigentextures: expected (H, W, k), got {self.eigentextures.shape}")
+        if self.eigentextures.ndim != 3 or min(self.eigentextures.shape) < 1:
+            raise InputError(
+                f"eigentextures: expected (H, W, k) with H, W, k >= 1, got "
+                f"{self.eigentextures.shape}"
+            )
+        if self.color_model != "RGB" and self.n_channels != 3:
+            raise InputError(
+                f"color_model: {self.color_model!r} needs 3 channels, got {self.n_channels} "
+                f"{self.channels} (only RGB may have another count)"
+            )
+        if self.color_mean.shape != (3,) or self.color_matrix.shape != (3, 3):
+            raise InputError(
+                f"color_mean, color_matrix: expected (3,) and (3, 3), got "
+                f"{self.color_mean.shape}, {self.color_matrix.shape}"
+            )
         k = self.eigentextures.shape[2]
         if self.eigen_abrdfs.shape != (self.n_rows, k):
             raise InputError(
@@ -380,8 +421,8 @@ def compress(
     >>> btf = compress(S, shape=(64, 64), light_dirs=L, view_dirs=V, k=20)  # doctest: +SKIP
     """
     data = np.asarray(data)
-    light_dirs = _directions(light_dirs, "light_dirs")
-    view_dirs = _directions(view_dirs, "view_dirs")
+    light_dirs = check_directions(light_dirs, "light_dirs")
+    view_dirs = check_directions(view_dirs, "view_dirs")
     n_rows = len(light_dirs) * len(view_dirs) * len(channels)
     if data.ndim == 5:
         if data.shape[:2] != (len(light_dirs), len(view_dirs)) or data.shape[4] != len(channels):

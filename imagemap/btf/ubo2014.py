@@ -25,6 +25,19 @@ SxV's rows are texels, x fastest (texel = y * width + x). Each decorrelated
 channel has its own factorization; :func:`read_ubo2014` places them in one BTF
 with a block-diagonal U (still orthonormal) and the channel's colour model, so
 decompression and the compressed-domain error work unchanged.
+
+Some files store the transposed factorization ("images" layout): rows = texels and
+cols = direction pairs, U holding the texels' factor and SxV the ABRDFs' times sigma.
+The file has no field naming the layout: readers tell it from rows and cols. When
+width * height equals n_views * n_lights the two layouts have the same sizes and a
+reader takes the normal one (as btflib does), so :func:`write_ubo2014` refuses the
+images layout for such sizes instead of writing a file every reader misreads.
+
+Values are range-checked: a factor that float16 (``scalar_size`` 2) cannot hold
+(|value| > 65504) is refused by the writer, and the reader refuses NaN or infinite
+values, zero sizes, a colour model other than RGB on anything but three channels
+(the decorrelated models are 3-channel transforms) and directions outside the upper
+hemisphere, naming the field and the channel.
 """
 
 from __future__ import annotations
@@ -36,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imagemap.btf.core import BTF
+from imagemap.btf.core import BTF, check_directions
 from imagemap.io import InputError, atomic_path
 
 __all__ = ["SIGNATURE", "COLOR_MODEL_CODES", "read_ubo2014", "write_ubo2014"]
@@ -55,6 +68,9 @@ COLOR_MODEL_CODES = {
     12: "logRGB",
 }
 _SCALAR_TYPES = {2: np.float16, 4: np.float32, 8: np.float64}
+
+#: Meta-block versions the format description above covers (btflib writes 1 to 4).
+META_VERSIONS = (1, 2, 3, 4)
 
 
 class _Reader:
@@ -98,7 +114,14 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
 
     Example
     -------
-    >>> btf = read_ubo2014("leather04_resampled_W400xH400_L151xV151.btf")  # doctest: +SKIP
+    >>> import tempfile
+    >>> path = Path(tempfile.mkdtemp()) / "grey.btf"
+    >>> _ = write_ubo2014(path, eigen_abrdfs=[np.eye(2)], singular_values=[[2.0, 1.0]],
+    ...                   eigentextures=[np.ones((2, 3, 2))], channels=("L",),
+    ...                   light_dirs=[[0, 0], [45, 90]], view_dirs=[[0, 0]])
+    >>> btf = read_ubo2014(path)
+    >>> btf.shape, btf.n_lights, btf.light_dirs[1].round(3).tolist()
+    ((2, 3), 2, [45.0, 90.0])
     """
     path = Path(path)
     if not path.is_file():
@@ -109,6 +132,8 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
         raise InputError(f"{path}: not a Bonn DFMF BTF (signature {signature!r})")
     start = f.pos
     size, version = f.scalars("I"), f.scalars("I")
+    if version not in META_VERSIONS:
+        raise InputError(f"{path}: meta block version {version} is not one of {META_VERSIONS}")
     f.take(240)  # measurement setup, image sensor, light source descriptions
     f.scalars("f", 4)  # pixels per mm, RGB scale factors
     if version > 1:
@@ -118,22 +143,31 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
     channels = ["R", "G", "B"]
     if version > 3:
         n_channels = f.scalars("I")
+        if n_channels < 1:
+            raise InputError(f"{path}: channels: the meta block lists none")
         channels = [f.take(f.scalars("I")).decode("latin-1").strip("\0") for _ in range(n_channels)]
     if f.pos - start != size:
         raise InputError(f"{path}: meta block is {f.pos - start} bytes, header says {size}")
     n_views = f.scalars("I")
     views, lights = [], None
-    for _ in range(n_views):
+    for view in range(n_views):
         views.append(f.scalars("f", 2))
         n_lights = f.scalars("I")
         view_lights = f.array(np.float32, 2 * n_lights).reshape(n_lights, 2)
         if lights is None:
             lights = view_lights
         elif len(view_lights) != len(lights):
-            raise InputError(f"{path}: views with different light sets are not supported")
+            raise InputError(
+                f"{path}: view {view} has {len(view_lights)} lights, view 0 has {len(lights)}: "
+                "views with different light sets are not supported"
+            )
     if lights is None:
-        raise InputError(f"{path}: no views")
+        raise InputError(f"{path}: n_views: the file has no views")
+    if len(lights) == 0:
+        raise InputError(f"{path}: n_lights: the views have no lights")
     width, height = f.scalars("I"), f.scalars("I")
+    if width < 1 or height < 1:
+        raise InputError(f"{path}: width x height is {width}x{height}; both must be >= 1")
     if signature.endswith(b"R"):
         f.array(np.float32, 9 * f.scalars("I"))  # local frame rotations: unused
     f.scalars("I")  # total components (btflib: the largest channel's k); unused
@@ -146,27 +180,35 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
 
     u_blocks, sigmas, eigentextures = [], [], []
     for channel in channels:
+        where = f"{path}: channel {channel!r}"
         scalar = f.scalars("B")
         if scalar not in _SCALAR_TYPES:
-            raise InputError(f"{path}: channel {channel}: scalar size {scalar} not 2, 4 or 8")
+            raise InputError(f"{where}: scalar size {scalar} not 2, 4 or 8")
         dtype = _SCALAR_TYPES[scalar]
         k, n_rows, n_cols = f.scalars("I"), f.scalars("I"), f.scalars("I")
+        if k < 1:
+            raise InputError(f"{where}: k (components) is 0")
+        # Sizes first: a corrupt size is named, not read as a huge truncated array.
+        if (n_rows, n_cols) == (n_pairs, n_texels):
+            transposed = False
+        elif (n_rows, n_cols) == (n_texels, n_pairs):
+            transposed = True  # images stacked column-wise: the factors' roles swap
+        else:
+            raise InputError(
+                f"{where}: factor sizes {n_rows}x{n_cols} do not match "
+                f"{n_views} views x {n_lights} lights and {width}x{height} texels"
+            )
         sigma = f.array(dtype, k).astype(np.float32)
         u = f.array(dtype, n_rows * k).reshape(n_rows, k).astype(np.float32)
         sxv = f.array(dtype, n_cols * k).reshape(n_cols, k).astype(np.float32)
-        # The normal layout first (as btflib's get_fmf_eigen_abrdfs): when the texel
-        # count equals views x lights the two layouts have the same sizes, and files
-        # written by btflib and by write_ubo2014 are normal.
-        if (n_rows, n_cols) == (n_pairs, n_texels):
-            pass
-        elif (n_rows, n_cols) == (n_texels, n_pairs):
-            # Images stacked column-wise instead: the roles of the factors swap.
+        for label, values in (("S", sigma), ("U", u), ("SxV", sxv)):
+            if not np.all(np.isfinite(values)):
+                bad = int(np.count_nonzero(~np.isfinite(values)))
+                raise InputError(f"{where}: {label} has {bad} NaN or infinite values")
+        # Equal sizes (texels == pairs) are read in the normal layout, as btflib's
+        # get_fmf_eigen_abrdfs does; write_ubo2014 never writes the other one then.
+        if transposed:
             u, sxv = sxv / np.where(sigma > 0, sigma, 1), u * sigma
-        else:
-            raise InputError(
-                f"{path}: channel {channel}: factor sizes {n_rows}x{n_cols} do not match "
-                f"{n_views} views x {n_lights} lights and {width}x{height} texels"
-            )
         u_blocks.append(u)
         sigmas.append(sigma)
         eigentextures.append(sxv.reshape(height, width, k))
@@ -181,17 +223,20 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
     for c, u in enumerate(u_blocks):
         big_u[c::n_channels, offset : offset + u.shape[1]] = u[file_rows]
         offset += u.shape[1]
-    return BTF(
-        big_u,
-        np.concatenate(sigmas),
-        np.concatenate(eigentextures, axis=2),
-        np.rad2deg(lights),
-        np.rad2deg(np.array(views, np.float32)),
-        tuple(channels),
-        COLOR_MODEL_CODES[code],
-        color_mean,
-        color_matrix,
-    )
+    try:
+        return BTF(
+            big_u,
+            np.concatenate(sigmas),
+            np.concatenate(eigentextures, axis=2),
+            np.rad2deg(lights),
+            np.rad2deg(np.array(views, np.float32)),
+            tuple(channels),
+            COLOR_MODEL_CODES[code],
+            color_mean,
+            color_matrix,
+        )
+    except InputError as exc:  # directions, colour model against channels
+        raise InputError(f"{path}: {exc}") from None
 
 
 def write_ubo2014(
@@ -226,17 +271,26 @@ def write_ubo2014(
     layout : {"abrdfs", "images"}
         "abrdfs" (btflib's files): U holds the ABRDFs' factor, SxV the texels'.
         "images": the transposed matrix (U rows are texels, SxV rows direction
-        pairs), which some Bonn files use; the reader accepts both.
+        pairs), which some Bonn files use; the reader accepts both. Refused when
+        width * height == n_views * n_lights: the file could not say which it is.
 
     Raises
     ------
     InputError
-        Inconsistent shapes or options (nothing is written).
+        Inconsistent shapes or options, values the scalar type cannot hold, channel
+        names that are not printable ASCII, a colour model other than RGB on other
+        than three channels (nothing is written).
 
     Example
     -------
-    >>> write_ubo2014("t.btf", eigen_abrdfs=[u] * 3, singular_values=[s] * 3,
-    ...               eigentextures=[w] * 3, light_dirs=L, view_dirs=V)  # doctest: +SKIP
+    >>> import tempfile
+    >>> u = np.linalg.qr(np.random.default_rng(0).normal(size=(2, 2)))[0]
+    >>> path = Path(tempfile.mkdtemp()) / "t.btf"
+    >>> _ = write_ubo2014(path, eigen_abrdfs=[u], singular_values=[np.ones(2)],
+    ...                   eigentextures=[np.ones((3, 4, 2))], channels=("L",),
+    ...                   light_dirs=[[0, 0], [45, 90]], view_dirs=[[0, 0]])
+    >>> read_ubo2014(path).shape
+    (3, 4)
     """
     codes = {name: code for code, name in COLOR_MODEL_CODES.items()}
     if color_model not in codes:
@@ -245,12 +299,36 @@ def write_ubo2014(
         raise InputError(f"scalar_size: {scalar_size!r} not one of {sorted(_SCALAR_TYPES)}")
     if layout not in ("abrdfs", "images"):
         raise InputError(f"layout: {layout!r} not 'abrdfs' or 'images'")
-    light_dirs = _check_directions(light_dirs, "light_dirs")
-    view_dirs = _check_directions(view_dirs, "view_dirs")
+    light_dirs = check_directions(light_dirs, "light_dirs")
+    view_dirs = check_directions(view_dirs, "view_dirs")
+    channels = _check_channel_names(channels)
+    if color_model != "RGB" and len(channels) != 3:
+        raise InputError(
+            f"color_model: {color_model!r} is a 3-channel transform; got {len(channels)} "
+            f"channels {channels} (use 'RGB' for another count)"
+        )
     n_pairs = len(light_dirs) * len(view_dirs)
     us, sigmas, sxvs = _check_factors(
         eigen_abrdfs, singular_values, eigentextures, channels, n_pairs
     )
+    height, width = sxvs[0].shape[:2]
+    if layout == "images" and height * width == n_pairs:
+        raise InputError(
+            f"layout: 'images' with {height}x{width} = {height * width} texels and "
+            f"{len(view_dirs)} views x {len(light_dirs)} lights = {n_pairs} direction pairs "
+            "is ambiguous (every reader takes such a file as 'abrdfs'); write layout='abrdfs'"
+        )
+    if layout == "images":
+        us, sxvs_flat = zip(
+            *(
+                (w.reshape(height * width, -1) / np.where(s > 0, s, 1), u * s)
+                for u, s, w in zip(us, sigmas, sxvs, strict=True)
+            ),
+            strict=True,
+        )
+    else:
+        sxvs_flat = [w.reshape(height * width, -1) for w in sxvs]
+    _check_range(us, sigmas, sxvs_flat, channels, scalar_size)
     mean = np.asarray(color_mean, dtype=np.float64)
     matrix = np.eye(3) if color_matrix is None else np.asarray(color_matrix, dtype=np.float64)
     if mean.shape != (3,) or matrix.shape != (3, 3):
@@ -259,7 +337,6 @@ def write_ubo2014(
         )
 
     dtype = np.dtype(_SCALAR_TYPES[scalar_size]).newbyteorder("<")
-    height, width = sxvs[0].shape[:2]
     lights = np.deg2rad(light_dirs).astype("<f4")
     views = np.deg2rad(view_dirs).astype("<f4")
     meta = struct.pack("<I", 4) + b"\0" * 240 + struct.pack("<4f", 1.0, 1.0, 1.0, 1.0)
@@ -277,10 +354,7 @@ def write_ubo2014(
         mean.astype("<f4").tobytes(),
         matrix.astype("<f4").tobytes(),
     ]
-    for u, s, w in zip(us, sigmas, sxvs, strict=True):
-        w = w.reshape(height * width, -1)
-        if layout == "images":
-            u, w = w / np.where(s > 0, s, 1), u * s
+    for u, s, w in zip(us, sigmas, sxvs_flat, strict=True):
         parts += [struct.pack("<BIII", scalar_size, s.size, u.shape[0], w.shape[0])]
         parts += [s.astype(dtype).tobytes(), u.astype(dtype).tobytes(), w.astype(dtype).tobytes()]
     path = Path(path)
@@ -289,13 +363,35 @@ def write_ubo2014(
     return path
 
 
-def _check_directions(value, name: str) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float32)
-    if array.ndim != 2 or array.shape[1] != 2 or len(array) < 1:
-        raise InputError(f"{name}: expected (n, 2) (theta, phi) in degrees, got {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise InputError(f"{name}: has NaN or infinite values")
-    return array
+def _check_channel_names(channels) -> tuple[str, ...]:
+    """Channel names as a tuple, or InputError: each non-empty printable ASCII (the file
+    stores bytes that btflib and pysmtb read as ASCII)."""
+    if isinstance(channels, str):
+        channels = (channels,)
+    names = tuple(channels)
+    for index, name in enumerate(names):
+        if not isinstance(name, str) or not name or not (name.isascii() and name.isprintable()):
+            raise InputError(f"channels[{index}]: {name!r} is not a non-empty printable ASCII name")
+    return names
+
+
+def _check_range(us, sigmas, sxvs, channels, scalar_size: int) -> None:
+    """InputError naming the factor and channel whose values the scalar type cannot hold
+    (float16 overflows to inf above 65504)."""
+    limit = float(np.finfo(_SCALAR_TYPES[scalar_size]).max)
+    for c, name in enumerate(channels):
+        for label, values in (
+            ("eigen_abrdfs", us[c]),
+            ("singular_values", sigmas[c]),
+            ("eigentextures", sxvs[c]),
+        ):
+            largest = float(np.abs(values).max())
+            if largest > limit:
+                raise InputError(
+                    f"{label}[{c}] (channel {name!r}): largest |value| {largest:.6g} exceeds "
+                    f"{limit:g}, the largest scalar_size={scalar_size} float; use a larger "
+                    "scalar_size or rescale"
+                )
 
 
 def _check_factors(eigen_abrdfs, singular_values, eigentextures, channels, n_pairs: int):
@@ -322,9 +418,10 @@ def _check_factors(eigen_abrdfs, singular_values, eigentextures, channels, n_pai
                 f"eigen_abrdfs[{c}] ({where}): expected ({n_pairs}, {k}) for the direction "
                 f"pairs (views x lights) and k = {k} singular values, got {u.shape}"
             )
-        if w.ndim != 3 or w.shape[2] != k:
+        if w.ndim != 3 or w.shape[2] != k or w.shape[0] < 1 or w.shape[1] < 1:
             raise InputError(
-                f"eigentextures[{c}] ({where}): expected (height, width, {k}), got {w.shape}"
+                f"eigentextures[{c}] ({where}): expected (height, width, {k}) with height "
+                f"and width >= 1, got {w.shape}"
             )
         if sxvs and w.shape[:2] != sxvs[0].shape[:2]:
             raise InputError(
