@@ -16,7 +16,7 @@ SIZE, CROP = 160, 112
 
 def _constraint_images(name: str) -> list[np.ndarray]:
     """The material's four top-view images, light theta 22 at azimuths 0..270."""
-    from data_gen.materials import make_material, render_btf_matrix
+    from imagemap.btf.materials import make_material, render_btf_matrix
 
     material = make_material(name, size=SIZE, seed=2)
     lights = np.array([[22.0, a] for a in (0, 90, 180, 270)], np.float32)
@@ -94,9 +94,9 @@ def test_four_copies_of_one_scan_are_refused(cloth):
 
 
 def test_the_sample_tells_which_scan_is_which_on_an_anisotropic_material():
-    from data_gen.materials import make_material, render_btf_matrix
     from imagemap.btf import compress
     from imagemap.btf.extrapolate import constraint_images
+    from imagemap.btf.materials import make_material, render_btf_matrix
 
     lights = np.array([[0, 0], [22, 0], [22, 90], [22, 180], [22, 270]], np.float32)
     views = np.array([[0, 0]], np.float32)

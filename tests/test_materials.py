@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from data_gen.materials import (
+from imagemap.btf.experiment import MATERIAL_SOURCES
+from imagemap.btf.materials import (
     EASY_MATERIALS,
     HARD_MATERIALS,
     Material,
@@ -15,7 +16,6 @@ from data_gen.materials import (
     render_btf_matrix,
     view_hits,
 )
-from imagemap.btf.experiment import MATERIAL_SOURCES
 
 LIGHTS, VIEWS = default_sampling()
 
@@ -119,3 +119,25 @@ def test_same_seed_same_bytes_and_every_material_registered():
     assert not np.array_equal(a, c)
     matrix, source_lights, source_views = MATERIAL_SOURCES["velvet"](16, 0)
     assert matrix.shape == (len(source_lights) * len(source_views) * 3, 16 * 16)
+
+
+def test_imagemap_never_imports_data_gen():
+    """data_gen uses imagemap, never the reverse: ``btf experiment`` finds its materials in
+    imagemap.btf.materials (it imported data_gen.materials to register them)."""
+    import ast
+    from pathlib import Path
+
+    import imagemap
+
+    offenders = []
+    for path in Path(imagemap.__file__).parent.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            else:
+                continue
+            offenders += [f"{path.name}: {n}" for n in names if n.split(".")[0] == "data_gen"]
+    assert not offenders, offenders
+    assert set(MATERIAL_SOURCES) >= set(EASY_MATERIALS) | set(HARD_MATERIALS)

@@ -19,14 +19,14 @@ plugged in through ``extra_methods`` (``moving_average`` by default: see
 
 Material sources: a source is a callable ``(size, seed) -> (S, light_dirs,
 view_dirs)`` giving the ground-truth BTF matrix (rows light x view x RGB, columns
-the size x size texels). This module knows no materials of its own: pass
-``sources={name: source}``, or name materials that someone registered with
-:func:`register_material`. ``data_gen.materials`` registers its procedural
-materials when it is imported (data_gen depends on imagemap, never the reverse).
+the size x size texels). The procedural materials of :mod:`imagemap.btf.materials`
+(cloth, leather, wallpaper, wood, velvet, lacquered_leather, cobbles) are known by
+name; pass ``sources={name: source}`` for others, or :func:`register_material` them.
 
 Example
 -------
->>> import data_gen.materials  # registers cloth, leather, .., velvet, cobbles  # doctest: +SKIP
+>>> sorted(MATERIAL_SOURCES)[:3]
+['cloth', 'cobbles', 'lacquered_leather']
 >>> rows = run_experiment("table2/", materials=["leather"])  # doctest: +SKIP
 """
 
@@ -39,6 +39,7 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +58,7 @@ from imagemap.btf.extrapolate import (
     texture_optimization,
     tile,
 )
+from imagemap.btf.materials import MATERIALS, ground_truth
 from imagemap.io import InputError, atomic_path, write_image
 
 __all__ = [
@@ -106,9 +108,11 @@ ExtraMethod = Callable[[BTF, tuple[int, int], int], BTF]
 #: view_dirs (m, 2)); rows in (light, view, RGB) C order, columns row-major texels.
 MaterialSource = Callable[[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
-#: Materials known by name (filled by :func:`register_material`, e.g. on importing
-#: ``data_gen.materials``).
-MATERIAL_SOURCES: dict[str, MaterialSource] = {}
+#: Materials known by name: the procedural ones of :mod:`imagemap.btf.materials`, and any
+#: added by :func:`register_material`.
+MATERIAL_SOURCES: dict[str, MaterialSource] = {
+    name: partial(ground_truth, name) for name in MATERIALS
+}
 
 
 def register_material(name: str, source: MaterialSource) -> None:
@@ -125,8 +129,8 @@ def _source(name: str, sources: Mapping[str, MaterialSource] | None) -> Material
         return MATERIAL_SOURCES[name]
     known = sorted({*(sources or {}), *MATERIAL_SOURCES})
     raise InputError(
-        f"material {name!r}: no source; known: {known or 'none'} (import data_gen.materials "
-        f"to register the procedural materials, or pass sources={{name: source}})"
+        f"material {name!r}: no source; known: {known or 'none'} (pass "
+        f"sources={{name: source}} or register_material() for another)"
     )
 
 

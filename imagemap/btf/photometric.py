@@ -326,7 +326,7 @@ def enlarge_range_map(
 def btf_direction_vectors(directions: np.ndarray) -> np.ndarray:
     """BTF (theta, phi) directions in degrees to unit vectors in the image frame used here.
 
-    BTF azimuths (:mod:`imagemap.btf.core`, :mod:`data_gen.materials`) count y along the
+    BTF azimuths (:mod:`imagemap.btf.core`, :mod:`imagemap.btf.materials`) count y along the
     image rows (down the screen); the image frame of :mod:`imagemap.render` has y up, so the
     y component changes sign.
 

@@ -266,7 +266,6 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    import data_gen.materials  # noqa: F401  (registers the procedural materials)
     from imagemap.btf.experiment import ExperimentParams, format_table, run_experiment
 
     if args.size < 16:
