@@ -616,9 +616,25 @@ def evaluate(
     eval_views=EVAL_VIEWS,
     size: int = RENDER_SIZE,
 ) -> dict:
-    """Leave-one-out over the folder's meshes; per object-view and per object (UV) rows."""
+    """Leave-one-out over the folder's meshes; per object-view and per object (UV) rows.
+
+    Raises
+    ------
+    InputError
+        Before any synthesis: not a folder, fewer than two meshes, a mesh without UVs
+        and texture, or an ``only`` name that is not one of the meshes.
+    """
+    from imagemap.io import InputError
+
+    if not Path(folder).is_dir():
+        raise InputError(f"{folder}: not a folder of textured meshes")
     files = mesh_files(folder)
     names = [p.stem for p in files]
+    if len(files) < 2:
+        raise InputError(f"{folder}: {len(files)} mesh(es); leave-one-out needs at least two")
+    unknown = sorted(set(only or ()) - set(names))
+    if unknown:
+        raise InputError(f"--only: no mesh named {', '.join(unknown)} in {folder}")
     meshes = {p.stem: TexturedArrays.load(p) for p in files}
     shared = shares_uv_layout(folder, list(meshes.values()))
     rows, uv_rows, pictures = [], [], {}
@@ -772,9 +788,15 @@ def main(argv=None) -> int:
         for path in prepare(args.source, args.out):
             print(path)
         return 0
-    args.out.mkdir(parents=True, exist_ok=True)
+    from imagemap.io import InputError
+
     only = [n for n in args.only.split(",") if n] or None
-    report = evaluate(args.folder, args.out, args.views, args.preset, only)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+        report = evaluate(args.folder, args.out, args.views, args.preset, only)
+    except InputError as exc:
+        print(f"error: {exc}")
+        return 2
     print(table(report))
     for path in write_pictures(report, args.out):
         print(path)

@@ -145,6 +145,21 @@ def test_first_choice_is_the_only_other_example(rm):
     assert rm.first_choice("ffhq_teaser1", SUBSET) == "ffhq_teaser3"
 
 
+def test_bad_folders_stop_before_any_synthesis(rm, tmp_path):
+    from imagemap.io import InputError
+
+    with pytest.raises(InputError, match="not a folder"):
+        rm.evaluate(tmp_path / "missing", tmp_path)
+    (tmp_path / "one").mkdir()
+    (tmp_path / "one" / "a.glb").write_bytes((SUBSET / "ffhq_teaser1.glb").read_bytes())
+    with pytest.raises(InputError, match="at least two"):
+        rm.evaluate(tmp_path / "one", tmp_path)
+    with pytest.raises(InputError, match="no mesh named nobody"):
+        rm.evaluate(SUBSET, tmp_path, only=["nobody"])
+    assert rm.main(["run", str(tmp_path / "one"), "--out", str(tmp_path / "out")]) == 2
+    assert not list((tmp_path / "out").glob("*.glb"))
+
+
 @pytest.mark.slow
 def test_leave_one_out_on_the_subset(rm, tmp_path):
     report = rm.evaluate(SUBSET, tmp_path, views="front,left,right", size=96)
