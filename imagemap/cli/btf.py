@@ -128,6 +128,9 @@ def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubP
     add_common_options(p)
     p.set_defaults(func=_experiment)
 
+    from imagemap.cli import btf_photometric
+
+    btf_photometric.register(btf_subparsers)
     return {"btf": btf_subparsers}
 
 
