@@ -43,7 +43,7 @@ def _per_object_costs(root: Path) -> dict:
     import numpy as np
 
     from imagemap.database import Database
-    from imagemap.depth.pipeline import example_mappings, pyramid_levels
+    from imagemap.depth.guides import example_mappings, pyramid_levels
     from imagemap.io import read_depth
 
     def load_all(database):

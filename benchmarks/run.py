@@ -44,7 +44,7 @@ import sys
 import time
 import tracemalloc
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -664,12 +664,12 @@ def run_scaling(data_dir: Path, settings: Settings, trace: bool) -> list[dict]:
 def run_quality(data_dir: Path, settings: Settings, backend: str) -> dict:
     """Leave-one-out mean CIEDE2000 of the full method on a small fish class."""
     from imagemap import Database
-    from imagemap.depth.pipeline import PRESETS
+    from imagemap.depth.config import PRESETS
     from imagemap.evaluation import leave_one_out, summarize
 
     class_dir = fish_class(data_dir, settings.quality_size, count=settings.quality_count, holdout=0)
     database = Database.from_directory(class_dir)
-    params = replace(PRESETS["fish"], backend=backend)
+    params = PRESETS["fish"].replace_fields(backend=backend)
     start = time.perf_counter()
     evaluation = leave_one_out(database, preset=params, methods=("full",), workers=1)
     seconds = time.perf_counter() - start

@@ -21,7 +21,7 @@ from PIL import Image, ImageDraw
 
 from data_gen import make_instance
 from imagemap import Database, Example, colorize
-from imagemap.depth.pipeline import PRESETS
+from imagemap.depth.config import PRESETS
 from imagemap.evaluation import _copy_nearest
 from imagemap.io import write_image
 
@@ -90,7 +90,7 @@ def crops_figure(count: int = 12) -> np.ndarray:
     for cls, name_boxes in (("fish", ("eye", "stripes")), ("busts", ("face",))):
         db, query = _database(cls, count)
         mask = query.mask
-        laplacian = replace(PRESETS[cls], appearance_pyramid="laplacian")
+        laplacian = PRESETS[cls].replace_fields(appearance_pyramid="laplacian")
         paper = colorize(query.depth, db, replace(laplacian, vote="mean"), seed=0)
         laplacian_copy = colorize(query.depth, db, laplacian, seed=0)
         default = colorize(query.depth, db, cls, seed=0)

@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING
 
 #: Public name -> the module that defines it (imported on first access).
 _LAZY = {
-    "PRESETS": "imagemap.depth.pipeline",
-    "ColorizeParams": "imagemap.depth.pipeline",
+    "PRESETS": "imagemap.depth.config",
+    "DepthConfig": "imagemap.depth.config",
     "ColorizeResult": "imagemap.depth.pipeline",
     "colorize": "imagemap.depth.pipeline",
-    "select_examples": "imagemap.depth.pipeline",
+    "select_examples": "imagemap.depth.selection",
     "Database": "imagemap.database",
     "Example": "imagemap.database",
     "EngineParams": "imagemap.core.engine",
@@ -45,7 +45,7 @@ _LAZY = {
 
 __all__ = [
     "PRESETS",
-    "ColorizeParams",
+    "DepthConfig",
     "ColorizeResult",
     "Database",
     "EngineParams",
@@ -67,13 +67,9 @@ __all__ = [
 if TYPE_CHECKING:  # what type checkers and editors see
     from imagemap.core.engine import EngineParams, EngineResult, Mapping, synthesize
     from imagemap.database import Database, Example
-    from imagemap.depth.pipeline import (
-        PRESETS,
-        ColorizeParams,
-        ColorizeResult,
-        colorize,
-        select_examples,
-    )
+    from imagemap.depth.config import PRESETS, DepthConfig
+    from imagemap.depth.pipeline import ColorizeResult, colorize
+    from imagemap.depth.selection import select_examples
     from imagemap.errors import InputError
     from imagemap.io import read_depth, read_image, write_image
     from imagemap.mesh import colorize_mesh, export_textured, render_mesh

@@ -36,9 +36,10 @@ import re
 import sys
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 from imagemap.database import Database, database_at_view, prepare_database
 from imagemap.io import InputError, atomic_path
@@ -63,18 +64,16 @@ DONE_DIR = ".imagemap-done"
 class BatchOptions:
     """What every object of a batch is synthesized with.
 
-    ``views`` apply to meshes (the first one is also the view at which mesh
-    examples are rendered for depth-map queries); ``background`` None writes RGBA
-    maps with a transparent background, else RGB on that colour.
+    ``options`` are :data:`imagemap.depth.config.OPTIONS` by name (a mapping; kept
+    as sorted pairs), over ``preset``; ``views`` apply to meshes (the first one is
+    also the view at which mesh examples are rendered for depth-map queries);
+    ``background`` None writes RGBA maps with a transparent background, else RGB on
+    that colour. Checked when built: an unknown preset or option, or a value the
+    configuration refuses, is an :class:`InputError`.
     """
 
     preset: str = "busts"
-    m: int | None = None
-    backend: str | None = None
-    example_preference: float | None = None
-    edge_support: float | None = None
-    complete_features: bool | None = None
-    even_palettes: bool | None = None
+    options: Any = ()
     seed: int = 0
     views: tuple[View, ...] = (FRONT,)
     size: tuple[int, int] = DEFAULT_SIZE
@@ -83,6 +82,10 @@ class BatchOptions:
     background: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
+        pairs = self.options.items() if isinstance(self.options, Mapping) else self.options
+        options = tuple(sorted((str(k), v) for k, v in dict(pairs).items() if v is not None))
+        object.__setattr__(self, "options", options)
+        self.config()  # refuses a bad preset, option or combination now
         if isinstance(self.views, str):
             object.__setattr__(self, "views", tuple(parse_views(self.views)))
         if self.mesh_format not in ("glb", "obj"):
@@ -98,14 +101,14 @@ class BatchOptions:
         return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()[:16]
 
     def colorize_options(self) -> dict:
-        return {
-            "m": self.m,
-            "backend": self.backend,
-            "example_preference": self.example_preference,
-            "edge_support": self.edge_support,
-            "complete_features": self.complete_features,
-            "even_palettes": self.even_palettes,
-        }
+        """The options as keywords of :func:`imagemap.colorize`."""
+        return dict(self.options)
+
+    def config(self):
+        """The :class:`~imagemap.depth.config.DepthConfig` every object is made with."""
+        from imagemap.depth.config import resolve_config
+
+        return resolve_config(self.preset, **self.colorize_options())
 
 
 @dataclass(frozen=True)
@@ -268,9 +271,8 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
         result = colorize(
             depth,
             databases[str(options.views[0])],
-            preset=options.preset,
+            preset=options.config(),
             seed=options.seed,
-            **options.colorize_options(),
         )
         picture = (
             result.rgba if options.background is None else result.on_background(options.background)
@@ -285,9 +287,8 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
             list(options.views),
             size=options.size,
             texture_size=options.texture_size,
-            preset=options.preset,
+            preset=options.config(),
             seed=options.seed,
-            **options.colorize_options(),
         )
         export_textured(made.mesh, job.output)
         examples = sorted({n for r in made.results for n in r.example_names})

@@ -64,7 +64,9 @@ import numpy as np
 from imagemap.align import aligned_source, paste_aligned
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.database import Database, Example
-from imagemap.depth.pipeline import PRESETS, ColorizeParams, colorize, select_examples
+from imagemap.depth.config import FINISHES, PRESETS, DepthConfig, resolve_config
+from imagemap.depth.pipeline import colorize
+from imagemap.depth.selection import select_examples
 from imagemap.io import InputError
 from imagemap.metrics import (
     FaultyRule,
@@ -112,6 +114,7 @@ METHODS: tuple[str, ...] = (
     "mean_vote",
     "no_position",
     "laplacian",
+    "paper",
 )
 
 
@@ -215,45 +218,49 @@ def class_of(example: Example) -> str:
     return re.sub(r"[_-]?\d+$", "", example.name) or example.name
 
 
-def method_params(method: str, params: ColorizeParams) -> ColorizeParams | None:
-    """The engine parameters of an engine method (None for ``copy_nearest``).
+def method_params(method: str, config: DepthConfig) -> DepthConfig | None:
+    """The configuration of an engine method (None for ``copy_nearest``).
 
     Parameters
     ----------
     method : str
         One of :data:`METHODS`.
-    params : ColorizeParams
-        The class preset.
+    config : DepthConfig
+        The class preset (with the options the run was given).
 
     Returns
     -------
-    ColorizeParams or None
+    DepthConfig or None
 
     Example
     -------
-    >>> method_params("one_pass", PRESETS["fish"]).patch_sizes
+    >>> method_params("one_pass", PRESETS["fish"]).pyramid.patch_sizes
     (7,)
+    >>> method_params("paper", PRESETS["fish"]).finish.vote
+    'mean'
     """
     if method == "full":
-        return params
+        return config
     if method == "copy_nearest":
         return None
     if method == "one_pass":
         # Fig. 1: one scale, windows of the paper's k, depth only, one vote.
-        return replace(
-            params,
-            patch_sizes=params.patch_sizes[:1],
+        return config.replace_fields(
+            patch_sizes=config.pyramid.patch_sizes[:1],
             max_iterations=0,
             position_weight=0.0,
             vote="mean",
-            grow_pyramid=False,  # one level: Fig. 1 has no pyramid
+            even_palettes=False,
+            grow=False,  # one level: Fig. 1 has no pyramid
         )
     if method == "mean_vote":
-        return replace(params, vote="mean")
+        return config.replace_fields(vote="mean", even_palettes=False)
     if method == "no_position":
-        return replace(params, position_weight=0.0)
+        return config.replace_fields(position_weight=0.0)
     if method == "laplacian":
-        return replace(params, appearance_pyramid="laplacian")
+        return config.replace_fields(appearance_pyramid="laplacian")
+    if method == "paper":
+        return config.replace_fields(**FINISHES["paper"])
     raise InputError(f"unknown method {method!r}; use some of {', '.join(METHODS)}")
 
 
@@ -304,7 +311,7 @@ def evaluate_object(
     database: Database,
     name: str,
     *,
-    preset: str | ColorizeParams = "fish",
+    preset: str | DepthConfig = "fish",
     methods: tuple[str, ...] = METHODS,
     seed: int = 0,
 ) -> ObjectEvaluation:
@@ -316,7 +323,7 @@ def evaluate_object(
         The whole database; the object is left out of it for its own synthesis.
     name : str
         The object.
-    preset : str or ColorizeParams
+    preset : str or DepthConfig
         Class preset of the engine methods.
     methods : tuple of str
         Some of :data:`METHODS`.
@@ -333,7 +340,7 @@ def evaluate_object(
     >>> obj = evaluate_object(db, "fish_003", preset="fish")  # doctest: +SKIP
     >>> obj.results["full"].metrics.ciede2000  # doctest: +SKIP
     """
-    params = PRESETS[preset] if isinstance(preset, str) else preset
+    params = resolve_config(preset)
     example = database[name]
     others = database.without(name)
     if len(others) == 0:
@@ -390,12 +397,13 @@ def _task(args: tuple) -> ObjectEvaluation:
 def leave_one_out(
     database: Database,
     *,
-    preset: str | ColorizeParams | None = None,
+    preset: str | DepthConfig | None = None,
     methods: tuple[str, ...] | list[str] = METHODS,
     workers: int = 1,
     limit: int | None = None,
     seed: int = 0,
     quiet: bool = True,
+    options: dict | None = None,
 ) -> Evaluation:
     """Leave-one-out evaluation of every object of ``database`` with every method.
 
@@ -404,8 +412,8 @@ def leave_one_out(
     database : Database
         At least two examples of the same size; labels (``NAME_labels.png``) and a
         JSON ``class`` field are used where present.
-    preset : str or ColorizeParams, optional
-        Engine parameters; by default each class's preset of the same name
+    preset : str or DepthConfig, optional
+        The configuration; by default each class's preset of the same name
         (``"busts"`` for a class with no preset of its name).
     methods : sequence of str
         Some of :data:`METHODS` (all by default).
@@ -420,6 +428,9 @@ def leave_one_out(
         Seed of every synthesis; results do not depend on ``workers``.
     quiet : bool
         No progress bar.
+    options : dict, optional
+        :data:`imagemap.depth.config.OPTIONS` by name, applied to every class's
+        preset before the methods derive from it.
 
     Returns
     -------
@@ -459,7 +470,7 @@ def leave_one_out(
     rules: dict[str, FaultyRule] = {}
     reference: dict[str, dict] = {}
     for class_name, members in classes.items():
-        if isinstance(preset, ColorizeParams):
+        if isinstance(preset, DepthConfig):
             presets[class_name] = "custom"
         else:
             presets[class_name] = preset or (class_name if class_name in PRESETS else "busts")
@@ -473,8 +484,8 @@ def leave_one_out(
     tasks = []
     for name in names:
         class_name = class_of(database[name])
-        chosen = preset if isinstance(preset, ColorizeParams) else presets[class_name]
-        tasks.append((database, name, chosen, methods, seed))
+        chosen = preset if isinstance(preset, DepthConfig) else presets[class_name]
+        tasks.append((database, name, resolve_config(chosen, **(options or {})), methods, seed))
 
     results: dict[str, ObjectEvaluation] = {}
     errors: dict[str, str] = {}

@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import math
 import numbers
-import os
 import sys
 
 # Nothing heavy at import: the command line builds its parser with these types
@@ -26,7 +25,6 @@ import sys
 from imagemap.errors import InputError
 
 __all__ = [
-    "check_colorize_arguments",
     "check_examples",
     "check_float",
     "check_int",
@@ -96,60 +94,6 @@ def check_examples(examples) -> list[str] | None:
             raise InputError(f"examples: expected example names (strings), got {name!r}")
     if len(set(names)) != len(names):
         raise InputError(f"examples: a name is given twice in {names}")
-    return names
-
-
-def check_colorize_arguments(
-    depth,
-    database,
-    preset=None,
-    *,
-    m=None,
-    examples=None,
-    backend=None,
-    example_preference=None,
-    seed=0,
-    **_others,
-) -> list[str] | None:
-    """Check the arguments of :func:`imagemap.colorize`; return ``examples`` as a list.
-
-    Called as ``check_colorize_arguments(**locals())`` on the first line of
-    ``colorize`` (arguments it does not check are ignored). Raises
-    :class:`InputError` naming the argument, then runs the memory guard
-    (:func:`imagemap.depth.budget.guard_colorize`), so a run too large for this machine
-    is refused before it starts.
-    """
-    from imagemap.core.engine import BACKENDS
-    from imagemap.database import Database
-    from imagemap.depth import budget
-    from imagemap.depth.pipeline import PRESETS, ColorizeParams
-
-    if isinstance(depth, (str, os.PathLike)):
-        raise InputError(
-            f"depth: expected an array, got the path {os.fspath(depth)!r} "
-            "(read it with imagemap.read_depth)"
-        )
-    if not isinstance(database, Database):
-        raise InputError(
-            "database: expected an imagemap.Database (Database.from_directory(DIR), or "
-            f"Database([Example.from_arrays(...), ...])), got {type(database).__name__}"
-        )
-    if preset is not None and not isinstance(preset, (str, ColorizeParams)):
-        raise InputError(f"preset: expected a preset name or ColorizeParams, got {preset!r}")
-    if isinstance(preset, str) and preset not in PRESETS:
-        raise InputError(f"preset: unknown preset {preset!r}; use one of {sorted(PRESETS)}")
-    if m is not None:
-        check_int("m", m, minimum=1)
-    names = check_examples(examples)
-    if backend is not None and backend not in BACKENDS:
-        raise InputError(f"backend: unknown backend {backend!r}; use one of {list(BACKENDS)}")
-    if example_preference is not None:
-        check_float("example_preference", example_preference, minimum=0.0)
-    check_seed(seed)
-    if names:
-        for name in names:
-            database[name]  # an unknown name is an InputError listing the known ones
-    budget.guard_colorize(depth, database, preset, m=m, examples=names)
     return names
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from imagemap import Database, Example, colorize, select_examples
-from imagemap.depth.pipeline import PRESETS, to_rgb, to_ycbcr
+from imagemap.depth.config import PRESETS
+from imagemap.depth.guides import to_rgb, to_ycbcr
 from imagemap.io import InputError
 
 
@@ -54,14 +55,16 @@ def test_database_of_one_and_manual_examples(blob_database, query_blob):
 def test_ycbcr_round_trip_and_presets_follow_table_1():
     rgb = np.random.default_rng(0).random((8, 8, 3)).astype(np.float32)
     np.testing.assert_allclose(to_rgb(to_ycbcr(rgb)), rgb, atol=1e-5)
-    assert PRESETS["humans"].m == 1 and PRESETS["humans"].patch_sizes == (7, 9, 9)
-    assert PRESETS["fish"].m == 2 and PRESETS["fish"].patch_sizes == (7, 11, 9)
-    assert PRESETS["fish"].position_weight < PRESETS["busts"].position_weight
+    assert PRESETS["humans"].selection.m == 1
+    assert PRESETS["humans"].pyramid.patch_sizes == (7, 9, 9)
+    assert PRESETS["fish"].selection.m == 2
+    assert PRESETS["fish"].pyramid.patch_sizes == (7, 11, 9)
+    assert PRESETS["fish"].guides.position_weight < PRESETS["busts"].guides.position_weight
 
 
 def test_pyramid_depth_follows_object_size():
     """Three levels where the coarsest still sees the object 1.25 windows across."""
-    from imagemap.depth.pipeline import pyramid_levels
+    from imagemap.depth.guides import pyramid_levels
 
     def square(side):
         mask = np.zeros((400, 400), bool)

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap import Database, DepthConfig, Example, colorize
 from imagemap.core import blend
 from imagemap.core.blend import coherent_edges, copy_through, merge_regions, seamless_copy
-from imagemap.depth.pipeline import PRESETS, level_patch_sizes, pyramid_levels
+from imagemap.depth.config import PRESETS
+from imagemap.depth.guides import level_patch_sizes, pyramid_levels
 from imagemap.metrics import (
     blur_ratio,
     feature_components,
@@ -211,7 +212,7 @@ def test_an_eye_without_depth_signature_is_drawn_deterministically():
         [Example.from_arrays("a", d1, i1, labels=l1), Example.from_arrays("b", d2, i2, labels=l2)]
     )
     depth, truth, labels = eye_object(centre=(32, 48), radii=(20, 36), eye=(26, 28))
-    params = replace(PRESETS["fish"], m=2)
+    params = PRESETS["fish"].replace_fields(m=2)
     first = colorize(depth, db, params, seed=0)
     again = colorize(depth, db, params, seed=0)
     assert first.image.tobytes() == again.image.tobytes()
@@ -221,7 +222,7 @@ def test_an_eye_without_depth_signature_is_drawn_deterministically():
 @pytest.mark.parametrize("vote", ["mean", "mode"])
 def test_target_never_increases_with_either_vote(blob_database, query_blob, vote):
     depth, _ = query_blob
-    params = replace(PRESETS["busts"], vote=vote)
+    params = PRESETS["busts"].replace_fields(vote=vote)
     result = colorize(depth, blob_database, params, seed=3)
     for values in result.objective:
         assert np.all(np.diff(values) <= 1e-6 * np.abs(np.asarray(values[:-1])))
@@ -229,8 +230,8 @@ def test_target_never_increases_with_either_vote(blob_database, query_blob, vote
 
 def test_copy_vote_is_crisper_than_the_mean_vote(blob_database, query_blob):
     depth, _ = query_blob
-    voted = colorize(depth, blob_database, replace(PRESETS["busts"], vote="mean"), seed=0)
-    copied = colorize(depth, blob_database, replace(PRESETS["busts"], vote="copy"), seed=0)
+    voted = colorize(depth, blob_database, PRESETS["busts"].replace_fields(vote="mean"), seed=0)
+    copied = colorize(depth, blob_database, PRESETS["busts"].replace_fields(vote="copy"), seed=0)
     images = [e.image for e in blob_database.examples]
     mask = depth > 0
 
@@ -240,7 +241,7 @@ def test_copy_vote_is_crisper_than_the_mean_vote(blob_database, query_blob):
         return blur_ratio(result.image, copy_through(order, result.source), mask)
 
     assert ratio(copied) > ratio(voted)
-    assert ColorizeParams().vote == "copy"
+    assert DepthConfig().finish.vote == "copy"
 
 
 def test_a_missing_feature_at_the_silhouette_is_not_counted_as_drawn():
@@ -291,7 +292,7 @@ def eye_at_the_outline():
     assert ndimage.distance_transform_edt(mask)[eye].min() <= 2  # the eye touches the edge
 
     def eye_copied_from_eyes(**overrides):
-        result = colorize(depth, db, replace(PRESETS["fish"], m=2, **overrides), seed=0)
+        result = colorize(depth, db, PRESETS["fish"].replace_fields(m=2, **overrides), seed=0)
         by_name = {"a": l1, "b": l2}
         example_labels = [by_name[name] for name in result.example_names]
         return np.mean(source_labels(result.source, example_labels, mask)[eye] == 2)
@@ -334,7 +335,9 @@ def test_the_mean_vote_is_the_ems_own_map_whatever_the_final_reseed(blob_databas
     paper's mean vote (and its source map) and the EM's target trace stay the same."""
     depth, _ = query_blob
     results = [
-        colorize(depth, blob_database, replace(PRESETS["busts"], vote=vote, final_reseed=r), seed=0)
+        colorize(
+            depth, blob_database, PRESETS["busts"].replace_fields(vote=vote, final_reseed=r), seed=0
+        )
         for vote in ("mean", "copy")
         for r in (0.0, 0.7)
     ]
@@ -346,7 +349,10 @@ def test_the_mean_vote_is_the_ems_own_map_whatever_the_final_reseed(blob_databas
 
 
 def test_silhouette_band_is_a_clipped_signed_distance():
-    from imagemap.depth.pipeline import SILHOUETTE_RANGE, _silhouette_band
+    from imagemap.depth.config import Guides
+    from imagemap.depth.guides import silhouette_band as _silhouette_band
+
+    SILHOUETTE_RANGE = Guides().silhouette_range
 
     mask = np.zeros((20, 20), bool)
     mask[5:15, 5:15] = True
@@ -387,7 +393,7 @@ def test_new_colorize_settings_are_checked(field, value):
     from imagemap.io import InputError
 
     with pytest.raises(InputError, match=field):
-        ColorizeParams(**{field: value})
+        DepthConfig().replace_fields(**{field: value})
 
 
 def test_context_is_the_coarser_levels_colours_on_the_finer_grid():
@@ -410,18 +416,19 @@ def test_context_is_the_coarser_levels_colours_on_the_finer_grid():
 
 
 def test_only_fine_levels_of_large_objects_get_context():
-    from imagemap.depth.pipeline import context_levels
+    from imagemap.depth.guides import context_level_weights, context_levels, level_plans
 
     small = np.zeros((150, 200), bool)
     small[40:110, 60:140] = True  # a 75 px object, the paper's scale
     assert context_levels(small, (7, 11, 9)) == 0
-    assert ColorizeParams().engine_params(2, 0).context_weights == ()
+    weak = DepthConfig().replace_fields(wide_context_weight=0.0)
+    assert all(not plan.has_context for plan in level_plans(weak, small, 2))
     big = np.kron(small, np.ones((4, 4), bool))
     assert context_levels(big, (7, 11, 9, 9)) == 1
-    params = ColorizeParams().engine_params(2, 1)
-    assert params.context_levels == 1 and len(params.context_weights) == 3
+    plans = level_plans(weak.replace_fields(patch_sizes=(7, 11, 9, 9)), big, 2)
+    assert [plan.has_context for plan in plans] == [True, False, False, False]
+    assert len(plans[0].context_weights) == 3
     # Every level but the coarsest gets the weak context; the fine ones the full one.
-    from imagemap.depth.pipeline import context_level_weights
 
     assert context_level_weights(small, (7, 11, 9), 0.25) == (2, (0.25, 0.25, 0.0))
     assert context_level_weights(big, (7, 11, 9, 9), 0.25) == (3, (1.0, 0.25, 0.25, 0.0))
@@ -430,40 +437,63 @@ def test_only_fine_levels_of_large_objects_get_context():
 
 def _busts_mappings(blob_database, query_blob, levels=3):
     """The query's and the first two examples' mappings with the busts preset's bands."""
-    from imagemap.depth.pipeline import depth_mappings, example_mappings
+    from imagemap.depth.guides import depth_mappings, example_mappings
 
-    clip = PRESETS["busts"].detail_clip
-    query = depth_mappings(query_blob[0], levels, clip, True)
+    guides = PRESETS["busts"].guides
+    query = depth_mappings(query_blob[0], levels, guides)
     examples = blob_database.examples[:2]
-    return query, [example_mappings(e, levels, "laplacian", clip, True) for e in examples]
+    return query, [example_mappings(e, levels, "laplacian", guides) for e in examples]
+
+
+def _busts_engine_params(levels_with_context, weight=1.0, max_iterations=3):
+    """The busts preset's engine parameters for three levels, with the luma context at
+    ``levels_with_context`` (level -> factor) only."""
+    from imagemap.core.params import LevelPlan
+    from imagemap.depth.pipeline import engine_params
+
+    mask = np.ones((48, 64), bool)
+    params = engine_params(PRESETS["busts"], mask, 2)
+    plans = tuple(
+        LevelPlan(
+            patch_size=plan.patch_size,
+            max_iterations=max_iterations,
+            exemplar_costs=plan.exemplar_costs,
+            context_weights=(
+                (weight * levels_with_context[level], 0.0, 0.0)
+                if level in levels_with_context
+                else ()
+            ),
+            guide_reseed=plan.guide_reseed,
+            final_reseed=plan.final_reseed,
+        )
+        for level, plan in enumerate(params.levels)
+    )
+    return replace(params, levels=plans)
 
 
 def test_a_level_weight_of_zero_is_no_context_there(blob_database, query_blob):
     from imagemap.core.engine import synthesize
 
-    params = PRESETS["busts"]
     query, exemplars = _busts_mappings(blob_database, query_blob)
-    finest = replace(params.engine_params(2, 1), max_iterations=3)
-    weighted = replace(finest, context_levels=2, context_level_weights=(1.0, 0.0, 0.0))
+    finest = _busts_engine_params({0: 1.0})
+    weighted = _busts_engine_params({0: 1.0, 1: 0.0})
     a = synthesize(query, exemplars, finest, seed=1)
     b = synthesize(query, exemplars, weighted, seed=1)
     assert a.appearance[0].tobytes() == b.appearance[0].tobytes()
-    weak = replace(weighted, context_level_weights=(0.25, 0.0, 0.0))
+    weak = _busts_engine_params({0: 0.25})
     c = synthesize(query, exemplars, weak, seed=1)
     assert c.appearance[0].tobytes() != a.appearance[0].tobytes()
-    with pytest.raises(ValueError, match="context level weights"):
-        synthesize(query, exemplars, replace(finest, context_level_weights=(1.0,)), seed=1)
 
 
 def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_blob):
     """With context on every fine level the EM still never raises its target, and the
     same seed gives the same bytes; without it the map differs (it is used)."""
     from imagemap.core.engine import synthesize
+    from imagemap.core.params import LevelPlan
 
-    params = PRESETS["busts"]
     query, exemplars = _busts_mappings(blob_database, query_blob)
-    on = replace(params.engine_params(2, 2), max_iterations=4)
-    off = replace(on, context_weights=())
+    on = _busts_engine_params({0: 1.0, 1: 1.0}, max_iterations=4)
+    off = _busts_engine_params({}, max_iterations=4)
     first, again = (
         synthesize(query, exemplars, on, seed=1),
         synthesize(query, exemplars, on, seed=1),
@@ -473,8 +503,9 @@ def test_context_keeps_the_target_monotone_and_the_bytes(blob_database, query_bl
         assert np.all(np.diff(values) <= 1e-6 * np.abs(np.asarray(values[:-1])))
     plain = synthesize(query, exemplars, off, seed=1)
     assert plain.appearance[0].tobytes() != first.appearance[0].tobytes()
+    wrong = (LevelPlan(patch_size=7, context_weights=(1.0,)),) + on.levels[1:]
     with pytest.raises(ValueError, match="context weights"):
-        synthesize(query, exemplars, replace(on, context_weights=(1.0,)), seed=1)
+        synthesize(query, exemplars, replace(on, levels=wrong), seed=1)
 
 
 def _skin_and_shirt_with_an_eye():
@@ -538,7 +569,7 @@ def test_region_merge_follows_the_reference_to_a_better_offset():
 
 def test_colorize_with_region_merge_is_deterministic(blob_database, query_blob):
     depth, _ = query_blob
-    params = replace(PRESETS["busts"], merge_regions=True, max_iterations=3)
+    params = PRESETS["busts"].replace_fields(merge_regions=True, max_iterations=3)
     first = colorize(depth, blob_database, preset=params, seed=2)
     again = colorize(depth, blob_database, preset=params, seed=2)
     assert first.image.tobytes() == again.image.tobytes()
@@ -548,11 +579,12 @@ def test_the_blend_keeps_the_rim_at_the_copys_colours(blob_database, query_blob)
     """Outside the object the voted map holds whatever the windows left there (zeros
     on plain colour levels: green in YCbCr); the blend's reference there is the copy,
     so the rim keeps the copied colours (it had drifted 0.16 towards the zeros)."""
-    from imagemap.depth.pipeline import _example_ycbcr, to_ycbcr
+    from imagemap.depth.guides import example_ycbcr as _example_ycbcr
+    from imagemap.depth.guides import to_ycbcr
 
     depth, _ = query_blob
     result = colorize(depth, blob_database, "busts", seed=0)
-    assert result.params.appearance_pyramid == "gaussian"
+    assert result.config.matching.appearance_pyramid == "gaussian"
     mask = depth > 0
     rim = mask & ~ndimage.binary_erosion(mask, iterations=3)
     copied = copy_through(
@@ -566,7 +598,7 @@ def test_the_blend_keeps_the_rim_at_the_copys_colours(blob_database, query_blob)
 def test_example_mappings_refuse_the_old_boolean(blob_database):
     """``example_mappings`` took ``use_pyramid=True`` where it now takes a pyramid name:
     a leftover bool is refused rather than read silently as plain colours."""
-    from imagemap.depth.pipeline import example_mappings
+    from imagemap.depth.guides import example_mappings
 
     example = blob_database.examples[0]
     with pytest.raises(ValueError, match="appearance_pyramid"):

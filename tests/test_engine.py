@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from imagemap import ColorizeParams, Database, Example, colorize
+from imagemap import Database, DepthConfig, Example, colorize
 from imagemap.core.engine import EngineParams, Mapping, synthesize
-from imagemap.depth.pipeline import PRESETS
+from imagemap.depth.config import PRESETS
 
 
 def slab(shape, top_left, size, left_colour=(0.9, 0.1, 0.1), right_colour=(0.1, 0.1, 0.9)):
@@ -64,7 +64,7 @@ def test_position_term_makes_synthesis_non_stationary():
     inner = ndimage.binary_erosion(depth > 0, iterations=12)
     accuracy = {}
     for weight in (1.0, 0.0):
-        params = ColorizeParams(m=2, position_weight=weight, backend="exact")
+        params = DepthConfig().replace_fields(m=2, position_weight=weight, backend="exact")
         image = colorize(depth, db, params).image
         red = image[..., 0] > image[..., 2]
         accuracy[weight] = float((red == left)[inner].mean())
@@ -155,7 +155,9 @@ def test_exemplar_costs_steer_the_source(blob_database, query_blob):
     depth, _ = query_blob
     free = colorize(depth, blob_database, "busts", m=2, example_preference=0.0)
     assert len(set(np.unique(free.source[..., 0][depth > 0]))) == 2
-    everywhere = replace(PRESETS["busts"], example_preference=100.0, preference_at_finest=True)
+    everywhere = PRESETS["busts"].replace_fields(
+        example_preference=100.0, preference_at_finest=True
+    )
     steered = colorize(depth, blob_database, everywhere, m=2)
     assert set(np.unique(steered.source[..., 0][depth > 0])) == {0}
     # By default the finest level is free: the coarse levels' choice, mostly kept.
@@ -169,38 +171,41 @@ def test_exemplar_costs_steer_the_source(blob_database, query_blob):
         synthesize([Mapping(guide=rng.random((20, 20)))], [[exemplar]], params)
 
 
-def test_feature_level_moves_the_final_reseed_and_the_free_levels(blob_database, query_blob):
-    """``feature_level`` is where a large map draws its features: the final reseed
+def test_the_level_plan_moves_the_final_reseed_and_the_free_levels(blob_database, query_blob):
+    """A front end's level plan says where the features are drawn: the final reseed
     follows that level's EM (its own trace unchanged, the finer level starting from
-    the new matches), and the exemplar costs stop there, not only at the finest."""
-    from imagemap.depth.pipeline import depth_mappings, example_mappings
+    the new matches), the exemplar costs stop there, and the finer levels refine."""
+    from imagemap.core.params import LevelPlan
+    from imagemap.depth.guides import depth_mappings, example_mappings
 
     depth, _ = query_blob
     chosen = [blob_database[0], blob_database[3]]
+    guides = PRESETS["busts"].guides
+    base = EngineParams(guide_weights=(1.0, 2.0, 0.5), appearance_weights=(1.0, 0.5, 0.5))
 
-    def run(**overrides):
-        params = replace(PRESETS["busts"], patch_sizes=(5, 5)).engine_params(len(chosen))
-        params = replace(params, **overrides)
-        query = depth_mappings(depth, 2, 3.0, True)
-        exemplars = [example_mappings(e, 2, "gaussian", 3.0, True) for e in chosen]
+    def run(*plans):
+        params = replace(base, levels=tuple(LevelPlan(5, **plan) for plan in plans))
+        query = depth_mappings(depth, 2, guides)
+        exemplars = [example_mappings(e, 2, "gaussian", guides) for e in chosen]
         return synthesize(query, exemplars, params, seed=0, quiet=True)
 
-    plain = run(final_reseed=0.0, exemplar_costs=())
-    at_finest = run(final_reseed=0.95, exemplar_costs=(), feature_level=0)
-    at_coarser = run(final_reseed=0.95, exemplar_costs=(), feature_level=1)
+    plain = run({}, {})
+    at_finest = run({"final_reseed": 0.95}, {})
+    at_coarser = run({}, {"final_reseed": 0.95})
     assert at_finest.objective == plain.objective  # after the last EM: only the copy moves
     assert at_coarser.objective[1] == plain.objective[1]
     assert at_coarser.objective[0] != plain.objective[0]
 
     mask = depth > 0
-    costly = dict(exemplar_costs=(0.0, 100.0), exemplar_costs_at_finest=False)
-    finest_free = run(**costly, feature_level=0).source[..., 0][mask]
-    both_free = run(**costly, feature_level=1).source[..., 0][mask]
-    assert np.mean(both_free == 1) > np.mean(finest_free == 1)
-    # The levels finer than the feature level refine it: a short EM.
-    assert len(at_coarser.objective[0]) <= 2 < len(plain.objective[0])
-    assert len(run(feature_level=1, refine_iterations=1).objective[0]) == 1
-    with pytest.raises(ValueError, match="feature_level"):
-        EngineParams(feature_level=-1)
-    with pytest.raises(ValueError, match="refine_iterations"):
-        EngineParams(refine_iterations=0)
+    costly = {"exemplar_costs": (0.0, 100.0)}
+    finest_free = run({}, costly).source[..., 0][mask]
+    both_costly = run(costly, costly).source[..., 0][mask]
+    assert np.mean(finest_free == 1) > np.mean(both_costly == 1)
+    # A level's iteration cap is its own.
+    assert len(run({"max_iterations": 1}, {}).objective[0]) == 1
+    with pytest.raises(ValueError, match="final_reseed"):
+        LevelPlan(5, final_reseed=1.0)
+    with pytest.raises(ValueError, match="exemplar_costs"):
+        LevelPlan(5, exemplar_costs=(-1.0,))
+    with pytest.raises(ValueError, match="level plans"):
+        EngineParams(levels=(LevelPlan(5),)).level_plans(2)

@@ -141,20 +141,24 @@ def test_report_files_and_links(class_evaluation, tmp_path):
 
 
 def test_method_params_of_the_baselines():
-    from imagemap.depth.pipeline import PRESETS
+    from imagemap.depth.config import PRESETS
 
     fish = PRESETS["fish"]
     assert method_params("full", fish) == fish
     assert method_params("copy_nearest", fish) is None
     one = method_params("one_pass", fish)
-    assert (one.patch_sizes, one.max_iterations, one.position_weight) == ((7,), 0, 0.0)
-    assert method_params("no_position", fish).position_weight == 0.0
-    assert method_params("laplacian", fish).appearance_pyramid == "laplacian"
-    assert fish.appearance_pyramid == "gaussian"
+    assert one.pyramid.patch_sizes == (7,) and one.matching.max_iterations == 0
+    assert one.guides.position_weight == 0.0
+    assert method_params("no_position", fish).guides.position_weight == 0.0
+    assert method_params("laplacian", fish).matching.appearance_pyramid == "laplacian"
+    assert fish.matching.appearance_pyramid == "gaussian"
     with pytest.raises(InputError, match="unknown method"):
         method_params("best", fish)
-    assert method_params("mean_vote", fish).vote == "mean" and fish.vote == "copy"
-    assert one.vote == "mean" and not one.grow_pyramid  # Fig. 1: one level, mean vote
+    assert method_params("mean_vote", fish).finish.vote == "mean" and fish.finish.vote == "copy"
+    assert one.finish.vote == "mean" and not one.pyramid.grow  # Fig. 1: one level, mean vote
+    paper = method_params("paper", fish)
+    assert (paper.finish.vote, paper.matching.appearance_pyramid) == ("mean", "laplacian")
+    assert not (paper.finish.complete_features or paper.finish.even_palettes)
     assert set(METHODS) == {
         "full",
         "copy_nearest",
@@ -162,6 +166,7 @@ def test_method_params_of_the_baselines():
         "mean_vote",
         "no_position",
         "laplacian",
+        "paper",
     }
 
 

@@ -5,16 +5,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from imagemap.core import engine
-from imagemap.core.engine import (
-    EngineParams,
-    Mapping,
-    _LevelSolver,
-    _pad_crop_into,
-    _pad_into,
-    _Timer,
-    synthesize,
-)
+from imagemap.core import solver as engine
+from imagemap.core.engine import EngineParams, Mapping, ReleasableLevels, synthesize
+from imagemap.core.solver import LevelSolver as _LevelSolver
+from imagemap.core.solver import Timer as _Timer
+from imagemap.core.solver import _pad_crop_into, _pad_into
 
 
 @pytest.mark.parametrize("mode", ["constant", "reflect", "edge"])
@@ -194,24 +189,24 @@ def test_release_search_keeps_what_votes_and_dense_maps_need():
 
 
 def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
-    from dataclasses import replace
-
     from imagemap.database import Database, Example
     from imagemap.depth import budget
-    from imagemap.depth.pipeline import PRESETS, pyramid_levels
+    from imagemap.depth.config import PRESETS
+    from imagemap.depth.guides import pyramid_levels
 
     rng = np.random.default_rng(0)
     depth = np.zeros((600, 800), np.float32)
     depth[100:500, 100:700] = 0.5 + 0.1 * rng.random((400, 600))
     database = Database([Example.from_arrays("a", depth, np.zeros((600, 800, 3), np.float32))])
     with_band = PRESETS["fish"]
-    assert with_band.silhouette_weight > 0
-    without = replace(with_band, silhouette_weight=0.0)
+    assert with_band.guides.silhouette_weight > 0
+    without = with_band.replace_fields(silhouette_weight=0.0)
     more = budget.colorize_estimate(depth, database, with_band)
     fewer = budget.colorize_estimate(depth, database, without)
     assert more.bytes > fewer.bytes and more.seconds > fewer.seconds
     # The pyramid grown for a large object, each level estimated.
-    assert more.levels == pyramid_levels(depth > 0, with_band.patch_sizes) > with_band.levels
+    patch_sizes = with_band.pyramid.patch_sizes
+    assert more.levels == pyramid_levels(depth > 0, patch_sizes) > with_band.pyramid.levels
 
 
 def _pyramid_scene(size, seed, n_levels=2):
@@ -262,7 +257,7 @@ def test_handed_over_pyramids_are_freed_level_by_level_with_the_same_result():
     _synthesis_peak(list)  # kernels loaded first
     kept, kept_peak, finest, query, exemplars = _synthesis_peak(list)
     assert all(m is not None for m in query) and all(m is not None for e in exemplars for m in e)
-    released, released_peak, _, query, exemplars = _synthesis_peak(engine.ReleasableLevels)
+    released, released_peak, _, query, exemplars = _synthesis_peak(ReleasableLevels)
     assert all(m is None for m in query) and all(m is None for e in exemplars for m in e)
     for a, b in zip(kept.appearance, released.appearance, strict=True):
         assert np.array_equal(a, b)

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from imagemap import validate
+from imagemap.align import centroid_shift, translate
 from imagemap.core.engine import EngineParams, Mapping, synthesize
 from imagemap.core.pyramid import (
     collapse_laplacian,
@@ -27,7 +28,7 @@ from imagemap.core.pyramid import (
     level_shapes,
     mask_pyramid,
 )
-from imagemap.depth.pipeline import centroid_shift, to_rgb, to_ycbcr, translate
+from imagemap.depth.guides import to_rgb, to_ycbcr
 from imagemap.io import InputError, validate_depth
 
 FAST = settings(
@@ -253,7 +254,7 @@ def test_api_integers_refuse_non_integers(value):
 @FAST
 @given(st.tuples(st.integers(0, 255), st.integers(0, 255), st.integers(0, 255)))
 def test_background_colour_round_trip(rgb):
-    from imagemap.cli.synthesize import parse_colour
+    from imagemap.cli.options import parse_colour
 
     text = "#" + "".join(f"{c:02x}" for c in rgb)
     assert parse_colour(text) == tuple(c / 255 for c in rgb)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from imagemap.core.engine import EngineParams, Mapping, _LevelSolver, _Timer
+from imagemap.core.engine import EngineParams, Mapping
 from imagemap.core.pyramid import (
     collapse_laplacian,
     gaussian_pyramid,
@@ -9,6 +9,7 @@ from imagemap.core.pyramid import (
     level_shapes,
     mask_pyramid,
 )
+from imagemap.core.solver import LevelSolver, Timer
 
 
 @pytest.mark.parametrize("shape", [(150, 200), (37, 50, 3), (64, 64, 5), (33, 17)])
@@ -58,7 +59,7 @@ def test_source_coordinates_propagate_times_two():
     exemplars = [fine, Mapping(guide=rng.random((18, 22, 1)), appearance=rng.random((18, 22, 1)))]
     query = Mapping(guide=rng.random((16, 16, 1)))
     params = EngineParams(patch_sizes=(3,), backend="exact")
-    solver = _LevelSolver(query, exemplars, 3, params, rng, _Timer())
+    solver = LevelSolver(query, exemplars, 3, params, rng, Timer())
     coarse = np.zeros((8, 8, 3), dtype=np.int32)
     coarse[..., 0] = 1
     coarse[..., 1] = np.arange(8)[:, None]

@@ -8,8 +8,8 @@ import numpy as np
 from scipy import fft, ndimage
 
 from imagemap import Database, Example, select_examples
+from imagemap.align import centroid_shift, translate
 from imagemap.core.blend import copy_through, seamless_copy
-from imagemap.depth.pipeline import centroid_shift, translate
 
 
 def _direct_ranking(depth, database):
@@ -107,7 +107,7 @@ def test_seamless_copy_by_channel_equals_all_channels_at_once():
 def test_colour_conversion_in_row_blocks_equals_whole_image():
     from skimage import color
 
-    from imagemap.depth.pipeline import _ROWS, to_ycbcr
+    from imagemap.depth.guides import _ROWS, to_ycbcr
 
     rgb = np.random.default_rng(2).random((2 * _ROWS + 17, 9, 3)).astype(np.float32)
     whole = (color.rgb2ycbcr(rgb) / 255.0).astype(np.float32)

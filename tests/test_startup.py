@@ -85,7 +85,7 @@ def test_public_names_are_importable_and_lazy_submodules_resolve():
 
 def test_option_choices_match_the_library():
     from imagemap.core.engine import APPEARANCE_PYRAMIDS, BACKENDS
-    from imagemap.depth.pipeline import PRESETS
+    from imagemap.depth.config import PRESETS
     from imagemap.evaluation import METHODS
 
     assert PRESET_NAMES == tuple(sorted(PRESETS))

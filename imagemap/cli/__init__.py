@@ -12,9 +12,10 @@ does not know itself as ``args.forwarded`` and parses them when it runs.
 Building the parser imports nothing heavy: ``register`` functions must not import
 NumPy, SciPy, scikit-image or numba (``imagemap --help`` and every ``COMMAND
 --help`` answer at once); the ``func`` functions import what their command needs.
-The option choices that live in heavy modules are restated here
-(:data:`PRESET_NAMES`, :data:`BACKEND_NAMES`, :data:`METHOD_NAMES`; a test checks
-them against the library).
+The colorization options and presets come from :mod:`imagemap.depth.config`, which
+imports nothing heavy; the choices that live in heavy modules are restated here
+(:data:`PIXELWISE_BACKEND_NAMES`, :data:`METHOD_NAMES`; a test checks them against the
+library).
 """
 
 from __future__ import annotations
@@ -25,18 +26,28 @@ import importlib
 import logging
 import sys
 
+from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS
+from imagemap.depth.config import PRESETS
 from imagemap.errors import InputError
 
-#: ``sorted(imagemap.depth.pipeline.PRESETS)``: the ``--preset`` choices.
-PRESET_NAMES = ("busts", "fish", "humans")
-#: ``imagemap.core.engine.BACKENDS``: the ``--backend`` choices.
-BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
+#: The ``--preset`` choices.
+PRESET_NAMES = tuple(sorted(PRESETS))
+#: The ``--backend`` choices.
+BACKEND_NAMES = BACKENDS
 #: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 #: ``imagemap.evaluation.METHODS``: the ``imagemap evaluate --methods`` names, in report order.
-METHOD_NAMES = ("full", "copy_nearest", "one_pass", "mean_vote", "no_position", "laplacian")
-#: ``imagemap.core.engine.APPEARANCE_PYRAMIDS``: the ``--appearance-pyramid`` choices.
-APPEARANCE_PYRAMID_NAMES = ("gaussian", "laplacian")
+METHOD_NAMES = (
+    "full",
+    "copy_nearest",
+    "one_pass",
+    "mean_vote",
+    "no_position",
+    "laplacian",
+    "paper",
+)
+#: The ``--appearance-pyramid`` choices.
+APPEARANCE_PYRAMID_NAMES = APPEARANCE_PYRAMIDS
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",

@@ -20,6 +20,8 @@ five baselines:
   no_position   the full method without the position term
   laplacian     the full method on the paper's Laplacian colour bands instead
                 of each pyramid level's plain colours
+  paper         the paper's method on our guide bands (--finish paper: mean
+                vote on Laplacian colour bands, no finishing stage)
 
 Writes REPORT_DIR/results.csv (object, method, ciede2000, ssim, part_accuracy,
 part_transfer, ..., faulty, seconds), summary.md (per class: the means, their 95 %
@@ -38,7 +40,8 @@ examples:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from imagemap.cli import METHOD_NAMES, PRESET_NAMES, add_common_options
-    from imagemap.validate import non_negative_int, positive_int
+    from imagemap.cli.options import add_config_options
+    from imagemap.validate import positive_int
 
     p = subparsers.add_parser(
         "evaluate",
@@ -60,19 +63,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"comma-separated methods (default all: {','.join(METHOD_NAMES)})",
     )
     p.add_argument("--limit", type=positive_int, help="evaluate only the first N objects")
-    p.add_argument(
-        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
-    )
+    add_config_options(p)  # applied to each class's preset; the methods derive from it
     add_common_options(p)
     p.set_defaults(func=run_evaluate)
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
+    from imagemap.cli.options import config_options
     from imagemap.database import Database
+    from imagemap.depth.config import resolve_config
     from imagemap.evaluation import METHODS, check_report, leave_one_out, summarize, write_report
     from imagemap.io import InputError
     from imagemap.outputs import check_output_directory, resolve
 
+    options = config_options(args)
+    resolve_config(args.preset, **options)  # a bad option or combination stops here
     database = Database.from_directory(args.db)
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     unknown = [m for m in methods if m not in METHODS]
@@ -92,6 +97,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         limit=args.limit,
         seed=args.seed,
         quiet=args.quiet,
+        options=options,
     )
     paths = write_report(evaluation, args.out)
     missing = check_report(args.out)

@@ -39,12 +39,8 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import (
-        APPEARANCE_PYRAMID_NAMES,
-        PRESET_NAMES,
-        add_common_options,
-    )
-    from imagemap.cli.batch import add_colorize_options, add_mesh_options
+    from imagemap.cli import PRESET_NAMES, add_common_options
+    from imagemap.cli.options import add_config_options, add_mesh_options
 
     p = subparsers.add_parser(
         "synthesize",
@@ -67,25 +63,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="busts",
         help="class preset: weights, patch sizes and m after the paper's Table 1 (default busts)",
     )
-    add_colorize_options(p)
+    add_config_options(p)
     p.add_argument("--examples", help="comma-separated example names to use instead")
     p.add_argument("--exclude", help="comma-separated example names to leave out of the database")
-    p.add_argument(
-        "--vote",
-        choices=("copy", "mean", "mode"),
-        help="how matched windows make the map: copy (default; each pixel copied from the "
-        "example pixel its windows agree on, seams blended: crisp eyes and stripes), mean "
-        "(the paper: weighted mean of the windows, smooth but blurred), mode (copying "
-        "inside the EM iterations too)",
-    )
-    p.add_argument(
-        "--appearance-pyramid",
-        choices=APPEARANCE_PYRAMID_NAMES,
-        help="what each pyramid level matches and copies: gaussian (default; the level's "
-        "plain colours, so a copied pixel keeps the colour the coarser levels chose), "
-        "laplacian (the paper's YCbCr Laplacian bands; '--vote mean --appearance-pyramid "
-        "laplacian' is the paper's method with our guide bands)",
-    )
     p.add_argument(
         "--background",
         default="transparent",
@@ -111,7 +91,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run even when the estimated memory exceeds what is available (see -v for the "
         "estimate)",
     )
-    add_mesh_options(p)  # mesh input and .glb/.obj output: imagemap/cli/batch.py
+    add_mesh_options(p)  # mesh input and .glb/.obj output: imagemap/cli/mesh.py
     add_common_options(p)
     p.set_defaults(func=run_synthesize)
 
@@ -130,21 +110,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     check.add_argument("--json", action="store_true", help="print the report as JSON")
     check.set_defaults(func=run_db_check)
     db.set_defaults(func=lambda args: db.print_help() or 2)
-
-
-def parse_colour(text: str) -> tuple[float, float, float] | None:
-    """'transparent' -> None; a named or '#rrggbb' colour -> RGB in [0, 1]."""
-    named = {"white": "#ffffff", "black": "#000000", "grey": "#808080", "gray": "#808080"}
-    text = named.get(text.lower(), text)
-    if text.lower() == "transparent":
-        return None
-    if len(text) == 7 and text.startswith("#"):
-        try:
-            red, green, blue = (int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
-            return red, green, blue
-        except ValueError:
-            pass
-    raise InputError(f"--background: not a colour: {text!r} (use transparent, white or #rrggbb)")
 
 
 def _name_of(depth_path) -> str:
@@ -261,9 +226,11 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
 
 def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.cli import map_large_blocks
-    from imagemap.cli.batch import is_mesh_request, run_mesh_synthesize
+    from imagemap.cli.mesh import is_mesh_request, run_mesh_synthesize
+    from imagemap.cli.options import config_options, parse_colour
     from imagemap.database import Database
     from imagemap.depth.budget import guard_colorize
+    from imagemap.depth.config import resolve_config
     from imagemap.io import read_depth
     from imagemap.progress import progress
 
@@ -271,6 +238,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
         map_large_blocks(args)
         return run_mesh_synthesize(args)
     background = parse_colour(args.background)
+    config = resolve_config(args.preset, **config_options(args))  # a bad combination stops here
     jobs = _plan_outputs(args)
     # Bad input stops at the door, before any synthesis: every depth is read first.
     depths = [read_depth(job["depth"]) for job in jobs]
@@ -287,8 +255,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
         guard_colorize(
             depth,
             database,
-            args.preset,
-            m=args.m,
+            config,
             examples=examples,
             what=str(job["depth"]),
             check=not args.no_memory_check,
@@ -301,7 +268,9 @@ def run_synthesize(args: argparse.Namespace) -> int:
             list(zip(jobs, depths, strict=True)), desc="maps", quiet=not batch or not interactive
         ):
             try:
-                report = _synthesize_one(args, job, depth, database, examples, background, batch)
+                report = _synthesize_one(
+                    args, job, depth, database, config, examples, background, batch
+                )
             except KeyboardInterrupt:
                 raise
             except Exception as exc:
@@ -331,8 +300,9 @@ def run_synthesize(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
-def _synthesize_one(args, job, depth, database, examples, background, batch) -> dict:
+def _synthesize_one(args, job, depth, database, config, examples, background, batch) -> dict:
     """One map: synthesize, build every output, write them all-or-nothing."""
+    from imagemap.cli.options import config_options
     from imagemap.depth.budget import memory_check
     from imagemap.depth.pipeline import colorize
     from imagemap.io import image_writer
@@ -346,16 +316,8 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
         result = colorize(
             depth,
             database,
-            preset=args.preset,
-            m=args.m,
+            preset=config,
             examples=examples,
-            backend=args.backend,
-            example_preference=args.example_preference,
-            vote=args.vote,
-            appearance_pyramid=args.appearance_pyramid,
-            edge_support=args.edge_support,
-            complete_features=args.complete_features,
-            even_palettes=args.even_palettes,
             seed=args.seed,
             quiet=batch or not interactive,
         )
@@ -375,6 +337,11 @@ def _synthesize_one(args, job, depth, database, examples, background, batch) -> 
         "seconds": seconds,
         "peak_rss_mb": _peak_rss_mb(),
         "timings": result.timings,
+        "stages": [
+            {"name": r.name, "seconds": round(r.seconds, 4), "changed": r.changed}
+            for r in result.stages
+        ],
+        "options": config_options(args),
         "objective": result.objective,
         "preset": args.preset,
         "seed": args.seed,

@@ -354,7 +354,7 @@ def seamless_copy(
     -------
     ndarray, (H, W, C) float32
     """
-    from imagemap.core.engine import _trim_heap
+    from imagemap.core.solver import trim_heap as _trim_heap
 
     _trim_heap()  # the caller's freed temporaries (seam placement): not kept resident
     reference = np.asarray(reference)

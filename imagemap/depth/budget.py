@@ -26,11 +26,13 @@ import contextvars
 import logging
 import os
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from imagemap.depth.config import resolve_config
+from imagemap.depth.guides import sized_pyramid
 from imagemap.io import InputError
 
 __all__ = [
@@ -228,31 +230,18 @@ def _enabled() -> bool:
     return _CHECK.get() and os.environ.get("IMAGEMAP_NO_MEMORY_CHECK", "") in ("", "0")
 
 
-def _resolve_params(preset, m):
-    from imagemap.depth.pipeline import PRESETS, ColorizeParams
+def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Estimate:
+    """The :func:`estimate_colorize` of ``imagemap.colorize(depth, database, config, ...)``.
 
-    if isinstance(preset, ColorizeParams):
-        params = preset
-    elif isinstance(preset, str) and preset in PRESETS:
-        params = PRESETS[preset]
-    else:
-        params = ColorizeParams()
-    n = m if m is not None else getattr(params, "m", 2)
-    guide_bands = 2 + (1 if getattr(params, "silhouette_weight", 0) else 0)
-    return n, tuple(params.patch_sizes), float(getattr(params, "pca_fraction", 0.2)), guide_bands
-
-
-def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples=None) -> Estimate:
-    """The :func:`estimate_colorize` of ``imagemap.colorize(depth, database, preset, ...)``.
-
+    ``config`` is a :class:`~imagemap.depth.config.DepthConfig` (or a preset name).
     Without ``examples`` the ``m`` largest examples stand for the automatic selection
     (an upper bound).
     """
-    from imagemap.depth.pipeline import level_patch_sizes, pyramid_levels
-
-    n, patch_sizes, pca_fraction, guide_bands = _resolve_params(preset, m)
+    config = resolve_config(config)
+    n = config.selection.m
+    guide_bands = 2 + (1 if config.guides.silhouette_weight else 0)
     mask = np.asarray(depth) > 0
-    levels = pyramid_levels(mask, patch_sizes)
+    pyramid = sized_pyramid(mask, replace(config.pyramid, grow=True))
     if examples:
         chosen = [database[name] for name in examples]
     else:
@@ -265,8 +254,8 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
         int(mask.sum()),
         _boundary(mask),
         exemplars,
-        level_patch_sizes(patch_sizes, levels),
-        pca_fraction,
+        pyramid.patch_sizes,
+        config.matching.pca_fraction,
         guide_bands,
     )
 
@@ -274,8 +263,7 @@ def colorize_estimate(depth: np.ndarray, database, preset=None, m=None, examples
 def guard_colorize(
     depth: np.ndarray,
     database,
-    preset=None,
-    m=None,
+    config=None,
     examples=None,
     what: str = "the query",
     check: bool | None = None,
@@ -299,7 +287,7 @@ def guard_colorize(
     depth = np.asarray(depth)
     if depth.ndim != 2 or len(database) == 0:
         return None  # the colorization's own checks say what is wrong
-    estimate = colorize_estimate(depth, database, preset, m, examples)
+    estimate = colorize_estimate(depth, database, config, examples)
     log.info(
         "estimate for %s (%dx%d, %d levels): %s",
         what,

@@ -1,0 +1,140 @@
+"""Options shared by the commands that synthesize: made from one declaration.
+
+The colorization options are :data:`imagemap.depth.config.OPTIONS`: every command
+(``synthesize``, ``batch``, ``evaluate``) adds them with :func:`add_config_options`
+and reads them back with :func:`config_options`, so a new option reaches every route
+by being declared once. Also here: the mesh options and the background colour,
+shared by ``synthesize`` and ``batch``.
+
+Nothing heavy is imported: the parser is built before NumPy is loaded.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from imagemap.depth.config import OPTIONS
+from imagemap.errors import InputError
+from imagemap.validate import (
+    fraction,
+    non_negative_float,
+    non_negative_int,
+    parse_size,
+    positive_int,
+)
+
+__all__ = [
+    "add_config_options",
+    "add_mesh_options",
+    "config_options",
+    "parse_colour",
+    "views_of",
+]
+
+_TYPES = {
+    "positive_int": positive_int,
+    "non_negative_float": non_negative_float,
+    "fraction": fraction,
+}
+
+
+def add_config_options(parser: argparse.ArgumentParser) -> None:
+    """Add every option of :data:`~imagemap.depth.config.OPTIONS`, and ``--seed``.
+
+    An option not given is None: the preset's value stands.
+    """
+    group = parser.add_argument_group("method (each overrides the preset)")
+    for option in OPTIONS:
+        if option.kind == "switch_on":
+            group.add_argument(
+                option.flag, dest=option.name, action="store_const", const=True, help=option.help
+            )
+        elif option.kind == "switch_off":
+            group.add_argument(
+                option.flag, dest=option.name, action="store_const", const=False, help=option.help
+            )
+        elif option.kind == "choice":
+            group.add_argument(
+                option.flag, dest=option.name, choices=option.choices, help=option.help
+            )
+        else:
+            group.add_argument(
+                option.flag, dest=option.name, type=_TYPES[option.kind], help=option.help
+            )
+    parser.add_argument(
+        "--seed", type=non_negative_int, default=0, help="random seed >= 0 (same seed, same bytes)"
+    )
+
+
+def config_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The options of :data:`~imagemap.depth.config.OPTIONS` given on the command line.
+
+    Examples
+    --------
+    >>> config_options(argparse.Namespace(vote="mean", m=None, seed=0))
+    {'vote': 'mean'}
+    """
+    values = {option.name: getattr(args, option.name, None) for option in OPTIONS}
+    return {name: value for name, value in values.items() if value is not None}
+
+
+def add_mesh_options(parser: argparse.ArgumentParser) -> None:
+    """--view, --views, --size, --texture-size: how meshes are seen and textured."""
+    group = parser.add_argument_group("meshes (input .glb .obj .ply ...; output .glb or .obj)")
+    group.add_argument(
+        "--view",
+        help="AZ,EL in degrees to look from (default front, 0,0: along -z as data_gen); "
+        "a negative value needs '=': --view=-90,0",
+    )
+    group.add_argument(
+        "--views",
+        help="several views baked into one UV atlas: names (front,back,left,right,top,"
+        "bottom) or AZ,EL pairs, e.g. 'front,back' or '0,0;90,0;180,0'",
+    )
+    group.add_argument(
+        "--size",
+        type=parse_size,
+        default=(200, 150),
+        help="WIDTHxHEIGHT of each view's depth map (default 200x150)",
+    )
+    group.add_argument(
+        "--texture-size",
+        type=positive_int,
+        default=512,
+        help="texture width and height when several views are baked (default 512)",
+    )
+
+
+def views_of(args: argparse.Namespace) -> tuple:
+    """The views ``--views`` or ``--view`` name (default: the front)."""
+    from imagemap.mesh import FRONT, parse_view, parse_views
+
+    if getattr(args, "views", None):
+        return tuple(parse_views(args.views))
+    if getattr(args, "view", None):
+        return (parse_view(args.view),)
+    return (FRONT,)
+
+
+def parse_colour(text: str) -> tuple[float, float, float] | None:
+    """'transparent' -> None; a named or '#rrggbb' colour -> RGB in [0, 1].
+
+    Examples
+    --------
+    >>> parse_colour("#ff8000")
+    (1.0, 0.5019607843137255, 0.0)
+    >>> parse_colour("transparent") is None
+    True
+    """
+    named = {"white": "#ffffff", "black": "#000000", "grey": "#808080", "gray": "#808080"}
+    text = named.get(text.lower(), text)
+    if text.lower() == "transparent":
+        return None
+    if len(text) == 7 and text.startswith("#"):
+        try:
+            red, green, blue = (int(text[i : i + 2], 16) / 255.0 for i in (1, 3, 5))
+            return red, green, blue
+        except ValueError:
+            pass
+    raise InputError(f"--background: not a colour: {text!r} (use transparent, white or #rrggbb)")

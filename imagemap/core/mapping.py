@@ -1,0 +1,66 @@
+"""A mapping: one pyramid level of guide bands, appearance bands and a mask."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Mapping", "ReleasableLevels"]
+
+
+@dataclass(frozen=True)
+class Mapping:
+    """One pyramid level of a query or exemplar: guide, appearance and mask.
+
+    Parameters
+    ----------
+    guide : ndarray, shape (H, W, Cg) or (H, W)
+        Bands known for query and exemplars (depth bands, constraint images...).
+    appearance : ndarray, shape (H, W, Ca) or (H, W), optional
+        Bands to synthesise: given for exemplars, None for the query.
+    mask : ndarray of bool, shape (H, W), optional
+        Where the mapping matters (the object); None means everywhere.
+    """
+
+    guide: np.ndarray
+    appearance: np.ndarray | None = None
+    mask: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        guide = np.asarray(self.guide, dtype=np.float32)
+        if guide.ndim == 2:
+            guide = guide[..., None]
+        if guide.ndim != 3:
+            raise ValueError(f"guide must be (H, W) or (H, W, C), got shape {guide.shape}")
+        object.__setattr__(self, "guide", guide)
+        if self.appearance is not None:
+            appearance = np.asarray(self.appearance, dtype=np.float32)
+            if appearance.ndim == 2:
+                appearance = appearance[..., None]
+            if appearance.shape[:2] != guide.shape[:2]:
+                raise ValueError(
+                    f"appearance {appearance.shape[:2]} and guide {guide.shape[:2]} differ in size"
+                )
+            object.__setattr__(self, "appearance", appearance)
+        if self.mask is not None:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.shape != guide.shape[:2]:
+                raise ValueError(f"mask {mask.shape} and guide {guide.shape[:2]} differ in size")
+            if not mask.any():
+                raise ValueError("mask is empty")
+            object.__setattr__(self, "mask", mask)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.guide.shape[:2]
+
+
+class ReleasableLevels(list):
+    """A pyramid (list of :class:`Mapping`, finest first) handed over to :func:`synthesize`:
+    once the engine has packed a level's bands it calls :meth:`release`, which drops the
+    level from the list, so that its arrays are freed during the synthesis if nothing
+    else holds them. A plain list is left as it is."""
+
+    def release(self, level: int) -> None:
+        self[level] = None

@@ -1,0 +1,882 @@
+"""One pyramid level of the engine: packed bands, PCA features, E-step and M-step.
+
+:class:`LevelSolver` holds everything the EM iterations of one level need; the
+loop over levels and iterations is :func:`imagemap.core.engine.synthesize`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import sys
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy import ndimage
+
+from imagemap.core import kernels as _kernels
+from imagemap.core.mapping import Mapping
+from imagemap.core.params import EngineParams
+from imagemap.core.search import make_index
+
+__all__ = ["FINAL_RESEED_WORST", "RESEED_WORST", "LevelSolver", "Timer", "trim_heap"]
+
+log = logging.getLogger("imagemap")
+
+_CHUNK = 16384  # windows per block when extracting features: bounds memory
+_GATHER_ROWS = 2048  # windows per gather of one channel into such a block (see _Windows)
+# Fixed PatchMatch work split (results do not depend on the thread count): bands of
+# at least _BAND_ROWS rows, since propagation does not cross band borders.
+_MAX_BANDS = 8
+# Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
+_EXACT_START_FLOPS = 2e9
+_BAND_ROWS = 64
+_SOURCE_ROWS = 256  # rows per block when the dense source map is made
+#: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
+#: margin of that largest magnitude over the largest value in the PCA samples.
+_FEATURE_RANGE = 32767
+_FEATURE_MARGIN = 2.0
+#: Share of a level's windows, the worst fits of the guide after propagation, that
+#: ``EngineParams.guide_reseed`` may give a match on guide and position only.
+RESEED_WORST = 0.1
+#: Share of the finest level's windows, the worst fits of the guide after the EM, that
+#: ``EngineParams.final_reseed`` may give a match on guide and position only. Larger
+#: than ``RESEED_WORST``: no EM iteration follows that could vote a good guide fit away.
+FINAL_RESEED_WORST = 0.25
+
+
+def trim_heap() -> None:
+    """Give the C heap's free pages back to the system (glibc ``malloc_trim``; elsewhere
+    nothing). Freed NumPy arrays below glibc's mmap threshold stay in the heap, resident,
+    and the next phase's larger arrays are mapped beside them: trimmed between phases,
+    the peak is what is alive, not what was once allocated."""
+    global _MALLOC_TRIM
+    if _MALLOC_TRIM is None:
+        _MALLOC_TRIM = False
+        if sys.platform.startswith("linux"):
+            with contextlib.suppress(OSError, AttributeError):
+                _MALLOC_TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+    if _MALLOC_TRIM:
+        _MALLOC_TRIM(0)
+
+
+_MALLOC_TRIM = None
+
+
+class Timer:
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    def add(self, stage: str, start: float) -> None:
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + time.perf_counter() - start
+
+
+def _gaussian_window(k: int, sigma_fraction: float) -> np.ndarray:
+    r = k // 2
+    sigma = max(sigma_fraction * k, 0.5)
+    offsets = np.arange(-r, r + 1, dtype=np.float64)
+    g = np.exp(-(offsets[:, None] ** 2 + offsets[None, :] ** 2) / (2 * sigma**2))
+    return (g / g.sum()).astype(np.float32)
+
+
+def _centroid_frame(mask: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
+    """(yc, xc, s, s): centroid and RMS radius of the mask (or of the whole frame)."""
+    if mask is None:
+        mask = np.ones(shape, dtype=bool)
+    ys, xs = np.nonzero(mask)
+    # One isotropic scale, the object's RMS radius: limbs that move (an arm raised)
+    # change the spread along one axis, and must not rescale that axis alone.
+    radius = max(float(np.sqrt(ys.var() + xs.var())), 1.0)
+    return np.array([ys.mean(), xs.mean(), radius, radius], dtype=np.float64)
+
+
+def _positions(ys: np.ndarray, xs: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    return np.stack([(ys - frame[0]) / frame[2], (xs - frame[1]) / frame[3]], axis=1).astype(
+        np.float32
+    )
+
+
+def _pad_into(out: np.ndarray, array: np.ndarray, r: int, mode: str, scale=None) -> None:
+    """``np.pad(array * scale, r, mode)`` written into ``out`` ((H + 2r, W + 2r, C), a view
+    into a larger array): no padded or scaled temporary of the whole image."""
+    h, w = array.shape[:2]
+    inner = out[r : r + h, r : r + w]
+    if scale is None:
+        inner[...] = array
+    else:
+        np.multiply(array, scale, out=inner)
+    if r == 0:
+        return
+    if mode == "reflect" and (r >= h or r >= w):  # reflected more than once: numpy's rule
+        out[...] = np.pad(inner, ((r, r), (r, r), (0, 0)), mode=mode)
+        return
+    for axis, n in ((0, h), (1, w)):
+        lead = out if axis == 0 else out.swapaxes(0, 1)  # pad rows, then columns (all rows)
+        if mode == "constant":
+            lead[:r] = 0
+            lead[r + n :] = 0
+        elif mode == "edge":
+            lead[:r] = lead[r]
+            lead[r + n :] = lead[r + n - 1]
+        else:  # reflect (the edge pixel not repeated)
+            lead[:r] = lead[2 * r : r : -1]
+            lead[r + n :] = lead[r + n - 2 : n - 2 : -1] if n >= 2 else lead[r]
+
+
+def _pad_index(n: int, r: int, mode: str) -> np.ndarray:
+    """Which source row (or column) each of the n + 2r of an axis padded by r on both
+    sides shows, by :func:`numpy.pad`'s rule for ``mode`` (-1: the constant 0)."""
+    index = np.arange(n, dtype=np.int64)
+    if mode == "constant":
+        return np.pad(index, r, mode="constant", constant_values=-1)
+    return np.pad(index, r, mode=mode)
+
+
+def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) -> None:
+    """``np.pad(array * scale, r, mode)[rows, cols]`` written into ``out`` (a view of a
+    larger array): the crop alone, without the padded whole. The padding modes are
+    separable (numpy pads axis by axis), so a crop is a gather of source rows and
+    columns; the products are the same float32 ones as of the padded whole."""
+    h, w = array.shape[:2]
+    if rows == slice(0, h + 2 * r) and cols == slice(0, w + 2 * r):  # the whole: in place
+        _pad_into(out, array, r, mode, scale)
+        return
+    row_index = _pad_index(h, r, mode)[rows]
+    col_index = _pad_index(w, r, mode)[cols]
+    inside_rows, inside_cols = row_index >= 0, col_index >= 0  # all but constant padding
+    block = array[row_index[inside_rows][:, None], col_index[inside_cols][None, :]]
+    if scale is not None:
+        np.multiply(block, scale, out=block)
+    if inside_rows.all() and inside_cols.all():
+        out[...] = block
+        return
+    out[...] = 0
+    out[np.ix_(inside_rows, inside_cols)] = block
+
+
+def _box(valid: np.ndarray) -> tuple[int, int, int, int]:
+    """Rows y0:y1 and columns x0:x1 of the bounding box of a non-empty boolean image."""
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
+    """``array[..., channels]`` without a copy when ``channels`` are all of them, in order."""
+    if np.array_equal(channels, np.arange(array.shape[-1])):
+        return array
+    return array[..., channels]
+
+
+def _fit_pca(
+    samples: np.ndarray, n_keep: int, rng: np.random.Generator, overwrite: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (D,) and the n_keep leading principal directions (D, n_keep) of the rows
+    (``overwrite``: float32 ``samples`` are centred in place, not copied)."""
+    mean = samples.mean(axis=0)
+    if overwrite and samples.dtype == np.float32:
+        centered = np.subtract(samples, mean, out=samples)
+    else:
+        centered = (samples - mean).astype(np.float32, copy=False)
+    dim = centered.shape[1]
+    if dim <= 1024 or 4 * n_keep > dim:
+        cov = (centered.T @ centered).astype(np.float64)
+        eigvals, eigvecs = np.linalg.eigh(cov)
+        basis = eigvecs[:, ::-1][:, :n_keep]
+    else:  # randomised range finder (Halko et al.): the covariance would be too large
+        omega = rng.standard_normal((dim, n_keep + 10)).astype(np.float32)
+        y = centered @ omega
+        for _ in range(2):
+            y, _ = np.linalg.qr(y)
+            y = centered @ (centered.T @ y)
+        q, _ = np.linalg.qr(y)
+        _, _, vt = np.linalg.svd(q.T @ centered, full_matrices=False)
+        basis = vt[:n_keep].T
+    return mean.astype(np.float32), np.ascontiguousarray(basis, dtype=np.float32)
+
+
+class _Windows:
+    """Flattened k x k windows of some channels of a band stack, optionally scaled.
+
+    ``view`` is a sliding-window view, (..., C, k, k); ``channels`` a slice (free on
+    the view) or an index array (applied after the gather), None for all; ``scale``
+    one factor per selected channel (the exemplars' appearance is stored unscaled,
+    once, and scaled per block of windows: the same float32 products as a scaled
+    copy, without the copy).
+    """
+
+    def __init__(self, view: np.ndarray, channels=None, scale: np.ndarray | None = None) -> None:
+        self.view = view
+        self.channels = channels
+        k = view.shape[-1]
+        self.scale = None if scale is None else np.repeat(scale.astype(np.float32), k * k)
+
+    @property
+    def width(self) -> int:
+        """Values per window (selected channels times k^2)."""
+        view = self.view
+        if isinstance(self.channels, slice):
+            return view[..., self.channels, :, :].shape[-3] * view.shape[-1] ** 2
+        n = view.shape[-3] if self.channels is None else len(self.channels)
+        return n * view.shape[-1] ** 2
+
+    def __call__(self, index: tuple[np.ndarray, ...], out: np.ndarray | None = None) -> np.ndarray:
+        """The (N, width) windows at ``index``, into the first N rows of ``out`` if given
+        (a buffer reused from block to block)."""
+        view = self.view
+        if isinstance(self.channels, slice):
+            view = view[..., self.channels, :, :]
+        channels = range(view.shape[-3])
+        if self.channels is not None and not isinstance(self.channels, slice):
+            channels = self.channels
+        # Gathered one channel at a time into the (N, C, k, k) block: the gather of all
+        # channels at once comes out in the view's memory order (not C-contiguous), and
+        # flattening it copied the whole block a second time.
+        k, n = view.shape[-1], index[0].shape[0]
+        if out is None:
+            block = np.empty((n, len(channels), k, k), dtype=view.dtype)
+        else:
+            block = out[:n].reshape(n, len(channels), k, k)
+        # In runs of _GATHER_ROWS windows: each channel's gather makes a temporary, and
+        # small ones are reused from the heap instead of being mapped and faulted in anew.
+        for start in range(0, n, _GATHER_ROWS):
+            sub = tuple(i[start : start + _GATHER_ROWS] for i in index)
+            rows = block[start : start + _GATHER_ROWS]
+            for i, channel in enumerate(channels):
+                rows[:, i] = view[..., channel, :, :][sub]
+        block = block.reshape(n, -1)
+        if self.scale is not None:
+            block *= self.scale
+        return block
+
+
+class _Projection:
+    """Weighted window -> PCA coordinates, for one part (guide or appearance) of the bands."""
+
+    def __init__(self, n_channels: int, window: np.ndarray) -> None:
+        self.n_channels = n_channels
+        # Window order of sliding_window_view: (channel, ky, kx).
+        self.sqrt_weights = np.tile(np.sqrt(window).ravel(), n_channels).astype(np.float32)
+        self.matrix: np.ndarray | None = None
+        self.offset: np.ndarray | None = None
+
+    @property
+    def n_components(self) -> int:
+        return 0 if self.matrix is None else self.matrix.shape[1]
+
+    def fit(self, samples: np.ndarray, fraction: float, cap: int | None, rng) -> None:
+        """Learn the projection from window ``samples`` (float32, overwritten: weighted
+        and centred in place, no copies of the samples)."""
+        weighted = np.multiply(samples, self.sqrt_weights, out=samples)
+        n_keep = max(1, int(round(fraction * weighted.shape[1])))
+        if cap is not None:
+            n_keep = min(n_keep, cap)
+        mean, basis = _fit_pca(weighted, n_keep, rng, overwrite=True)
+        self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
+        self.offset = mean @ basis
+
+    def project(
+        self,
+        windows: _Windows,
+        index: tuple[np.ndarray, ...],
+        out: np.ndarray | None = None,
+        inverse_unit: float | None = None,
+    ) -> np.ndarray:
+        """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
+        which may be a column slice of a larger array), in blocks of windows; with
+        ``inverse_unit``, quantized (see :func:`_store`)."""
+        n = index[0].shape[0]
+        if out is None:
+            out = np.empty((n, self.n_components), dtype=np.float32)
+        # One buffer for the windows and one for their product, reused by every block (not
+        # a fresh large array per block: each would be mapped and faulted in anew).
+        rows = min(_CHUNK, n)
+        gathered = np.empty((rows, windows.width), dtype=np.float32)
+        product = np.empty((rows, self.n_components), dtype=np.float32)
+        for start in range(0, n, _CHUNK):
+            sub = tuple(i[start : start + _CHUNK] for i in index)
+            m = sub[0].shape[0]
+            values = np.matmul(windows(sub, gathered), self.matrix, out=product[:m])
+            np.subtract(values, self.offset, out=values)
+            _store(out[start : start + m], values, inverse_unit)
+        return out
+
+
+def _store(out: np.ndarray, values: np.ndarray, inverse_unit: float | None) -> None:
+    """``out[...] = values``, or the nearest integer multiples of the unit, clipped to
+    +-_FEATURE_RANGE, when ``inverse_unit`` is given (``values`` is overwritten)."""
+    if inverse_unit is None:
+        out[...] = values
+        return
+    np.multiply(values, np.float32(inverse_unit), out=values)
+    np.rint(values, out=values)
+    np.clip(values, -_FEATURE_RANGE, _FEATURE_RANGE, out=values)
+    out[...] = values
+
+
+class LevelSolver:
+    """Everything the EM iterations of one level need, built once for the level."""
+
+    def __init__(
+        self,
+        query: Mapping,
+        exemplars: Sequence[Mapping],
+        k: int,
+        params: EngineParams,
+        rng: np.random.Generator,
+        timer: Timer,
+        prepare: bool = True,
+        context: tuple[np.ndarray, list[np.ndarray]] | None = None,
+        release=None,
+    ) -> None:
+        """Pack the bands of ``query`` and ``exemplars`` (nothing of the mappings is kept),
+        then, unless ``prepare`` is False, learn the PCA and make the features
+        (:meth:`prepare`): with False the caller may free the mappings first.
+
+        ``context``: (query's, exemplars') extra guide bands, (H, W, Cc) each, that
+        follow the mappings' own guide bands (``params.guide_weights`` covers both):
+        packed from where they are, not concatenated into a copy of every guide.
+        ``release``: called with an exemplar's index once its bands are packed, so that
+        the caller may free its mapping (and context) before the next one is packed;
+        ``exemplars`` (a list) then loses that entry too.
+        """
+        start = time.perf_counter()
+        self.params = params
+        self.r = r = k // 2
+        self.window = _gaussian_window(k, params.window_sigma)
+        self.timer = timer
+        self.chosen: np.ndarray | None = None  # sources the mode vote copied
+        n_appearance = exemplars[0].appearance.shape[2]
+        guide_w = np.asarray(params.guide_weights, dtype=np.float32)
+        appearance_w = np.asarray(params.appearance_weights, dtype=np.float32)
+        self.guide_active = np.flatnonzero(guide_w != 0)
+        self.appearance_active = np.flatnonzero(appearance_w != 0)
+        n_ga, n_aa = len(self.guide_active), len(self.appearance_active)
+        self.n_guide_active = n_ga
+        query_context, exemplar_context = context or (None, [None] * len(exemplars))
+        n_own = query.guide.shape[2]  # the mappings' own guide bands; context ones after
+
+        # Band scales: weight per standard deviation over the exemplars' masks.
+        guide_scale = guide_w[self.guide_active]
+        appearance_scale = appearance_w[self.appearance_active]
+        if params.normalize_bands:
+            guide_scale = guide_scale / self._band_std(
+                exemplars, "guide", self.guide_active, exemplar_context, n_own
+            )
+            appearance_scale = appearance_scale / self._band_std(
+                exemplars, "appearance", self.appearance_active
+            )
+        self.appearance_scale = appearance_scale.astype(np.float32)
+
+        # Exemplars: padded and packed into one array each (zero beyond each one's size).
+        # Index arrays are int32 (half the memory of int64; sizes stay far below 2^31).
+        heights = [e.shape[0] for e in exemplars]
+        widths = [e.shape[1] for e in exemplars]
+        n_ex = len(exemplars)
+        self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
+        # Candidates: window centres in the (dilated) mask. Only their windows are ever
+        # read, so the bands are packed for the box around them (an object often fills
+        # a third of its frame): band_origin is the box's top-left in frame coordinates,
+        # band_y, band_x a candidate's window's top-left in the packed bands.
+        self.exemplar_valid = [self._region(ex.mask, ex.shape, r) for ex in exemplars]
+        boxes = [_box(valid) for valid in self.exemplar_valid]
+        self.band_origin = np.array([box[::2] for box in boxes], dtype=np.int32).reshape(-1, 2)
+        hp = max(y1 - y0 for y0, y1, _, _ in boxes) + 2 * r
+        wp = max(x1 - x0 for _, _, x0, x1 in boxes) + 2 * r
+        # Guide bands scaled; appearance bands once, unscaled (the matched ones are scaled
+        # where they are read: kernels and feature blocks).
+        self.exemplar_guide = np.zeros((n_ex, hp, wp, n_ga), dtype=np.float32)
+        self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
+        cand_e, cand_y, cand_x, positions = [], [], [], []
+        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
+        n_cand = 0
+        for e in range(n_ex):
+            ex = exemplars[e]
+            h, w = ex.shape
+            y0, y1, x0, x1 = boxes[e]
+            # The box's rows and columns of the padded frame (padded coordinates).
+            rows, cols = slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r)
+            crop = (slice(0, y1 - y0 + 2 * r), slice(0, x1 - x0 + 2 * r))
+            self._pad_guide(
+                self.exemplar_guide[e][crop],
+                ex.guide,
+                exemplar_context[e],
+                r,
+                guide_scale,
+                rows,
+                cols,
+            )
+            _pad_crop_into(
+                self.exemplar_appearance[e][crop], ex.appearance, r, "reflect", rows, cols
+            )
+            ys, xs = np.nonzero(self.exemplar_valid[e])
+            self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
+            n_cand += len(ys)
+            cand_e.append(np.full(len(ys), e, dtype=np.int32))
+            cand_y.append(ys.astype(np.int32))
+            cand_x.append(xs.astype(np.int32))
+            positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
+            del ex
+            if release is not None:  # packed: the caller's mapping may go now
+                exemplars[e] = None
+                release(e)
+        self.cand_e = np.concatenate(cand_e)
+        self.cand_y = np.concatenate(cand_y)
+        self.cand_x = np.concatenate(cand_x)
+        self.band_y = self.cand_y - self.band_origin[self.cand_e, 0]
+        self.band_x = self.cand_x - self.band_origin[self.cand_e, 1]
+        self.cand_position = np.concatenate(positions)
+        costs = np.zeros(n_ex, dtype=np.float32)
+        if params.exemplar_costs:
+            if len(params.exemplar_costs) != n_ex:
+                raise ValueError(f"{n_ex} exemplars need as many exemplar_costs")
+            costs[:] = params.exemplar_costs
+        if np.any(costs < 0):
+            raise ValueError("exemplar_costs must not be negative")
+        self.cand_bias = costs[self.cand_e]
+
+        # Query: centres inside the (dilated) mask on the stride grid.
+        self.query_shape = query.shape
+        h, w = query.shape
+        centres = self._region(query.mask, (h, w), r)
+        if params.stride > 1:
+            grid = np.zeros((h, w), dtype=bool)
+            grid[:: params.stride, :: params.stride] = True
+            # The last row and column too, so that every pixel is covered by a window.
+            grid[h - 1, :: params.stride] = grid[:: params.stride, w - 1] = True
+            grid[h - 1, w - 1] = True
+            centres &= grid
+        self.query_y, self.query_x = (a.astype(np.int32) for a in np.nonzero(centres))
+        self.query_lookup = np.full((h, w), -1, dtype=np.int32)
+        self.query_lookup[self.query_y, self.query_x] = np.arange(len(self.query_y))
+        self.query_position = _positions(
+            self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
+        )
+        # The query's matched bands, like the exemplars', for the box around its window
+        # centres only: query_band_y, query_band_x are a centre's window's top-left there,
+        # query_crop the box's rows and columns of the padded frame.
+        y0, y1, x0, x1 = _box(centres)
+        self.query_band_y, self.query_band_x = self.query_y - y0, self.query_x - x0
+        self.query_crop = (slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r))
+        self.query_active = np.zeros(
+            (y1 - y0 + 2 * r, x1 - x0 + 2 * r, n_ga + n_aa), dtype=np.float32
+        )
+        self._pad_guide(
+            self.query_active[..., :n_ga],
+            query.guide,
+            query_context,
+            r,
+            guide_scale,
+            *self.query_crop,
+        )
+        timer.add("setup", start)
+        if prepare:
+            self.prepare(rng)
+
+    def prepare(self, rng: np.random.Generator) -> None:
+        """PCA learned on exemplar windows, and the features of candidates and query
+        windows: from the packed bands alone."""
+        k, timer, params = 2 * self.r + 1, self.timer, self.params
+        n_ga, n_aa = self.n_guide_active, len(self.appearance_active)
+        n_appearance = self.exemplar_appearance.shape[-1]
+        h = self.query_shape[0]
+
+        # PCA, learned on exemplar windows, separately for guide and appearance.
+        start = time.perf_counter()
+        all_appearance = np.array_equal(self.appearance_active, np.arange(n_appearance))
+        self.exemplar_windows = (
+            _Windows(sliding_window_view(self.exemplar_guide, (k, k), axis=(1, 2))),
+            _Windows(
+                sliding_window_view(self.exemplar_appearance, (k, k), axis=(1, 2)),
+                None if all_appearance else self.appearance_active,
+                self.appearance_scale,
+            ),
+        )
+        self.guide_projection = _Projection(n_ga, self.window)
+        self.appearance_projection = _Projection(n_aa, self.window)
+        n_samples = min(params.pca_samples, len(self.cand_e))
+        pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
+        sample_index = (self.cand_e[pick], self.band_y[pick], self.band_x[pick])
+        projections = (self.guide_projection, self.appearance_projection)
+        largest = 0.0
+        for projection, windows in zip(projections, self.exemplar_windows, strict=True):
+            if projection.n_channels:
+                # The samples are consumed by the fit (weighted and centred in place).
+                projection.fit(
+                    windows(sample_index), params.pca_fraction, params.pca_max_components, rng
+                )
+                if params.quantize_features:
+                    largest = max(
+                        largest, float(np.abs(projection.project(windows, sample_index)).max())
+                    )
+        if params.quantize_features:
+            position = np.float32(params.position_weight)
+            for values in (self.cand_position, self.query_position):
+                largest = max(largest, float(np.abs(values).max(initial=0.0)) * position)
+            largest = max(largest, float(np.sqrt(self.cand_bias.max(initial=0.0))), 1e-30)
+            # Features in steps of one unit, to _FEATURE_MARGIN times the largest value seen.
+            self.inverse_unit: float | None = _FEATURE_RANGE / (_FEATURE_MARGIN * largest)
+        else:
+            self.inverse_unit = None
+        timer.add("pca", start)
+
+        # Features: [guide PCA | weighted position | exemplar cost | appearance PCA].
+        start = time.perf_counter()
+        index = (self.cand_e, self.band_y, self.band_x)
+        # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
+        self.n_init_dims = self.guide_projection.n_components + 3
+        self.candidate_features = self._features(
+            self.exemplar_windows, index, self.cand_position, np.sqrt(self.cand_bias)
+        )
+        query_view = sliding_window_view(self.query_active, (k, k), axis=(0, 1))
+        self.query_windows = (
+            _Windows(query_view, slice(0, n_ga)),
+            _Windows(query_view, slice(n_ga, n_ga + n_aa)),
+        )
+        self.query_features = self._features(
+            self.query_windows, (self.query_band_y, self.query_band_x), self.query_position, 0.0
+        )
+        ys = self.query_y
+        n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
+        row_edges = np.linspace(0, h, n_bands + 1).astype(np.int64)
+        self.band_starts = np.searchsorted(ys, row_edges, side="left").astype(np.int64)
+        timer.add("features", start)
+        self.indexes: dict[str, object] = {}
+
+    def _pad_guide(self, out, guide, context, r, scale, rows, cols) -> None:
+        """The active guide channels, of the mapping's own bands then of the context
+        bands, scaled and padded, the crop ``rows``, ``cols`` of the padded frame into
+        ``out`` (the channels written part by part: the same float32 products as of
+        one concatenated guide)."""
+        n = 0
+        for array, channels in _guide_parts(guide, context, self.guide_active):
+            m = n + len(channels)
+            _pad_crop_into(
+                out[..., n:m],
+                _channels(array, channels),
+                r,
+                self.params.guide_padding,
+                rows,
+                cols,
+                scale[n:m],
+            )
+            n = m
+
+    @staticmethod
+    def _band_std(
+        exemplars: Sequence[Mapping],
+        part: str,
+        channels: np.ndarray,
+        context: Sequence[np.ndarray | None] | None = None,
+        n_own: int | None = None,
+    ) -> np.ndarray:
+        if len(channels) == 0:
+            return np.ones(0, dtype=np.float32)
+        values = []
+        for e, ex in enumerate(exemplars):
+            if part == "guide":  # own bands, then context bands: one (N, C) array
+                extra = None if context is None else context[e]
+                parts = _guide_parts(ex.guide, extra, channels, n_own)
+                picked = [array[..., c] for array, c in parts]
+                bands = picked[0] if len(picked) == 1 else np.concatenate(picked, axis=2)
+            else:
+                bands = getattr(ex, part)[..., channels]
+            values.append(
+                bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels))
+            )
+        stacked = np.concatenate(values, axis=0)
+        std = stacked.std(axis=0)
+        floor = max(float(std.max()), 1e-12) * 1e-3
+        return np.maximum(std, floor).astype(np.float32)
+
+    @staticmethod
+    def _region(mask: np.ndarray | None, shape: tuple[int, int], r: int) -> np.ndarray:
+        if mask is None:
+            return np.ones(shape, dtype=bool)
+        return ndimage.binary_dilation(mask, iterations=max(r, 1))
+
+    def _features(self, windows, index, position, bias) -> np.ndarray:
+        """(N, D) features [guide PCA | weighted position | sqrt of the exemplar cost
+        (candidates; 0 for the query) | appearance PCA], made in blocks of windows and
+        stored as float32 or quantized (int16)."""
+        n_guide = self.guide_projection.n_components
+        n_dims = self.n_init_dims + self.appearance_projection.n_components
+        dtype = np.float32 if self.inverse_unit is None else np.int16
+        out = np.empty((len(position), n_dims), dtype=dtype)
+        block = np.empty((min(_CHUNK, len(position)), n_dims), dtype=np.float32)
+        weight = np.float32(self.params.position_weight)
+        for start in range(0, len(position), _CHUNK):
+            stop = min(start + _CHUNK, len(position))
+            sub = tuple(i[start:stop] for i in index)
+            values = block[: stop - start]
+            if n_guide:
+                self.guide_projection.project(windows[0], sub, values[:, :n_guide])
+            values[:, n_guide : n_guide + 2] = position[start:stop] * weight
+            values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
+            if self.appearance_projection.n_components:
+                self.appearance_projection.project(windows[1], sub, values[:, self.n_init_dims :])
+            _store(out[start:stop], values, self.inverse_unit)
+        return out
+
+    # -- the two steps ---------------------------------------------------------
+
+    def set_appearance(self, appearance_padded: np.ndarray, project: bool = True) -> None:
+        """Install the current appearance estimate; refresh the query's PCA features
+        too unless ``project`` is False (exact costs need only the bands)."""
+        start = time.perf_counter()
+        n_ga = self.n_guide_active
+        # No temporaries: the product is written into the query's band stack.
+        np.multiply(
+            _channels(appearance_padded[self.query_crop], self.appearance_active),
+            self.appearance_scale,
+            out=self.query_active[..., n_ga:],
+        )
+        if project and self.appearance_projection.n_components:
+            self.appearance_projection.project(
+                self.query_windows[1],
+                (self.query_band_y, self.query_band_x),
+                self.query_features[:, self.n_init_dims :],
+                self.inverse_unit,
+            )
+        self.timer.add("features", start)
+
+    def costs(self, matches: np.ndarray, subset: np.ndarray | None = None) -> np.ndarray:
+        """Exact window distances of query centres (all, or ``subset``) to ``matches``."""
+        start = time.perf_counter()
+        if subset is None:
+            centres_y, centres_x = self.query_band_y, self.query_band_x
+            positions = self.query_position
+        else:
+            matches = matches[subset]
+            centres_y, centres_x = self.query_band_y[subset], self.query_band_x[subset]
+            positions = self.query_position[subset]
+        out = _kernels.window_costs(
+            self.query_active,
+            self.exemplar_guide,
+            self.exemplar_appearance,
+            self.appearance_active,
+            self.appearance_scale,
+            self.window,
+            centres_y,
+            centres_x,
+            self.cand_e,
+            self.band_y,
+            self.band_x,
+            np.ascontiguousarray(matches),
+            positions,
+            self.cand_position,
+            np.float32(self.params.position_weight**2),
+            self.cand_bias,
+        )
+        self.timer.add("costs", start)
+        return out
+
+    def vote(
+        self, matches: np.ndarray, appearance_padded: np.ndarray, kind: str | None = None
+    ) -> np.ndarray:
+        """M-step into ``appearance_padded`` (in place, also returned); ``kind`` overrides
+        ``params.vote`` ("mode" also records the copied sources for :meth:`dense_source`)."""
+        start = time.perf_counter()
+        windows = (
+            self.exemplar_appearance,
+            self.window,
+            self.query_lookup,
+            self.cand_e,
+            self.band_y,
+            self.band_x,
+            matches,
+        )
+        if (kind or self.params.vote) == "mode":
+            self.chosen = np.empty(appearance_padded.shape[:2] + (3,), dtype=np.int32)
+            _kernels.vote_mode(*windows, appearance_padded, self.chosen)
+        else:
+            _kernels.vote(*windows, appearance_padded)
+        self.timer.add("vote", start)
+        return appearance_padded
+
+    def search(self, matches: np.ndarray | None, init: bool, seed: int, rng) -> np.ndarray:
+        """E-step search: new candidate matches (PCA space) for every query centre."""
+        ndims = self.n_init_dims if init else self.candidate_features.shape[1]
+        backend = self.params.backend
+        if backend == "patchmatch":
+            start = time.perf_counter()
+            passes = self.params.patchmatch_passes
+            if matches is None:
+                n_query, n_cand = len(self.query_y), len(self.cand_e)
+                if n_query * n_cand * ndims <= _EXACT_START_FLOPS:
+                    # A small (coarsest) level: an exact global start costs little.
+                    data = self.candidate_features[:, :ndims].astype(np.float32)
+                    start_index = make_index("exact", data)
+                    matches, _ = start_index.query(
+                        self.query_features[:, :ndims].astype(np.float32)
+                    )
+                else:
+                    matches = rng.integers(0, n_cand, size=n_query)
+                    passes *= 2
+            new = np.ascontiguousarray(matches, dtype=np.int64).copy()
+            distances = _kernels.feature_distances(
+                self.query_features, self.candidate_features, new, ndims
+            )
+            _kernels.patchmatch(
+                self.query_features,
+                self.candidate_features,
+                ndims,
+                self.query_y,
+                self.query_x,
+                self.query_lookup,
+                self.cand_e,
+                self.cand_y,
+                self.cand_x,
+                self.exemplar_lookup,
+                self.exemplar_shape,
+                self.band_starts,
+                new,
+                distances,
+                passes,
+                self.params.stride,
+                seed,
+            )
+            self.timer.add("search", start)
+            return new
+        key = "init" if init else "full"
+        if key not in self.indexes:
+            start = time.perf_counter()
+            data = np.ascontiguousarray(self.candidate_features[:, :ndims], dtype=np.float32)
+            self.indexes[key] = make_index(backend, data, seed=seed)
+            self.timer.add("index", start)
+        start = time.perf_counter()
+        queries = np.ascontiguousarray(self.query_features[:, :ndims], dtype=np.float32)
+        new, _ = self.indexes[key].query(queries)
+        self.timer.add("search", start)
+        return new.astype(np.int64)
+
+    def release_search(self) -> None:
+        """Free what only the E-step and the exact costs need (features, guide and query
+        bands, exemplar lookups): the votes and the dense source maps do not."""
+        for name in (
+            "candidate_features",
+            "query_features",
+            "exemplar_guide",
+            "exemplar_windows",
+            "query_active",
+            "query_windows",
+            "exemplar_lookup",
+            "exemplar_valid",
+            "cand_position",
+            "indexes",
+        ):
+            setattr(self, name, None)
+
+    def reseed(
+        self,
+        matches: np.ndarray,
+        ratio: float,
+        seed: int,
+        rng,
+        worst: float = RESEED_WORST,
+        keep_detail: bool = False,
+    ) -> np.ndarray:
+        """Propagated matches, some replaced by matches on guide and position only.
+
+        A replacement is taken where the propagated match is among the
+        ``worst`` share of worst fits of the guide and the guide-only match fits it
+        in less than ``ratio`` of that distance: relief that the coarser levels
+        could not resolve (a small bulging eye) then gets its own match instead of
+        the coarser level's appearance there. With ``keep_detail`` a replacement must
+        also carry at least the appearance detail of the match it replaces (the
+        energy of its window's appearance features): relief the depth marks only
+        vaguely (a brow ridge) keeps the brow the EM drew rather than a plain patch
+        that fits the ridge a little better.
+        """
+        guided = self.search(matches, init=True, seed=seed, rng=rng)
+        n = self.n_init_dims
+        matches = np.ascontiguousarray(matches, dtype=np.int64)
+        fit = _kernels.feature_distances(self.query_features, self.candidate_features, matches, n)
+        fit_guided = _kernels.feature_distances(
+            self.query_features, self.candidate_features, guided, n
+        )
+        take = (fit > np.quantile(fit, 1.0 - worst)) & (fit_guided < ratio * fit)
+        if keep_detail:
+            take &= self._appearance_energy(guided) >= self._appearance_energy(matches)
+        log.info("reseed: %d of %d matches taken from the guide", int(take.sum()), len(take))
+        return np.where(take, guided, matches)
+
+    def _appearance_energy(self, matches: np.ndarray) -> np.ndarray:
+        """Squared norm of each matched window's appearance features (its detail).
+
+        The features are PCA coefficients about the examples' mean window: of Laplacian
+        bands this is the window's detail; of plain colour levels (Gaussian) it is how
+        far the window stands out from the mean window in colour and detail, which
+        still ranks an eye or a brow above plain skin."""
+        features = self.candidate_features[matches, self.n_init_dims :].astype(np.float64)
+        return np.einsum("ij,ij->i", features, features)
+
+    def propagate(self, coarse_source: np.ndarray) -> np.ndarray:
+        """Initial matches from the coarser level's dense source map (coordinates x2)."""
+        ys, xs = self.query_y, self.query_x
+        src = coarse_source[
+            np.minimum(ys // 2, coarse_source.shape[0] - 1),
+            np.minimum(xs // 2, coarse_source.shape[1] - 1),
+        ]
+        e = src[:, 0]
+        sy = np.minimum(2 * src[:, 1] + ys % 2, self.exemplar_shape[e, 0] - 1)
+        sx = np.minimum(2 * src[:, 2] + xs % 2, self.exemplar_shape[e, 1] - 1)
+        matches = np.empty(len(ys), dtype=np.int64)
+        for ex, valid in enumerate(self.exemplar_valid):
+            # Nearest candidate of every exemplar pixel: snaps propagated coordinates (made
+            # here, used once: not kept through the level's iterations).
+            ny, nx = ndimage.distance_transform_edt(
+                ~valid, return_distances=False, return_indices=True
+            )
+            sel = e == ex
+            at = (sy[sel], sx[sel])  # the nearest candidate read where it is needed only
+            matches[sel] = self.exemplar_lookup[ex, ny[at], nx[at]]
+            del ny, nx
+        return matches
+
+    def dense_source(self, matches: np.ndarray, copied: bool | None = None) -> np.ndarray:
+        """(H, W, 3) exemplar, y, x for every pixel: the pixel it copied (after a mode vote;
+        ``copied`` overrides ``params.vote``), else its position in the match of its
+        nearest window centre."""
+        h, w = self.query_shape
+        ny, nx = ndimage.distance_transform_edt(
+            self.query_lookup < 0, return_distances=False, return_indices=True
+        )
+        if copied is None:
+            copied = self.params.vote == "mode"
+        copied_by_mode = copied and self.chosen is not None
+        r = self.r
+        out = np.empty((h, w, 3), dtype=np.int32)
+        xx = np.arange(w)[None, :]
+        for y0 in range(0, h, _SOURCE_ROWS):  # in blocks of rows: int64 temporaries stay small
+            y1 = min(h, y0 + _SOURCE_ROWS)
+            block_ny, block_nx = ny[y0:y1], nx[y0:y1]
+            c = matches[self.query_lookup[block_ny, block_nx]]
+            e = self.cand_e[c]
+            sy = self.cand_y[c] + (np.arange(y0, y1)[:, None] - block_ny)
+            sx = self.cand_x[c] + (xx - block_nx)
+            if copied_by_mode:
+                chosen = self.chosen[r + y0 : r + y1, r : r + w]
+                copied = chosen[..., 0] >= 0
+                e = np.where(copied, chosen[..., 0], e)
+                # The mode vote records padded coordinates in the packed bands.
+                origin = self.band_origin[e] - r
+                sy = np.where(copied, chosen[..., 1] + origin[..., 0], sy)
+                sx = np.where(copied, chosen[..., 2] + origin[..., 1], sx)
+            out[y0:y1, :, 0] = e
+            out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
+            out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
+        return out
+
+
+def _guide_parts(guide, context, active, n_own=None):
+    """The ``active`` guide channels as (array, channel indices) parts: of the mapping's
+    own ``guide`` bands (the first ``n_own``, default all of them), then of the
+    ``context`` bands (None: none)."""
+    n_own = guide.shape[2] if n_own is None else n_own
+    parts = [(guide, active[active < n_own])]
+    if context is not None:
+        parts.append((context, active[active >= n_own] - n_own))
+    return [(array, channels) for array, channels in parts if len(channels)]

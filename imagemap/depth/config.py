@@ -1,0 +1,509 @@
+"""The depth front end's configuration: one frozen, nested :class:`DepthConfig`.
+
+Every setting of a depth-map colorization is a field here, grouped by the part of
+the pipeline that reads it (:mod:`imagemap.depth.pipeline`): which examples
+(:class:`Selection`), how many pyramid levels (:class:`Pyramid`), the depth's guide
+bands (:class:`Guides`), the engine's matching (:class:`Matching`) and how the
+matches make the map (:class:`Finish`). Each field's comment says what it is for
+and where its value comes from; ``docs/presets.md`` has the measurements.
+
+Class presets are configurations (:data:`PRESETS`), and the options a user may set
+from the command line, a batch or the Python API are declared once, in
+:data:`OPTIONS`: the CLI's flags, :class:`imagemap.batch.BatchOptions` and
+:func:`imagemap.colorize`'s keywords are all made from it.
+
+This module imports nothing heavy (the command line builds its parser from it).
+
+Examples
+--------
+>>> config = resolve_config("fish", vote="mean")
+>>> config.finish.vote, config.guides.position_weight, config.selection.m
+('mean', 0.5, 2)
+>>> paper = resolve_config("busts", finish="paper")
+>>> paper.finish.vote, paper.matching.appearance_pyramid, paper.finish.complete_features
+('mean', 'laplacian', False)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS
+from imagemap.errors import InputError
+from imagemap.validate import check_float, check_int
+
+__all__ = [
+    "FINISHES",
+    "OPTIONS",
+    "PRESETS",
+    "VOTES",
+    "DepthConfig",
+    "Finish",
+    "Guides",
+    "Matching",
+    "Option",
+    "Pyramid",
+    "Selection",
+    "apply_options",
+    "resolve_config",
+]
+
+#: How matched windows make the map (:attr:`Finish.vote`).
+VOTES = ("copy", "mean", "mode")
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Which examples the synthesis uses."""
+
+    #: Examples chosen automatically, nearest in centroid-aligned depth (paper, Sec. 2.3;
+    #: Table 1: 1 for humans, 2 for busts and fish).
+    m: int = 2
+
+    def __post_init__(self) -> None:
+        check_int("m", self.m, minimum=1)
+
+
+@dataclass(frozen=True)
+class Pyramid:
+    """How many pyramid levels, and their windows."""
+
+    #: Window width per level, fine to coarse, for the paper's 200x150 objects (Table 1).
+    patch_sizes: tuple[int, ...] = (7, 11, 9)
+    #: Add finer levels for large objects so that the coarsest level sees the object as
+    #: the paper's does at 200x150; False keeps the preset's levels (still dropping
+    #: levels for small objects).
+    grow: bool = True
+    #: The coarsest level must see the object at least this many windows across: a window
+    #: larger than the object matches nothing but the silhouette.
+    min_windows_across: float = 1.25
+    #: A level is added while the next coarser one would still see the object this many
+    #: windows across (the paper's objects are 2 to 3.5 windows across at its coarsest
+    #: level; 3.5 left 4x busts with hair over the brows, docs/presets.md).
+    add_windows_across: float = 3.0
+    #: A level whose window spans less than this fraction of the object's size (square
+    #: root of its area) sees the coarser levels' colours as context, and the finest level
+    #: that spans more draws the small features (at 200x150 the finest window spans
+    #: 0.05-0.1: none; at 800x600 the two finest levels of a bust).
+    context_fraction: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.patch_sizes or any(
+            not isinstance(k, int) or k < 1 or k % 2 == 0 for k in self.patch_sizes
+        ):
+            raise InputError(f"patch_sizes: odd positive widths, got {self.patch_sizes}")
+        check_float("min_windows_across", self.min_windows_across, minimum=0.0)
+        check_float("add_windows_across", self.add_windows_across, minimum=0.0)
+        check_float("context_fraction", self.context_fraction, minimum=0.0)
+
+    @property
+    def levels(self) -> int:
+        return len(self.patch_sizes)
+
+
+@dataclass(frozen=True)
+class Guides:
+    """The depth's guide bands and their weights (paper, Table 1, restated per band
+    standard deviation so that depth in metres, millimetres or [0, 1] gives one result)."""
+
+    #: Weight of the depth's Gaussian level.
+    depth_weight: float = 1.0
+    #: Weight of the depth's detail (Laplacian) band.
+    depth_detail_weight: float = 2.0
+    #: The detail band in units of its robust spread inside the object, soft-clipped at
+    #: this many units (0: raw band): without it the silhouette's jump sets the band's
+    #: scale and interior relief (sockets, lips, an eye's bulge) hardly counts.
+    detail_clip: float = 3.0
+    #: Percentile of |detail| inside the object taken as its unit: the relief that marks
+    #: features, not the body's flat stretches, whose tiny values a median would blow up.
+    detail_percentile: float = 95.0
+    #: Weight of the silhouette band (signed distance to the outline); with it the depth
+    #: is continued past the outline, so an eye 3 px from the outline matches the
+    #: examples' eyes, not their outlines; 0 keeps the paper's bands.
+    silhouette_weight: float = 0.5
+    #: The silhouette band saturates this many pixels of each level from the outline: it
+    #: says "edge here" to a window, not how deep inside it is.
+    silhouette_range: float = 2.0
+    #: Smoothing (pixels) of the depth continued past the outline.
+    extension_sigma: float = 2.0
+    #: Weight of the position relative to the object's centroid, per RMS radius of the
+    #: object (Table 1's relative position; fish 0.5, humans 3).
+    position_weight: float = 1.0
+    #: Weight of the coarser levels' luminance as an extra guide band (times the Y
+    #: weight) at levels finer than ``Pyramid.context_fraction``: a large map's fine
+    #: levels keep the eyes, lips and palette the coarser levels chose (Cb and Cr too gave
+    #: the same maps for 10 % more memory at 1024^2).
+    context_weight: float = 1.0
+    #: The context's factor at the other levels but the coarsest: weak, so the level's
+    #: own band still draws small features while coarser colours decide between examples
+    #: whose bands fit alike (200x150 busts with every feature 75 -> 83 %; full weight
+    #: lost fish eyes).
+    wide_context_weight: float = 0.25
+
+    def __post_init__(self) -> None:
+        for name in (
+            "depth_weight",
+            "depth_detail_weight",
+            "detail_clip",
+            "silhouette_weight",
+            "silhouette_range",
+            "extension_sigma",
+            "position_weight",
+            "context_weight",
+            "wide_context_weight",
+        ):
+            check_float(name, getattr(self, name), minimum=0.0)
+        check_float("detail_percentile", self.detail_percentile, minimum=0.0, maximum=100.0)
+
+
+@dataclass(frozen=True)
+class Matching:
+    """The engine's matching: colour bands, search and the EM."""
+
+    #: Weight of Y, and of Cb and Cr, per band standard deviation.
+    luma_weight: float = 1.0
+    chroma_weight: float = 0.5
+    #: Fraction of the PCA basis kept, for guide and colour windows (the paper: a fifth).
+    pca_fraction: float = 0.2
+    #: Nearest-neighbour search (patchmatch: fastest; exact: the reference).
+    backend: str = "patchmatch"
+    #: EM iterations per level at most, and the relative decrease of the target below
+    #: which a level stops.
+    max_iterations: int = 8
+    tolerance: float = 2e-3
+    #: EM iterations at the levels finer than the feature level: they refine the layout
+    #: that level drew (a long EM there wore brows that touch the hair down into it).
+    refine_iterations: int = 2
+    #: "gaussian": each level matches and copies its plain YCbCr colours, so a copied
+    #: pixel keeps the colour the coarser levels chose (busts' macro part transfer 0.71 ->
+    #: 0.81); "laplacian": the paper's bands, collapsed at the end.
+    appearance_pyramid: str = "gaussian"
+    #: Extra window cost per rank of a selected example at the levels coarser than the
+    #: feature level: each region from one example where it fits nearly as well, instead
+    #: of patches of two palettes (0: the paper's method).
+    example_preference: float = 0.3
+    #: Apply the preference at the feature level and finer too: fewer, smaller seams,
+    #: fewer small features.
+    preference_at_finest: bool = False
+    #: Per level, where the propagated matches fit the depth worst, matches on depth and
+    #: position alone replace them when they fit in less than this fraction of the
+    #: distance (0: off): features only the finer levels resolve are drawn.
+    guide_reseed: float = 0.5
+    #: After the feature level's EM, the same for a quarter of the windows, when the new
+    #: match also carries as much colour detail (0: off; not with the mean vote): 36
+    #: busts drew 91 % of eyes, brows and lips instead of 83 %.
+    final_reseed: float = 0.7
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise InputError(f"unknown backend {self.backend!r}; use one of {BACKENDS}")
+        if self.appearance_pyramid not in APPEARANCE_PYRAMIDS:
+            raise InputError(
+                f"unknown appearance_pyramid {self.appearance_pyramid!r}; "
+                f"use one of {APPEARANCE_PYRAMIDS}"
+            )
+        for name in ("luma_weight", "chroma_weight", "tolerance", "example_preference"):
+            check_float(name, getattr(self, name), minimum=0.0)
+        check_float("pca_fraction", self.pca_fraction, minimum=1e-6, maximum=1.0)
+        check_int("max_iterations", self.max_iterations, minimum=0)
+        check_int("refine_iterations", self.refine_iterations, minimum=1)
+        for name in ("guide_reseed", "final_reseed"):
+            if check_float(name, getattr(self, name), minimum=0.0, maximum=1.0) == 1.0:
+                raise InputError(f"{name}: must be below 1 (a fraction of the distance)")
+
+
+@dataclass(frozen=True)
+class Finish:
+    """How the finest level's matches make the map."""
+
+    #: "copy": every pixel copied from the example pixel most of its windows agree on,
+    #: seams blended in the gradient domain (crisp); "mean": the paper's M-step (the
+    #: Gaussian-weighted mean of the windows: smooth, blurred where they disagree);
+    #: "mode": copying inside the EM iterations too.
+    vote: str = "copy"
+    #: Weight of the seam costs when the copy's sources are rearranged so that seams fall
+    #: where the sources agree (Kwatra et al. 2003; 0: off).
+    seam_smoothness: float = 1.0
+    #: Let whole stray patches of another source take a touching region's source. Off:
+    #: blur ratio fish 0.87 -> 0.89 but busts with every feature 75 -> 67 %.
+    merge_regions: bool = False
+    #: The share of a region's luminance detail a merge must keep.
+    keep_detail: float = 0.5
+    #: Copy whole every small feature of an example (eye, lips, brow) that the copy cut:
+    #: busts with every feature 92 -> 100 % (4x: 67 -> 83 %).
+    complete_features: bool = True
+    #: Shift a part copied from two examples (a face's skin) into one palette. Off: no
+    #: detail measure moves and busts' dE00 rises by 0.45, though the faces look right.
+    even_palettes: bool = False
+    #: How far the copy may drift towards the voted colours in the seam blend, as a
+    #: fraction of the object's size (8 px for a 200x150 fish, 85 px at 2048^2).
+    blend_scale: float = 0.1
+    #: Keep a step one pixel sharp where the copy changes source inside one example and
+    #: the voted map shows at least this share of it (a sleeve meeting a hand; 0: blend
+    #: every seam): blur ratio fish 0.93 -> 0.97, humans 0.88 -> 0.97.
+    edge_support: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.vote not in VOTES:
+            raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
+        check_float("seam_smoothness", self.seam_smoothness, minimum=0.0)
+        check_float("keep_detail", self.keep_detail, minimum=0.0, maximum=1.0)
+        check_float("blend_scale", self.blend_scale, minimum=0.0)
+        check_float("edge_support", self.edge_support, minimum=0.0, maximum=1.0)
+
+    @property
+    def copies(self) -> bool:
+        """Whether the map is copied from example pixels (not the engine's vote)."""
+        return self.vote in ("copy", "mode")
+
+
+@dataclass(frozen=True)
+class DepthConfig:
+    """Everything a depth-map colorization does, in one frozen value.
+
+    Examples
+    --------
+    >>> config = DepthConfig()
+    >>> config.pyramid.patch_sizes, config.finish.vote
+    ((7, 11, 9), 'copy')
+    >>> config.replace_fields(vote="mean").finish.vote
+    'mean'
+    """
+
+    selection: Selection = field(default_factory=Selection)
+    pyramid: Pyramid = field(default_factory=Pyramid)
+    guides: Guides = field(default_factory=Guides)
+    matching: Matching = field(default_factory=Matching)
+    finish: Finish = field(default_factory=Finish)
+
+    def __post_init__(self) -> None:
+        if self.finish.even_palettes and not self.finish.copies:
+            raise InputError("even_palettes needs vote 'copy' or 'mode' (a copied map)")
+
+    def replace_fields(self, **values: Any) -> DepthConfig:
+        """A copy with fields replaced by their own name, whatever group holds them.
+
+        Examples
+        --------
+        >>> DepthConfig().replace_fields(m=1, patch_sizes=(7,)).pyramid.patch_sizes
+        (7,)
+        """
+        groups: dict[str, dict[str, Any]] = {}
+        for name, value in values.items():
+            group = _FIELD_GROUPS.get(name)
+            if group is None:
+                raise InputError(f"unknown setting {name!r}; known: {', '.join(_FIELD_GROUPS)}")
+            groups.setdefault(group, {})[name] = value
+        return replace(
+            self,
+            **{g: replace(getattr(self, g), **changes) for g, changes in groups.items()},
+        )
+
+    def flat(self) -> dict[str, Any]:
+        """Every field by its own name (for reports and digests)."""
+        return {
+            f.name: getattr(getattr(self, group), f.name)
+            for group in _GROUPS
+            for f in fields(getattr(self, group))
+        }
+
+
+_GROUPS = ("selection", "pyramid", "guides", "matching", "finish")
+_GROUP_TYPES = {"selection": Selection, "pyramid": Pyramid, "guides": Guides}
+_GROUP_TYPES.update({"matching": Matching, "finish": Finish})  # type: ignore[dict-item]
+#: Field name -> the group that holds it (field names are unique across groups).
+_FIELD_GROUPS = {f.name: group for group, cls in _GROUP_TYPES.items() for f in fields(cls)}
+
+
+def _preset(m: int, patch_sizes: tuple[int, ...], position_weight: float) -> DepthConfig:
+    return DepthConfig(
+        selection=Selection(m=m),
+        pyramid=Pyramid(patch_sizes=patch_sizes),
+        guides=Guides(position_weight=position_weight),
+    )
+
+
+#: Class presets after the paper's Table 1 (m and windows as published; weights
+#: restated per band standard deviation, see ``docs/presets.md``).
+PRESETS: dict[str, DepthConfig] = {
+    "humans": _preset(1, (7, 9, 9), 3.0),
+    "busts": _preset(2, (7, 11, 9), 1.0),
+    "fish": _preset(2, (7, 11, 9), 0.5),
+}
+
+#: Named finishes: field values that make a known method. "paper" is Hassner & Basri's
+#: own: the mean M-step on YCbCr Laplacian bands, collapsed, and no finishing stage
+#: (on our guide bands).
+FINISHES: dict[str, dict[str, Any]] = {
+    "copy": {},
+    "paper": {
+        "vote": "mean",
+        "appearance_pyramid": "laplacian",
+        "complete_features": False,
+        "even_palettes": False,
+        "merge_regions": False,
+    },
+}
+
+
+@dataclass(frozen=True)
+class Option:
+    """One setting a user may change from the command line, a batch or the API.
+
+    ``name`` is the keyword (``colorize(..., vote="mean")``) and the argparse
+    destination; ``setting`` the :class:`DepthConfig` field it sets (None: a named
+    bundle of fields, see :data:`FINISHES`); ``flag`` the command-line flag; ``kind``
+    how the flag reads its value: ``"choice"``, ``"positive_int"``,
+    ``"non_negative_float"``, ``"fraction"``, ``"switch_on"`` (a flag that sets True)
+    or ``"switch_off"`` (a flag that sets False).
+    """
+
+    name: str
+    setting: str | None
+    flag: str
+    kind: str
+    help: str
+    choices: tuple[str, ...] = ()
+
+
+#: The options of a depth-map colorization, declared once.
+OPTIONS: tuple[Option, ...] = (
+    Option("m", "m", "--m", "positive_int", "number of examples to select automatically (>= 1)"),
+    Option(
+        "backend",
+        "backend",
+        "--backend",
+        "choice",
+        "nearest-neighbour search (default patchmatch: fastest; exact: reference)",
+        BACKENDS,
+    ),
+    Option(
+        "example_preference",
+        "example_preference",
+        "--example-preference",
+        "non_negative_float",
+        "extra cost per rank of a selected example at the coarser levels (default 0.3): "
+        "each region of the object from one example where it fits nearly as well, instead "
+        "of patches of two palettes; 0 is the paper's method",
+    ),
+    Option(
+        "vote",
+        "vote",
+        "--vote",
+        "choice",
+        "how matched windows make the map: copy (default; each pixel copied from the example "
+        "pixel its windows agree on, seams blended: crisp eyes and stripes), mean (the "
+        "paper: weighted mean of the windows, smooth but blurred), mode (copying inside "
+        "the EM iterations too)",
+        VOTES,
+    ),
+    Option(
+        "appearance_pyramid",
+        "appearance_pyramid",
+        "--appearance-pyramid",
+        "choice",
+        "what each pyramid level matches and copies: gaussian (default; the level's plain "
+        "colours, so a copied pixel keeps the colour the coarser levels chose), laplacian "
+        "(the paper's YCbCr Laplacian bands)",
+        APPEARANCE_PYRAMIDS,
+    ),
+    Option(
+        "edge_support",
+        "edge_support",
+        "--edge-support",
+        "fraction",
+        "where the copy changes source inside one example and the step there is an edge the "
+        "voted map shows too (a sleeve meeting a hand), keep it one pixel sharp if the vote "
+        "shows at least this share of it (default 0.3); 0 blends every seam",
+    ),
+    Option(
+        "complete_features",
+        "complete_features",
+        "--no-feature-completion",
+        "switch_off",
+        "leave an example's eye, lips or brow as the copy cut it (by default a small feature "
+        "copied only in part, say lips cut into a lozenge where two offsets meet, is copied "
+        "whole)",
+    ),
+    Option(
+        "even_palettes",
+        "even_palettes",
+        "--even-palettes",
+        "switch_on",
+        "where the map shows one part (a face's skin, a plain shirt) in two examples' "
+        "colours, shift the smaller share into the larger's: one skin tone from face to "
+        "neck (off by default; docs/presets.md)",
+    ),
+    Option(
+        "finish",
+        None,
+        "--finish",
+        "choice",
+        "a named method: copy (default: the settings above) or paper (Hassner & Basri's "
+        "own: mean vote on Laplacian colour bands, no finishing stage); options given "
+        "beside it override it",
+        tuple(FINISHES),
+    ),
+)
+
+#: Option name -> its declaration.
+OPTION_NAMES = {option.name: option for option in OPTIONS}
+
+
+def apply_options(config: DepthConfig, **options: Any) -> DepthConfig:
+    """``config`` with the :data:`OPTIONS` given (None: unset) applied.
+
+    A named ``finish`` is applied first, so that options given beside it win.
+
+    Raises
+    ------
+    InputError
+        An unknown option or a value the configuration refuses (naming the option).
+    """
+    unknown = sorted(set(options) - set(OPTION_NAMES))
+    if unknown:
+        raise InputError(
+            f"unknown option {', '.join(unknown)}; the options are {', '.join(OPTION_NAMES)}"
+        )
+    values = {name: value for name, value in options.items() if value is not None}
+    finish = values.pop("finish", None)
+    settings: dict[str, Any] = {}
+    if finish is not None:
+        if finish not in FINISHES:
+            raise InputError(f"finish: unknown {finish!r}; use one of {', '.join(FINISHES)}")
+        settings.update(FINISHES[finish])
+    for name, value in values.items():
+        option = OPTION_NAMES[name]
+        if option.kind in ("switch_on", "switch_off") and not isinstance(value, bool):
+            raise InputError(f"{name}: expected True or False, got {value!r}")
+        if option.kind == "choice" and value not in option.choices:
+            raise InputError(f"{name}: unknown {value!r}; use one of {', '.join(option.choices)}")
+        settings[option.setting] = value  # type: ignore[index]
+    return config.replace_fields(**settings) if settings else config
+
+
+def resolve_config(preset: str | DepthConfig | None = None, **options: Any) -> DepthConfig:
+    """The configuration of a class preset (a name, a :class:`DepthConfig`, or None for
+    the default) with the :data:`OPTIONS` given applied.
+
+    Examples
+    --------
+    >>> resolve_config("humans").selection.m
+    1
+    >>> resolve_config("cats")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: preset: unknown preset 'cats'; use one of [...]
+    """
+    if preset is None:
+        config = DepthConfig()
+    elif isinstance(preset, DepthConfig):
+        config = preset
+    elif isinstance(preset, str) and preset in PRESETS:
+        config = PRESETS[preset]
+    elif isinstance(preset, str):
+        raise InputError(f"preset: unknown preset {preset!r}; use one of {sorted(PRESETS)}")
+    else:
+        raise InputError(f"preset: expected a preset name or DepthConfig, got {preset!r}")
+    return apply_options(config, **options)

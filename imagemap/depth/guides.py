@@ -1,0 +1,389 @@
+"""The depth front end's bands, pyramid and level plan.
+
+Guide bands per pyramid level: the depth's Gaussian level, its high frequencies
+(the Laplacian band of the same level, in units of its own spread inside the
+object) and the silhouette (signed distance to the outline), with the depth
+continued past the outline. Appearance bands: the Y, Cb and Cr of the image-map
+at each level, plain (Gaussian) or as the paper's Laplacian bands. The pyramid has
+as many levels as the object's size calls for, and :func:`level_plans` states what
+the engine does at each of them.
+
+Examples
+--------
+>>> mask = np.zeros((150, 200), bool); mask[30:120, 50:150] = True
+>>> pyramid_levels(mask, (7, 11, 9))
+3
+>>> depth = np.where(mask, 0.5, 0.0).astype(np.float32)
+>>> [level.guide.shape for level in depth_mappings(depth, levels=2)]
+[(150, 200, 3), (75, 100, 3)]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+from skimage import color
+
+from imagemap.core.blend import fill_background
+from imagemap.core.mapping import Mapping
+from imagemap.core.params import APPEARANCE_PYRAMIDS, LevelPlan
+from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
+from imagemap.depth.config import DepthConfig, Guides, Pyramid
+from imagemap.example import Example
+from imagemap.io import validate_depth
+
+__all__ = [
+    "context_level_weights",
+    "context_levels",
+    "depth_mappings",
+    "example_mappings",
+    "example_ycbcr",
+    "level_patch_sizes",
+    "level_plans",
+    "pyramid_levels",
+    "to_rgb",
+    "to_ycbcr",
+]
+
+_PYRAMID = Pyramid()
+_GUIDES = Guides()
+
+
+def context_levels(
+    mask: np.ndarray,
+    patch_sizes: tuple[int, ...],
+    context_fraction: float = _PYRAMID.context_fraction,
+) -> int:
+    """How many of the finest levels see the coarser levels' colours: those whose window
+    spans less than ``context_fraction`` of the object's size (square root of its area).
+
+    Examples
+    --------
+    >>> small = np.zeros((150, 200), bool); small[30:120, 50:150] = True
+    >>> context_levels(small, (7, 11, 9))
+    0
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> context_levels(big, (7, 11, 9, 9))
+    2
+    """
+    size = float(np.sqrt(mask.sum()))
+    spans = [k * 2**level / size for level, k in enumerate(patch_sizes[:-1])]
+    return sum(1 for span in spans if span < context_fraction)
+
+
+def context_level_weights(
+    mask: np.ndarray,
+    patch_sizes: tuple[int, ...],
+    wide: float = 0.0,
+    context_fraction: float = _PYRAMID.context_fraction,
+) -> tuple[int, tuple[float, ...]]:
+    """Which levels see the coarser levels' colours, and how strongly.
+
+    Returns the number of the finest levels with context and a factor per level
+    (finest first) on ``Guides.context_weight``: 1 where a window spans less than
+    ``context_fraction`` of the object (its own band holds almost nothing of the
+    object's structure there), ``wide`` at the other levels but the coarsest.
+
+    Examples
+    --------
+    >>> small = np.zeros((150, 200), bool); small[30:120, 50:150] = True
+    >>> context_level_weights(small, (7, 11, 9), wide=0.25)
+    (2, (0.25, 0.25, 0.0))
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> context_level_weights(big, (7, 11, 9, 9), wide=0.25)
+    (3, (1.0, 1.0, 0.25, 0.0))
+    >>> context_level_weights(small, (7, 11, 9))
+    (0, (0.0, 0.0, 0.0))
+    """
+    fine = context_levels(mask, patch_sizes, context_fraction)
+    n = len(patch_sizes)
+    weights = [1.0 if level < fine else float(wide) for level in range(n - 1)] + [0.0]
+    count = max((level + 1 for level, w in enumerate(weights) if w > 0), default=0)
+    return count, tuple(weights)
+
+
+def pyramid_levels(
+    mask: np.ndarray,
+    patch_sizes: tuple[int, ...],
+    grow: bool = True,
+    min_windows_across: float = _PYRAMID.min_windows_across,
+    add_windows_across: float = _PYRAMID.add_windows_across,
+) -> int:
+    """How many pyramid levels the object's size calls for.
+
+    The object's size is the square root of its area. A preset's coarsest level
+    is dropped while the object, at that level, is less than
+    ``min_windows_across`` windows across (a window larger than the object
+    matches nothing but the silhouette); levels are added while the next coarser
+    level would still see the object ``add_windows_across`` windows across, so that
+    the coarsest level sees the object's layout at any resolution as at the paper's
+    size (the added levels are finer ones, see :func:`level_patch_sizes`). The
+    paper's three levels and 7/11/9 windows were set for 200x150 images; this keeps
+    them there.
+
+    Examples
+    --------
+    >>> mask = np.zeros((60, 80), bool); mask[20:40, 10:70] = True
+    >>> pyramid_levels(mask, (7, 11, 9))
+    2
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> pyramid_levels(big, (7, 11, 9))
+    5
+    """
+    size = float(np.sqrt(mask.sum()))
+    levels = len(patch_sizes)
+    while levels > 1 and size / 2 ** (levels - 1) < min_windows_across * patch_sizes[levels - 1]:
+        levels -= 1
+    if grow and levels == len(patch_sizes):
+        while size / 2**levels >= add_windows_across * patch_sizes[-1]:
+            levels += 1
+    return levels
+
+
+def level_patch_sizes(patch_sizes: tuple[int, ...], levels: int) -> tuple[int, ...]:
+    """The preset's window widths (finest first) cut or extended to ``levels``.
+
+    Levels added for a large object are finer ones: the preset's widths stay at the
+    levels that see the object as its finest to coarsest levels do at the paper's
+    size, and the added levels below repeat its finest width.
+
+    Examples
+    --------
+    >>> level_patch_sizes((7, 11, 9), 5)
+    (7, 7, 7, 11, 9)
+    >>> level_patch_sizes((7, 11, 9), 2)
+    (7, 11)
+    """
+    if levels <= len(patch_sizes):
+        return tuple(patch_sizes[:levels])
+    return (patch_sizes[0],) * (levels - len(patch_sizes)) + tuple(patch_sizes)
+
+
+def sized_pyramid(mask: np.ndarray, pyramid: Pyramid) -> Pyramid:
+    """``pyramid`` with the windows of as many levels as the object's size calls for.
+
+    Examples
+    --------
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> sized_pyramid(big, Pyramid()).patch_sizes
+    (7, 7, 7, 11, 9)
+    """
+    levels = pyramid_levels(
+        mask,
+        pyramid.patch_sizes,
+        grow=pyramid.grow,
+        min_windows_across=pyramid.min_windows_across,
+        add_windows_across=pyramid.add_windows_across,
+    )
+    if levels == pyramid.levels:
+        return pyramid
+    return Pyramid(
+        patch_sizes=level_patch_sizes(pyramid.patch_sizes, levels),
+        grow=pyramid.grow,
+        min_windows_across=pyramid.min_windows_across,
+        add_windows_across=pyramid.add_windows_across,
+        context_fraction=pyramid.context_fraction,
+    )
+
+
+def feature_level(mask: np.ndarray, pyramid: Pyramid) -> int:
+    """The level whose windows draw the small features: the finest whose window spans at
+    least ``context_fraction`` of the object (the finest at the paper's size). A finer
+    window's relief holds no feature to match on (a 7 px window on a 30 px eye), and
+    depth-only matches there would scatter palette patches."""
+    fine = context_levels(mask, pyramid.patch_sizes, pyramid.context_fraction)
+    return min(fine, pyramid.levels - 1)
+
+
+def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple[LevelPlan, ...]:
+    """What the engine does at each level of ``config``'s (sized) pyramid, finest first.
+
+    - The feature level (:func:`feature_level`) draws the small features: the final
+      reseed runs after its EM, and it takes a feature from whichever example draws
+      it (no example preference there or finer, unless ``preference_at_finest``);
+    - the coarser levels prefer the nearest examples (``example_preference`` per
+      rank), so that each region comes from one example where it fits nearly as well;
+    - the levels finer than the feature level refine its layout
+      (``refine_iterations``);
+    - the levels whose windows span little of the object see the coarser levels'
+      luminance as context, the others but the coarsest weakly
+      (:func:`context_level_weights`).
+
+    Examples
+    --------
+    >>> mask = np.zeros((150, 200), bool); mask[30:120, 50:150] = True
+    >>> plans = level_plans(DepthConfig(), mask, n_examples=2)
+    >>> [(p.patch_size, p.exemplar_costs, p.final_reseed) for p in plans]
+    [(7, (), 0.7), (11, (0.0, 0.3), 0.0), (9, (0.0, 0.3), 0.0)]
+    """
+    pyramid, guides, matching = config.pyramid, config.guides, config.matching
+    n_levels = pyramid.levels
+    feature = feature_level(mask, pyramid)
+    costs = tuple(matching.example_preference * rank for rank in range(n_examples))
+    count, factors = context_level_weights(
+        mask, pyramid.patch_sizes, guides.wide_context_weight, pyramid.context_fraction
+    )
+    luma_context = guides.context_weight * matching.luma_weight
+    with_context = bool(guides.context_weight) and count > 0
+    # The mean vote's map is the EM's own vote: matches changed after it would describe
+    # (source, provenance) a map that was not made from them.
+    final_reseed = matching.final_reseed if config.finish.vote != "mean" else 0.0
+    plans = []
+    for level, k in enumerate(pyramid.patch_sizes):
+        preferred = matching.example_preference and (
+            level > feature or n_levels == 1 or matching.preference_at_finest
+        )
+        context: tuple[float, ...] = ()
+        if with_context and factors[level] > 0 and level < n_levels - 1:
+            context = (factors[level] * luma_context, 0.0, 0.0)
+        plans.append(
+            LevelPlan(
+                patch_size=k,
+                max_iterations=(
+                    min(matching.max_iterations, matching.refine_iterations)
+                    if level < feature
+                    else matching.max_iterations
+                ),
+                exemplar_costs=costs if preferred else (),
+                context_weights=context,
+                guide_reseed=matching.guide_reseed,
+                final_reseed=final_reseed if level == feature else 0.0,
+            )
+        )
+    return tuple(plans)
+
+
+def _interior_scale(detail: np.ndarray, mask: np.ndarray, percentile: float) -> float:
+    """The detail band's unit: a high percentile of its magnitude inside the object."""
+    inner = ndimage.binary_erosion(mask, iterations=2) if mask.any() else mask
+    values = detail[inner] if inner.sum() >= 16 else detail[mask] if mask.any() else detail
+    scale = float(np.percentile(np.abs(values), percentile)) if values.size else 0.0
+    return scale if scale > 0 else max(float(np.abs(detail).max()), 1e-12)
+
+
+def _extend_depth(depth: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
+    """The depth continued past the outline: nearest object depth, smoothed outside.
+
+    Windows at the outline then compare relief with relief; the outline itself
+    is the silhouette band's job.
+    """
+    outside = ndimage.gaussian_filter(fill_background(depth, mask), sigma)
+    return np.where(mask, depth, outside).astype(np.float32)
+
+
+def silhouette_band(mask: np.ndarray, saturation: float = _GUIDES.silhouette_range) -> np.ndarray:
+    """Signed distance to the outline (positive inside), in units of ``saturation``
+    pixels and clipped to [-1, 1].
+
+    Examples
+    --------
+    >>> mask = np.zeros((1, 7), bool); mask[0, 3:] = True
+    >>> silhouette_band(mask).round(2).tolist()
+    [[-1.0, -1.0, -0.5, 0.5, 1.0, 1.0, 1.0]]
+    """
+    inside = ndimage.distance_transform_edt(mask)
+    outside = ndimage.distance_transform_edt(~mask)
+    signed = (inside - outside) / saturation
+    return np.clip(signed, -1.0, 1.0).astype(np.float32)
+
+
+def _depth_guides(depth: np.ndarray, masks: list[np.ndarray], guides: Guides) -> list[np.ndarray]:
+    """Per level of ``masks`` (the object's mask pyramid): (H_l, W_l, B) depth Gaussian
+    level, its Laplacian (detail) band and, with a silhouette weight, the silhouette band
+    (the depth then extended past the outline)."""
+    levels = len(masks)
+    silhouette = bool(guides.silhouette_weight)
+    clip = guides.detail_clip or None
+    if silhouette:
+        depth = _extend_depth(depth, masks[0], guides.extension_sigma)
+    gaussian = gaussian_pyramid(depth, levels)
+    # One level more, so that even the coarsest level has a true band-pass detail band.
+    detail = laplacian_pyramid(depth, levels + 1)[:levels]
+    if clip:
+        scaled = []
+        for d, m in zip(detail, masks, strict=True):
+            unit = _interior_scale(d, m, guides.detail_percentile)
+            scaled.append((clip * unit) * np.tanh(d / (clip * unit)))
+        detail = scaled
+    bands = [[g, d] for g, d in zip(gaussian, detail, strict=True)]
+    if silhouette:
+        for level_bands, m in zip(bands, masks, strict=True):
+            level_bands.append(silhouette_band(m, guides.silhouette_range))
+    return [np.stack(level_bands, axis=-1) for level_bands in bands]
+
+
+def depth_mappings(depth: np.ndarray, levels: int = 3, guides: Guides = _GUIDES) -> list[Mapping]:
+    """The query's pyramid of mappings (guide bands and mask) for a depth map."""
+    depth = validate_depth(depth)
+    masks = mask_pyramid(depth > 0, levels)
+    return [
+        Mapping(guide=guide, mask=mask if mask.any() else None)
+        for guide, mask in zip(_depth_guides(depth, masks, guides), masks, strict=True)
+    ]
+
+
+_ROWS = 256  # rows per block of the colour conversions
+
+
+def to_ycbcr(rgb: np.ndarray) -> np.ndarray:
+    """RGB in [0, 1] to YCbCr scaled to [0, 1] (ITU-R BT.601, as skimage).
+
+    Examples
+    --------
+    >>> [round(float(v), 3) for v in to_ycbcr(np.ones((1, 1, 3), np.float32))[0, 0]]
+    [0.922, 0.502, 0.502]
+    """
+    # In blocks of rows: skimage works in float64 (several full-size copies at 4096^2).
+    out = np.empty(rgb.shape, dtype=np.float32)
+    for y in range(0, rgb.shape[0], _ROWS):
+        out[y : y + _ROWS] = color.rgb2ycbcr(rgb[y : y + _ROWS]) / 255.0
+    return out
+
+
+def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_ycbcr`, clipped to [0, 1].
+
+    Examples
+    --------
+    >>> rgb = np.array([[[0.2, 0.5, 0.9]]], np.float32)
+    >>> bool(np.allclose(to_rgb(to_ycbcr(rgb)), rgb, atol=1e-5))
+    True
+    """
+    return np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0.0, 1.0).astype(np.float32)
+
+
+def example_ycbcr(example: Example) -> np.ndarray:
+    """An example's image-map in YCbCr, the background filled with the nearest object colour."""
+    # The image read from disk is not left cached on the example: the synthesis keeps
+    # only its colour bands, and the finish reads it again (a full-size float32 image
+    # per example less through the synthesis).
+    cache = getattr(example, "__dict__", {})
+    cached = "image" in cache
+    image = example.image
+    if not cached and "image" in cache:  # filled just now (a cached_property): emptied
+        del cache["image"]
+    return to_ycbcr(fill_background(image, example.mask))
+
+
+def example_mappings(
+    example: Example,
+    levels: int = 3,
+    appearance_pyramid: str = "gaussian",
+    guides: Guides = _GUIDES,
+) -> list[Mapping]:
+    """An example's pyramid of mappings: depth bands, YCbCr (Gaussian or Laplacian) levels, mask."""
+    if appearance_pyramid not in APPEARANCE_PYRAMIDS:
+        raise ValueError(f"appearance_pyramid must be one of {APPEARANCE_PYRAMIDS}")
+    mask = example.mask
+    ycbcr = example_ycbcr(example)
+    if appearance_pyramid == "laplacian":
+        appearance = laplacian_pyramid(ycbcr, levels)
+    else:
+        appearance = gaussian_pyramid(ycbcr, levels)
+    masks = mask_pyramid(mask, levels)
+    return [
+        Mapping(guide=guide, appearance=bands, mask=level_mask if level_mask.any() else None)
+        for guide, bands, level_mask in zip(
+            _depth_guides(example.depth, masks, guides), appearance, masks, strict=True
+        )
+    ]
