@@ -39,7 +39,7 @@ class MeshResult:
 
 def colorize_mesh(
     mesh,
-    database: Database,
+    database: Database | dict[str, Database],
     views: list[View] | str | None = None,
     *,
     size: tuple[int, int] = DEFAULT_SIZE,

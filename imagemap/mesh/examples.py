@@ -130,7 +130,8 @@ def mesh_examples(
     """
     root = Path(root)
     view = parse_view(view)
-    examples, problems = [], []
+    examples: list[MeshExample] = []
+    problems: list[str] = []
     if not root.is_dir():
         return examples, problems
     for entry in sorted(root.iterdir()):
