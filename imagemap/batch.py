@@ -332,7 +332,10 @@ def _set_threads(threads: int) -> None:
     """Each worker's share of the cores for numba's parallel kernels."""
     import numba
 
-    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    # numba.config makes its settings at run time from the environment (globals()), out of
+    # a type checker's sight.
+    most = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+    numba.set_num_threads(max(1, min(threads, most)))
 
 
 def _pool_task(job: Job, options: BatchOptions) -> dict:
@@ -412,7 +415,7 @@ def run_batch(
         _collect(results, len(todo), summary, quiet, on_result)
         summary.seconds = time.perf_counter() - start
     finally:
-        if own_client:
+        if own_client and client is not None:  # own_client: _connect opened client
             client.close()
     _write_report(Path(out_dir), summary, options)
     return summary

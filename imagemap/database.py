@@ -61,7 +61,7 @@ class Database:
         """
         examples, problems = _scan(Path(path))
         meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
-        examples, problems = examples + meshes, problems + mesh_problems
+        examples, problems = [*examples, *meshes], problems + mesh_problems
         if strict and problems:
             raise InputError("; ".join(problems))
         if not examples:
@@ -205,7 +205,7 @@ def check_database(
     """
     examples, problems = _scan(Path(path))
     meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
-    examples, problems = examples + meshes, problems + mesh_problems
+    examples, problems = [*examples, *meshes], problems + mesh_problems
     rows = []
     for example in examples:
         try:

@@ -87,19 +87,31 @@ class Example:
     def depth(self) -> np.ndarray:
         if "depth" in self._arrays:
             return self._arrays["depth"]
-        return read_depth(self.depth_path)
+        return read_depth(self._path("depth_path"))
 
     @cached_property
     def image(self) -> np.ndarray:
         if "image" in self._arrays:
             return self._arrays["image"]
-        image = read_image(self.image_path)
+        image_path = self._path("image_path")
+        image = read_image(image_path)
         if image.shape[:2] != self.depth.shape:
             raise InputError(
-                f"{self.image_path}: image is {image.shape[1]}x{image.shape[0]} but its depth "
-                f"{self.depth_path.name} is {self.depth.shape[1]}x{self.depth.shape[0]}"
+                f"{image_path}: image is {image.shape[1]}x{image.shape[0]} but its depth "
+                f"{self._path('depth_path').name} is {self.depth.shape[1]}x{self.depth.shape[0]}"
             )
         return image
+
+    def _path(self, field_name: str) -> Path:
+        """The file behind a field (``"depth_path"``...), or :class:`InputError` when the
+        example has neither the array nor the file (an ``Example`` built by hand)."""
+        path = getattr(self, field_name)
+        if path is None:
+            raise InputError(
+                f"example {self.name!r}: no {field_name.removesuffix('_path')} array or file "
+                "(build examples with Example.from_arrays or Database.from_directory)"
+            )
+        return path
 
     @cached_property
     def labels(self) -> np.ndarray | None:

@@ -61,8 +61,10 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         raise
 
 
-def _to_unit_float(array: np.ndarray, path: Path) -> np.ndarray:
-    """Integer images to float32 in [0, 1] by their dtype's range; floats as they are."""
+def _to_unit_float(array: np.ndarray, path: Path | str) -> np.ndarray:
+    """Integer images to float32 in [0, 1] by their dtype's range; floats as they are.
+
+    ``path`` names the source in messages (a file, or an in-memory example's name)."""
     if array.dtype == np.uint8:
         return array.astype(np.float32) / 255.0
     if array.dtype == np.uint16:
@@ -287,5 +289,7 @@ def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
     """Save arrays to one ``.npz`` atomically."""
     path = Path(path)
     with atomic_path(path, suffix=".npz") as tmp:
-        np.savez_compressed(tmp, **arrays)
+        # allow_pickle spelled out (NumPy's default) so that a type checker matches
+        # **arrays to savez_compressed's **kwds rather than to that bool keyword.
+        np.savez_compressed(tmp, allow_pickle=True, **arrays)
     return path

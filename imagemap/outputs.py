@@ -157,9 +157,9 @@ def _staged(targets: list[Path]) -> Iterator[list[Path]]:
         for target in targets:
             target.parent.mkdir(parents=True, exist_ok=True)
             suffix = "".join(target.suffixes) or ".tmp"
-            fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=suffix, dir=target.parent)
+            fd, name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=suffix, dir=target.parent)
             os.close(fd)
-            temporaries.append(Path(tmp))
+            temporaries.append(Path(name))
         yield temporaries
     except BaseException:
         for tmp in temporaries:
