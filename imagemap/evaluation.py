@@ -73,6 +73,7 @@ from imagemap.metrics import (
     ImageMetrics,
     blur_ratio,
     class_reference,
+    coherence_metrics,
     image_metrics,
     macro_part_transfer,
     source_labels,
@@ -203,6 +204,13 @@ class Evaluation:
                         "features_drawn": result.metrics.features_drawn,
                         "features_measured": result.metrics.features_measured,
                         "blur_ratio": result.metrics.blur_ratio,
+                        "fragments_90": result.metrics.fragments_90,
+                        "fragment_share": result.metrics.fragment_share,
+                        "seam_length": result.metrics.seam_length,
+                        "continuity": result.metrics.continuity,
+                        "midtone_ratio": result.metrics.midtone_ratio,
+                        "parts_one_palette": result.metrics.parts_one_palette,
+                        "parts_palette_measured": result.metrics.parts_palette_measured,
                         "faulty": result.faulty,
                         "seconds": result.seconds,
                     }
@@ -279,8 +287,12 @@ def _detail_metrics(
     mask: np.ndarray,
     labels: np.ndarray | None,
     examples: list[Example],
+    truth: np.ndarray | None = None,
 ) -> ImageMetrics:
-    """Add the measures that need the source map: part transfer (micro and macro), blur."""
+    """Add the measures that need the source map: part transfer (micro and macro), blur,
+    and (given the truth) the coherence measures of :func:`imagemap.metrics.coherence_metrics`."""
+    if truth is not None:
+        metrics = coherence_metrics(metrics, image, truth, mask, source, labels)
     covered = mask & (source[..., 0] >= 0)
     # Copied from the examples as the synthesis sees them (object colours continued
     # past their outlines): a source pixel at an example's edge would otherwise bring
@@ -362,7 +374,7 @@ def evaluate_object(
         measured = image_metrics(
             image, truth, mask, labels, source=source, example_labels=_example_labels(sources)
         )
-        metrics = _detail_metrics(measured, image, source, mask, labels, sources)
+        metrics = _detail_metrics(measured, image, source, mask, labels, sources, truth)
         results[method] = MethodResult(
             method=method,
             image=image.astype(np.float32),

@@ -82,6 +82,7 @@ __all__ = [
     "PaletteCount",
     "ciede2000",
     "class_reference",
+    "coherence_metrics",
     "fragment_labels",
     "fragments",
     "image_metrics",
@@ -109,6 +110,13 @@ class ImageMetrics:
     and :mod:`imagemap.evaluation` fills them. ``features_drawn`` of
     ``features_measured`` small labelled features (:func:`features_drawn`) are
     reproduced where the truth has them.
+
+    The coherence measures (issue #32, ``docs/measures.md``), also filled by the
+    evaluation: ``fragments_90`` and ``fragment_share`` (:func:`fragments`),
+    ``seam_length`` (:func:`seam_length`, per outline length), ``continuity``
+    (:func:`structure_continuity`), ``midtone_ratio`` (:func:`midtone_share`), and
+    ``parts_one_palette`` of ``parts_palette_measured`` labelled parts painted from
+    one example (:func:`palettes_per_part`).
     """
 
     ciede2000: float
@@ -119,6 +127,13 @@ class ImageMetrics:
     features_drawn: int = 0
     features_measured: int = 0
     blur_ratio: float = math.nan
+    fragments_90: float = math.nan
+    fragment_share: float = math.nan
+    seam_length: float = math.nan
+    continuity: float = math.nan
+    midtone_ratio: float = math.nan
+    parts_one_palette: int = 0
+    parts_palette_measured: int = 0
 
     @property
     def features_missing(self) -> bool:
@@ -770,15 +785,16 @@ def _source_links(
 def fragment_labels(
     source: np.ndarray, mask: np.ndarray, *, drift: int = FRAGMENT_DRIFT
 ) -> np.ndarray:
-    """Label each object pixel with its fragment (0 off the object).
+    """Label each object pixel that has a source with its fragment (0 elsewhere).
 
     A fragment is a connected region (4-neighbours) copied from one example with
     offsets (source position minus pixel position) that change by at most ``drift``
     pixels between neighbours. Chains of small changes stay one fragment, so this is
     not a label per offset: it is the connected components of the graph whose edges
     are the neighbour pairs that continue one copy, found by
-    :func:`scipy.sparse.csgraph.connected_components` (no pixel loop). An object pixel
-    with no source (example index -1) is a fragment of its own.
+    :func:`scipy.sparse.csgraph.connected_components` (no pixel loop). Object pixels
+    with no source (example index -1: the holes of a pasted example) belong to no
+    fragment and are labelled 0.
 
     Parameters
     ----------
@@ -792,7 +808,8 @@ def fragment_labels(
     Returns
     -------
     ndarray of int64, (H, W)
-        1..n on the object, numbered in raster order of their first pixel.
+        1..n on the object's pixels with a source, numbered in raster order of their
+        first pixel.
 
     Example
     -------
@@ -806,28 +823,22 @@ def fragment_labels(
     from scipy.sparse.csgraph import connected_components
 
     source, mask = _check_source(source, mask)
-    right, down, _ = _source_links(source, mask, drift)
+    right, down, covered = _source_links(source, mask, drift)
     h, w = mask.shape
     node = np.arange(h * w).reshape(h, w)
     start = np.concatenate([node[:, :-1][right], node[:-1, :][down]])
     end = np.concatenate([node[:, 1:][right], node[1:, :][down]])
     graph = coo_matrix((np.ones(len(start), np.int8), (start, end)), shape=(h * w, h * w))
     _, component = connected_components(graph, directed=False)
-    component = component.reshape(h, w)
-    # Renumber the components met on the object 1..n in raster order (deterministic).
-    first, inverse = np.unique(component[mask], return_inverse=True)
-    order = np.argsort(np.argsort(_first_positions(component, mask, len(first), inverse)))
+    # Renumbered 1..n in raster order of their first pixel (deterministic).
+    found, first, inverse = np.unique(
+        component.reshape(h, w)[covered], return_index=True, return_inverse=True
+    )
+    rank = np.empty(len(found), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(1, len(found) + 1)
     labels = np.zeros((h, w), dtype=np.int64)
-    labels[mask] = order[inverse] + 1
+    labels[covered] = rank[inverse]
     return labels
-
-
-def _first_positions(component, mask, count, inverse) -> np.ndarray:
-    """Raster position of each object component's first pixel."""
-    positions = np.flatnonzero(mask.ravel())
-    first = np.full(count, positions.max() + 1)
-    np.minimum.at(first, inverse, positions)
-    return first
 
 
 @dataclass(frozen=True)
@@ -837,10 +848,11 @@ class FragmentStats:
     Attributes
     ----------
     count_90 : int
-        The fewest fragments that together cover ``FRAGMENT_COVERAGE`` of the object.
+        The fewest fragments that together cover ``FRAGMENT_COVERAGE`` of the
+        object's pixels that have a source.
     mean_share : float
-        Area-weighted mean share of the object per fragment: the expected share of
-        the object covered by the fragment of a random object pixel (1 = one piece).
+        Area-weighted mean share per fragment: the expected share covered by the
+        fragment of a random pixel (1 = one piece); shares of the pixels with a source.
     count : int
         All fragments on the object.
     """
@@ -873,7 +885,9 @@ def fragments(
     Returns
     -------
     FragmentStats
-        A pasted example (one translation) is one fragment with mean share 1.
+        A pasted example (one translation) is one fragment with mean share 1, holes
+        or not (pixels without a source are no fragment; shares are of the pixels
+        with one). With no source at all: count 0 and NaN shares.
 
     Example
     -------
@@ -890,6 +904,8 @@ def fragments(
     labels = fragment_labels(source, mask, drift=drift)
     areas = np.bincount(labels[mask])[1:].astype(np.float64)
     total = areas.sum()
+    if total == 0:
+        return FragmentStats(count_90=0, mean_share=math.nan, count=0)
     covered = np.cumsum(np.sort(areas)[::-1])
     # The float tolerance keeps an exact 90 % (9 of 10 equal pieces) at 9, not 10.
     count_90 = int(np.searchsorted(covered, coverage * total * (1 - 1e-12)) + 1)
@@ -941,7 +957,8 @@ def seam_length(source: np.ndarray, mask: np.ndarray, *, per_outline: bool = Tru
         ((every, slice(None, -1)), (every, slice(1, None)), right),
         ((slice(None, -1), every), (slice(1, None), every), down),
     ):
-        # Two pixels without any source: a hole, not a seam between sources.
+        # Two pixels without any source: a hole, not a seam between sources (its
+        # border, a copied pixel beside a hole, is one: the picture jumps there).
         seam = mask[a] & mask[b] & ~linked & (covered[a] | covered[b])
         pairs.append(int(seam.sum()))
     length = float(sum(pairs))
@@ -1350,3 +1367,54 @@ def palettes_per_part(
             per_part[int(part)] = int(np.sum(row[1:] > min_share * size))
     ones = [n == 1 for n in per_part.values()]
     return PaletteCount(per_part, float(np.mean(ones)) if ones else math.nan)
+
+
+def coherence_metrics(
+    metrics: ImageMetrics,
+    image: np.ndarray,
+    truth: np.ndarray,
+    mask: np.ndarray,
+    source: np.ndarray,
+    labels: np.ndarray | None = None,
+) -> ImageMetrics:
+    """``metrics`` with the coherence measures of a map filled in (the whole object).
+
+    Parameters
+    ----------
+    metrics : ImageMetrics
+    image, truth : ndarray, (H, W, 3) in [0, 1]
+    mask : ndarray of bool, (H, W)
+    source : ndarray of int, (H, W, 3)
+        The map's source map.
+    labels : ndarray of int, (H, W), optional
+        The object's true part ids; without them the palette counts stay 0.
+
+    Returns
+    -------
+    ImageMetrics
+
+    Example
+    -------
+    >>> rows, columns = np.indices((30, 30))
+    >>> source = np.stack([np.zeros_like(rows), rows, columns], -1)
+    >>> truth = np.tile(np.sin(np.arange(30) / 2.0)[None, :, None] > 0, (30, 1, 3)) * 0.8
+    >>> m = coherence_metrics(image_metrics(truth, truth, np.ones((30, 30), bool)),
+    ...                       truth, truth, np.ones((30, 30), bool), source)
+    >>> m.fragments_90, m.fragment_share, m.seam_length, m.continuity
+    (1, 1.0, 0.0, 1.0)
+    """
+    split = fragments(source, mask)
+    parts = one = 0
+    if labels is not None:
+        count = palettes_per_part(source, np.where(mask, np.asarray(labels), 0))
+        parts, one = len(count.per_part), sum(n == 1 for n in count.per_part.values())
+    return replace(
+        metrics,
+        fragments_90=split.count_90,
+        fragment_share=split.mean_share,
+        seam_length=seam_length(source, mask),
+        continuity=structure_continuity(image, truth, mask),
+        midtone_ratio=midtone_share(image, truth, mask),
+        parts_one_palette=one,
+        parts_palette_measured=parts,
+    )

@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from imagemap.evaluation import Evaluation, ObjectEvaluation
 
 __all__ = [
+    "COHERENCE_COLUMNS",
     "CSV_COLUMNS",
     "INTERVAL_COLUMNS",
     "SUMMARY_COLUMNS",
@@ -57,6 +58,13 @@ CSV_COLUMNS = (
     "features_drawn",
     "features_measured",
     "blur_ratio",
+    "fragments_90",
+    "fragment_share",
+    "seam_length",
+    "continuity",
+    "midtone_ratio",
+    "parts_one_palette",
+    "parts_palette_measured",
     "faulty",
     "seconds",
 )
@@ -73,8 +81,10 @@ def summarize(evaluation: Evaluation) -> dict[str, dict[str, dict[str, float]]]:
     -------
     dict
         ``{class: {method: {"objects", "ciede2000", "ssim", "part_accuracy",
-        "part_transfer", "faulty", "seconds"}}}``; NaN means are skipped (a
-        metric NaN for every object stays NaN).
+        "part_transfer", ..., "fragments_90", "fragment_share", "seam_length",
+        "continuity", "midtone_ratio", "parts_one_palette", "objects_one_palette",
+        "faulty", "seconds"}}}``; NaN values are skipped (a metric NaN for every
+        object stays NaN). ``fragments_90`` is the median over the objects.
     """
     table: dict[str, dict[str, dict[str, float]]] = {}
     for class_name in dict.fromkeys(obj.class_name for obj in evaluation.objects):
@@ -83,6 +93,7 @@ def summarize(evaluation: Evaluation) -> dict[str, dict[str, dict[str, float]]]:
         for method in evaluation.methods:
             results = [obj.results[method] for obj in members]
             with_features = [r for r in results if r.metrics.features_measured]
+            with_parts = [r for r in results if r.metrics.parts_palette_measured]
 
             def mean(values):
                 values = np.asarray(values, dtype=np.float64)
@@ -91,6 +102,11 @@ def summarize(evaluation: Evaluation) -> dict[str, dict[str, dict[str, float]]]:
                     if np.isfinite(values).any()
                     else math.nan
                 )
+
+            def median(values):
+                values = np.asarray(values, dtype=np.float64)
+                finite = values[np.isfinite(values)]
+                return float(np.median(finite)) if finite.size else math.nan
 
             table[class_name][method] = {
                 "objects": len(results),
@@ -109,6 +125,26 @@ def summarize(evaluation: Evaluation) -> dict[str, dict[str, dict[str, float]]]:
                     len(with_features),
                 ),
                 "blur_ratio": mean([r.metrics.blur_ratio for r in results]),
+                # Coherence (issue #32): the fragment count is skewed (a few maps in
+                # thousands of pieces), so its median; the others are means.
+                "fragments_90": median([r.metrics.fragments_90 for r in results]),
+                "fragment_share": mean([r.metrics.fragment_share for r in results]),
+                "seam_length": mean([r.metrics.seam_length for r in results]),
+                "continuity": mean([r.metrics.continuity for r in results]),
+                "midtone_ratio": mean([r.metrics.midtone_ratio for r in results]),
+                # Share of all labelled parts with one palette, and of objects with
+                # one palette in every part.
+                "parts_one_palette": _share(
+                    sum(r.metrics.parts_one_palette for r in results),
+                    sum(r.metrics.parts_palette_measured for r in results),
+                ),
+                "objects_one_palette": _share(
+                    sum(
+                        r.metrics.parts_one_palette == r.metrics.parts_palette_measured
+                        for r in with_parts
+                    ),
+                    len(with_parts),
+                ),
                 "faulty": mean([float(r.faulty) for r in results]),
                 "seconds": mean([r.seconds for r in results]),
             }
@@ -129,6 +165,17 @@ SUMMARY_COLUMNS = (
     ("seconds", "s / object", "{:.2f}"),
 )
 
+#: The coherence table (issue #32, ``docs/measures.md``): (key, title, format).
+COHERENCE_COLUMNS = (
+    ("fragments_90", "fragments for 90 % ↓", "{:.0f}"),
+    ("fragment_share", "fragment share ↑", "{:.3f}"),
+    ("seam_length", "seams / outline ↓", "{:.2f}"),
+    ("continuity", "continuity ↑", "{:.2f}"),
+    ("midtone_ratio", "mid-tones ↓", "{:.2f}"),
+    ("parts_one_palette", "parts with one palette ↑", "pct"),
+    ("objects_one_palette", "objects with one palette per part ↑", "pct"),
+)
+
 
 #: The summary's intervals: how many resamples of a class's objects, and their level.
 BOOTSTRAP_RESAMPLES = 2000
@@ -140,6 +187,9 @@ INTERVAL_COLUMNS = (
     ("part_transfer_macro", "macro part transfer", "{:.3f}"),
     ("objects_features_drawn", "objects with all features", "pct"),
     ("blur_ratio", "blur ratio", "{:.2f}"),
+    ("fragment_share", "fragment share", "{:.3f}"),
+    ("continuity", "continuity", "{:.2f}"),
+    ("midtone_ratio", "mid-tones", "{:.2f}"),
     ("faulty", "faulty", "pct"),
 )
 
@@ -231,9 +281,9 @@ def _interval_cells(row: dict) -> list[str]:
     return cells
 
 
-def _summary_cells(row: dict) -> list[str]:
+def _summary_cells(row: dict, columns: tuple = SUMMARY_COLUMNS) -> list[str]:
     cells = []
-    for key, _, form in SUMMARY_COLUMNS:
+    for key, _, form in columns:
         value = row[key]
         unit = "%" if form == "pct" else ""
         cells.append("–" if _missing(value) else _number(value, form) + unit)
@@ -273,7 +323,12 @@ def summary_markdown(evaluation: Evaluation) -> str:
         "much as the body. Features drawn: small labelled parts (under 1.5% of the object: "
         "eyes, lips, eyebrows) whose L* pattern correlates with the truth's (NCC >= 0.5, "
         "best over shifts of 3 px). Blur ratio: fine-band energy of the map over that of "
-        "its source map copied pixel by pixel (1 = as crisp as copied pixels). Faulty: "
+        "its source map copied pixel by pixel (1 = as crisp as copied pixels). The "
+        "coherence measures (fragments: regions copied from one example with offsets "
+        "changing by at most 1 px between neighbours; continuity: structure-tensor "
+        "coherence over the truth's, blind to blur; mid-tones: share of pixels in the middle "
+        "of their window's tones over the truth's, blind to order) are defined in "
+        "docs/measures.md. Faulty: "
         "worse than the median paste of another member's map onto the object in luminance "
         "SSIM or in part transfer (ΔE00 where there are no labels), or a small feature not "
         "drawn: the class's bar below. The generated classes draw a palette per object, "
@@ -297,6 +352,20 @@ def summary_markdown(evaluation: Evaluation) -> str:
         ]
         for method, row in methods.items():
             lines.append(f"| {method} | " + " | ".join(_summary_cells(row)) + " |")
+        lines += [
+            "",
+            "Coherence (does the map hold together): median count of fragments covering "
+            "90 % of the object, mean area-weighted fragment share, seam length per outline "
+            "length, structure-tensor continuity and mid-tone share as ratios to the "
+            "truth's, share of labelled parts (and of objects, every part) painted from one "
+            "example.",
+            "",
+            "| method | " + " | ".join(title for _, title, _ in COHERENCE_COLUMNS) + " |",
+            "|---|" + "---:|" * len(COHERENCE_COLUMNS),
+        ]
+        for method, row in methods.items():
+            cells = _summary_cells(row, COHERENCE_COLUMNS)
+            lines.append(f"| {method} | " + " | ".join(cells) + " |")
         lines += [
             "",
             f"{100 * INTERVAL_LEVEL:.0f} % intervals of these means over the class's objects "
@@ -450,6 +519,19 @@ def _report_html(evaluation: Evaluation, image_paths: dict, example_paths: dict)
             cells = "".join(f"<td>{esc(cell)}</td>" for cell in _summary_cells(row))
             parts.append(f"<tr><td>{esc(method)}</td>{cells}</tr>")
         parts.append("</table>")
+        parts.append(
+            "<p>Coherence: does the map hold together (fragments, seams, continuity and "
+            "mid-tones against the truth, palettes per part; definitions in "
+            "docs/measures.md).</p><table><tr><th>method</th>"
+            + "".join(f"<th>{esc(title)}</th>" for _, title, _ in COHERENCE_COLUMNS)
+            + "</tr>"
+        )
+        for method, row in methods.items():
+            cells = "".join(
+                f"<td>{esc(cell)}</td>" for cell in _summary_cells(row, COHERENCE_COLUMNS)
+            )
+            parts.append(f"<tr><td>{esc(method)}</td>{cells}</tr>")
+        parts.append("</table>")
         first = evaluation.methods[0]
         if len(evaluation.methods) > 1:
             parts.append(
@@ -487,6 +569,8 @@ def _report_html(evaluation: Evaluation, image_paths: dict, example_paths: dict)
                 f"SSIM {_fmt(m.ssim, 2)}<br>part acc. {_fmt(m.part_accuracy, 2)} · "
                 f"transfer {_fmt(m.part_transfer, 2)}<br>features {m.features_drawn}/"
                 f"{m.features_measured} · blur {_fmt(m.blur_ratio, 2)}<br>"
+                f"fragments {_fmt(m.fragments_90, 0)} · continuity {_fmt(m.continuity, 2)}"
+                f" · mid-tones {_fmt(m.midtone_ratio, 2)}<br>"
                 f"{result.seconds:.2f} s</figcaption>"
                 "</figure>"
             )
@@ -560,8 +644,13 @@ def write_report(evaluation: Evaluation, out_dir: str | os.PathLike) -> dict[str
                         "part_transfer",
                         "part_transfer_macro",
                         "blur_ratio",
+                        "fragment_share",
+                        "seam_length",
+                        "continuity",
+                        "midtone_ratio",
                     )
                 },
+                "fragments_90": "" if math.isnan(row["fragments_90"]) else int(row["fragments_90"]),
                 "faulty": int(row["faulty"]),
                 "seconds": f"{row['seconds']:.3f}",
             }

@@ -140,6 +140,41 @@ def test_report_files_and_links(class_evaluation, tmp_path):
     assert check_report(tmp_path / "report") == ["images/fish_001/one_pass.png"]
 
 
+def test_coherence_columns_in_results_and_summary(class_evaluation, tmp_path):
+    from imagemap.report import COHERENCE_COLUMNS
+
+    paths = write_report(class_evaluation, tmp_path / "report")
+    with open(paths["csv"], newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    coherence = (
+        "fragments_90",
+        "fragment_share",
+        "seam_length",
+        "continuity",
+        "midtone_ratio",
+        "parts_one_palette",
+        "parts_palette_measured",
+    )
+    for column in coherence:
+        assert all(row[column] != "" for row in rows), column
+    summary = paths["summary"].read_text()
+    for _, title, _ in COHERENCE_COLUMNS:
+        assert title in summary and title in paths["html"].read_text()
+    table = summarize(class_evaluation)[CLASS]
+    for obj in class_evaluation.objects:
+        copy = obj.results["copy_nearest"].metrics
+        # A pasted example is one translation: one fragment (its holes are no fragment)
+        # with seams only around its holes.
+        assert copy.fragments_90 == 1 and copy.fragment_share > 0.9
+        assert copy.parts_palette_measured > 0
+        full = obj.results["full"].metrics
+        assert full.fragments_90 > copy.fragments_90 and full.seam_length > copy.seam_length
+        assert 0 < full.continuity < 1.5 and 0 < full.midtone_ratio < 5
+    # One example: a part has one palette, or none where it falls in the paste's holes.
+    assert table["copy_nearest"]["parts_one_palette"] > table["full"]["parts_one_palette"]
+    assert table["full"]["fragments_90"] > 10  # a patch method: many pieces
+
+
 def test_method_params_of_the_baselines():
     from imagemap.depth.config import PRESETS
 

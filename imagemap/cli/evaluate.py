@@ -24,10 +24,12 @@ five baselines:
                 vote on Laplacian colour bands, no finishing stage)
 
 Writes REPORT_DIR/results.csv (object, method, ciede2000, ssim, part_accuracy,
-part_transfer, ..., faulty, seconds), summary.md (per class: the means, their 95 %
-bootstrap intervals over the objects, and each method's paired difference to the first
-method), index.html (static; open it in a browser) with its pictures under images/, and
-overview.png.
+part_transfer, ..., blur_ratio, the coherence measures fragments_90, fragment_share,
+seam_length, continuity, midtone_ratio, parts_one_palette, parts_palette_measured
+(docs/measures.md), faulty, seconds), summary.md (per class: the means, a coherence
+table, their 95 % bootstrap intervals over the objects, and each method's paired
+difference to the first method), index.html (static; open it in a browser) with
+its pictures under images/, and overview.png.
 An object whose synthesis fails is named (exit code 1) and the others go on;
 Ctrl-C stops the run and still writes the report of the objects finished.
 
