@@ -1,11 +1,28 @@
 """imagemap: example-based synthesis of image-maps and BTF extrapolation on one engine.
 
-The Python API takes and returns NumPy arrays:
+The Python API takes and returns NumPy arrays. A database is usually a folder
+(``imagemap.Database.from_directory("fish_db/")``); here, three painted ellipses
+of different heights, and a query nearest the tallest:
 
+>>> import numpy as np
 >>> import imagemap
->>> db = imagemap.Database.from_directory("examples/fish")        # doctest: +SKIP
->>> result = imagemap.colorize(depth, db, preset="fish", seed=0)  # doctest: +SKIP
->>> result.image, result.provenance, result.cost                  # doctest: +SKIP
+>>> yy, xx = np.mgrid[:30, :40]
+>>> def ellipse(height):  # depth: larger is nearer, 0 is background
+...     inside = (yy - 15) ** 2 / (height / 2) ** 2 + (xx - 20) ** 2 / 256 < 1
+...     return np.where(inside, 0.7, 0).astype(np.float32)
+>>> def paint(depth):  # red above row 15, cream below, black background
+...     inside = (depth > 0)[..., None]
+...     return np.where(inside, np.where(yy[..., None] < 15, [0.8, 0.2, 0.1], [0.9, 0.9, 0.6]), 0)
+>>> db = imagemap.Database([imagemap.Example.from_arrays(f"height_{h}", ellipse(h),
+...                         paint(ellipse(h))) for h in (12, 20, 24)])
+>>> result = imagemap.colorize(ellipse(23), db, preset="fish", seed=0)
+>>> result.example_names  # the examples nearest in depth, nearest first
+['height_24', 'height_20']
+>>> result.image[[10, 20], 20].round(2)  # copied colours: red above, cream below
+array([[0.8, 0.2, 0.1],
+       [0.9, 0.9, 0.6]], dtype=float32)
+>>> result.image.shape, result.rgba.shape, result.provenance.shape
+((30, 40, 3), (30, 40, 4), (30, 40, 3))
 
 Imports are lazy (PEP 562): ``import imagemap`` loads nothing heavy, and a name
 such as ``imagemap.colorize`` or a submodule such as ``imagemap.depth.budget`` is

@@ -17,11 +17,32 @@ skipped and failed objects and the throughput (objects per minute).
 
 Examples
 --------
->>> from imagemap.batch import BatchOptions, run_batch
->>> summary = run_batch("queries/", "fish_db/", "out/", BatchOptions(preset="fish"),
-...                     workers=2)  # doctest: +SKIP
->>> summary.done, summary.failed, round(summary.per_minute, 1)  # doctest: +SKIP
-(12, 0, 18.3)
+Two depth maps against a database of two painted ellipses (usually a folder),
+in this process (``workers=1``), then the same batch again:
+
+>>> import shutil, tempfile
+>>> import numpy as np
+>>> from imagemap.database import Example
+>>> yy, xx = np.mgrid[:24, :32]
+>>> def ellipse(height):
+...     inside = (yy - 12) ** 2 / (height / 2) ** 2 + (xx - 16) ** 2 / 144 < 1
+...     return np.where(inside, 0.7, 0).astype(np.float32)
+>>> def paint(depth):
+...     return np.where((depth > 0)[..., None] & (yy[..., None] < 12), [0.8, 0.2, 0.1], 0.5)
+>>> db = Database([Example.from_arrays(f"e{h}", ellipse(h), paint(ellipse(h))) for h in (12, 18)])
+>>> folder = Path(tempfile.mkdtemp())
+>>> (folder / "in").mkdir()
+>>> for h in (14, 16):
+...     np.save(folder / "in" / f"q{h}_depth.npy", ellipse(h))
+>>> summary = run_batch(folder / "in", db, folder / "out", BatchOptions(preset="fish"))
+>>> summary.done, summary.skipped, summary.failed
+(2, 0, 0)
+>>> sorted(p.name for p in (folder / "out").iterdir())
+['.imagemap-done', 'batch_report.json', 'q14_image.png', 'q16_image.png']
+>>> again = run_batch(folder / "in", db, folder / "out", BatchOptions(preset="fish"))
+>>> again.done, again.skipped  # complete outputs are skipped
+(0, 2)
+>>> shutil.rmtree(folder)
 """
 
 from __future__ import annotations

@@ -29,9 +29,21 @@ class Database:
 
     Examples
     --------
-    >>> db = Database.from_directory("examples/fish")  # doctest: +SKIP
-    >>> db.names[:2]  # doctest: +SKIP
-    ['fish_000', 'fish_001']
+    >>> import shutil, tempfile
+    >>> import numpy as np
+    >>> from imagemap.io import write_image
+    >>> depth = np.zeros((8, 8), np.float32); depth[2:6, 2:6] = 0.5
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> for name in ("fish_001", "fish_000"):
+    ...     np.save(folder / f"{name}_depth.npy", depth)
+    ...     _ = write_image(folder / f"{name}_image.png", np.ones((8, 8, 3)))
+    >>> db = Database.from_directory(folder)
+    >>> db.names, db["fish_001"].image.shape
+    (['fish_000', 'fish_001'], (8, 8, 3))
+    >>> in_memory = Database([Example.from_arrays("a", depth, np.zeros((8, 8, 3)))])
+    >>> len(in_memory), in_memory[0].name
+    (1, 'a')
+    >>> shutil.rmtree(folder)
     """
 
     def __init__(self, examples: list[Example], source: str = "") -> None:
@@ -100,8 +112,14 @@ class Database:
 
         Examples
         --------
-        >>> db.without("fish_000").names[:1]  # doctest: +SKIP
-        ['fish_001']
+        >>> import numpy as np
+        >>> depth, image = np.ones((8, 8), np.float32), np.zeros((8, 8, 3))
+        >>> db = Database([Example.from_arrays(n, depth, image) for n in ("a", "b", "c")])
+        >>> db.without("b").names, db.without(["a", "c"]).names
+        (['a', 'c'], ['b'])
+        >>> db.without("d")
+        Traceback (most recent call last):
+        imagemap.errors.InputError: database: no example named 'd' (have: a, b, c)
         """
         flat: list[str] = []
         for item in names:
@@ -199,9 +217,20 @@ def check_database(
 
     Examples
     --------
-    >>> rows, problems = check_database("examples/fish")  # doctest: +SKIP
-    >>> rows[0]["name"], rows[0]["source"], problems  # doctest: +SKIP
-    ('fish_000', 'images', [])
+    >>> import shutil, tempfile
+    >>> import numpy as np
+    >>> from imagemap.io import write_image
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> depth = np.zeros((8, 12), np.float32); depth[2:6, 3:9] = 0.5
+    >>> np.save(folder / "fish_000_depth.npy", depth)
+    >>> _ = write_image(folder / "fish_000_image.png", np.ones((8, 12, 3)))
+    >>> _ = write_image(folder / "fish_001_image.png", np.ones((8, 12, 3)))
+    >>> rows, problems = check_database(folder)
+    >>> rows[0]["name"], rows[0]["source"], rows[0]["size"], rows[0]["foreground"]
+    ('fish_000', 'images', '12x8', 0.25)
+    >>> [problem.replace(str(folder), "DB") for problem in problems]
+    ['DB/fish_001_image.png: no depth map fish_001_depth.png beside it']
+    >>> shutil.rmtree(folder)
     """
     examples, problems = _scan(Path(path))
     meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})

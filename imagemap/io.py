@@ -39,8 +39,22 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
 
     Examples
     --------
-    >>> with atomic_path("out.npy") as tmp:  # doctest: +SKIP
+    >>> import shutil, tempfile
+    >>> target = Path(tempfile.mkdtemp()) / "out.npy"
+    >>> with atomic_path(target) as tmp:
+    ...     np.save(tmp, np.arange(3))
+    ...     target.exists()  # written beside it, renamed at the end
+    False
+    >>> np.load(target)
+    array([0, 1, 2])
+    >>> with atomic_path(target) as tmp:
     ...     np.save(tmp, np.zeros(3))
+    ...     raise RuntimeError("interrupted")
+    Traceback (most recent call last):
+    RuntimeError: interrupted
+    >>> np.load(target), [p.name for p in target.parent.iterdir()]  # untouched, no temporary
+    (array([0, 1, 2]), ['out.npy'])
+    >>> shutil.rmtree(target.parent)
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -17,10 +17,29 @@ Rules (the README's "Errors and overwrite rules"):
 
 Examples
 --------
->>> plan = OutputPlan()                                   # doctest: +SKIP
->>> plan.add_input("q_depth.png", "query depth")          # doctest: +SKIP
->>> plan.add_output("map.png", "-o", suffixes=(".png",))  # doctest: +SKIP
->>> plan.check()                                          # doctest: +SKIP
+>>> import shutil, tempfile
+>>> folder = Path(tempfile.mkdtemp())
+>>> plan = OutputPlan()
+>>> plan.add_input(folder / "q_depth.png", "query depth")
+>>> _ = plan.add_output(folder / "map.png", "-o", suffixes=(".png",))
+>>> plan.check()  # no clash, and the folder is writable
+>>> _ = plan.add_output(folder / "q_depth.png", "--provenance", suffixes=(".png",))
+>>> plan.check()  # doctest: +ELLIPSIS
+Traceback (most recent call last):
+imagemap.errors.InputError: ...q_depth.png (--provenance) would overwrite ...q_depth.png (query...
+
+A set of outputs is written whole, or not at all:
+
+>>> def fail(tmp):
+...     raise OSError("disk full")
+>>> write_all({folder / "a.txt": lambda tmp: tmp.write_text("a"), folder / "b.txt": fail})
+Traceback (most recent call last):
+OSError: disk full
+>>> list(folder.iterdir())  # neither a.txt nor a temporary file
+[]
+>>> write_all({folder / "a.txt": lambda tmp: tmp.write_text("a")})[0].read_text()
+'a'
+>>> shutil.rmtree(folder)
 """
 
 from __future__ import annotations
