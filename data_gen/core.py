@@ -21,13 +21,16 @@ from data_gen.geometry import Assembly
 from data_gen.render import OrthographicView, cast_orthographic
 
 __all__ = [
+    "PART_ROUGHNESS",
     "Instance",
     "ObjectClass",
     "SurfaceHits",
     "hsv",
+    "instance_maps",
     "instance_rng",
     "make_instance",
     "mix",
+    "part_roughness",
 ]
 
 #: Foreground depth is 0.1 at the class's far z and 1.0 at its near z (see
@@ -101,6 +104,108 @@ class Instance:
     labels: np.ndarray  # uint8 part ids, 0 = background
     params: dict  # JSON-able: class, seed, index, parts, palette, shape, view
     mesh: trimesh.Trimesh | None = None
+    maps: dict = field(default_factory=dict)  # PBR maps by kind (see instance_maps)
+
+
+#: Roughness of each part (by part name, across the classes): typical values of PBR
+#: material charts (wet scales and lips glossy, hair and cloth rough, eyes near mirror).
+PART_ROUGHNESS = {
+    "back": 0.45,
+    "belly": 0.4,
+    "fins": 0.55,
+    "tail": 0.55,
+    "eye": 0.08,
+    "gill": 0.5,
+    "skin": 0.55,
+    "hair": 0.8,
+    "eyebrows": 0.8,
+    "eyes": 0.08,
+    "lips": 0.4,
+    "clothing": 0.85,
+    "shirt": 0.85,
+    "trousers": 0.9,
+    "shoes": 0.35,
+}
+#: Roughness of a part missing from :data:`PART_ROUGHNESS`.
+OTHER_ROUGHNESS = 0.6
+#: How much a part's roughness follows its pattern: darker marks are rougher by up to
+#: this much, so a roughness map has structure inside a part (and a test can see
+#: that it follows the colour's source map, not just the parts).
+ROUGHNESS_FROM_PATTERN = 0.15
+#: Width (pixels) of the blur whose difference from the luminance is the relief.
+RELIEF_SIGMA = 2.0
+#: Slope of the normals per unit of relief (height in [0, 1] per pixel).
+RELIEF_STRENGTH = 4.0
+#: Occlusion: width (pixels) of the local mean depth, and darkening per unit of depth
+#: below it (a crease 0.1 deep in depth units is 40 % occluded).
+AO_SIGMA = 3.0
+AO_STRENGTH = 4.0
+
+
+def part_roughness(parts: Sequence[str], labels: np.ndarray, luma: np.ndarray) -> np.ndarray:
+    """Roughness per pixel or texel: its part's value, rougher where the pattern is darker.
+
+    ``labels`` are part ids (0: none, ``i + 1``: ``parts[i]``); ``luma`` the
+    colour's luminance in [0, 1], same shape.
+
+    Examples
+    --------
+    >>> part_roughness(("eye", "hair"), np.array([1, 2, 2]), np.array([1.0, 1.0, 0.0]))
+    array([0.08, 0.8 , 0.95], dtype=float32)
+    """
+    table = np.array(
+        [OTHER_ROUGHNESS] + [PART_ROUGHNESS.get(p, OTHER_ROUGHNESS) for p in parts], np.float32
+    )
+    base = table[np.clip(np.asarray(labels, dtype=np.int64), 0, len(parts))]
+    return np.clip(base + ROUGHNESS_FROM_PATTERN * (1.0 - luma), 0.0, 1.0).astype(np.float32)
+
+
+def instance_maps(
+    parts: Sequence[str], image: np.ndarray, depth: np.ndarray, labels: np.ndarray
+) -> dict[str, np.ndarray]:
+    """PBR maps of a rendered instance: roughness per part, relief, its normals, occlusion.
+
+    - ``roughness``: :func:`part_roughness` of each pixel's part and luminance;
+    - ``height``: the relief, 0.5 plus the luminance's difference from its blur
+      (:data:`RELIEF_SIGMA`) on the object, as if light marks were raised;
+    - ``normal``: tangent-space normals of that relief (OpenGL: x right, y up),
+      encoded ``(n + 1) / 2``; flat on the background;
+    - ``ao``: 1 less how far the depth lies below its local mean (creases darker).
+
+    Examples
+    --------
+    >>> from data_gen import CLASSES
+    >>> fish = make_instance(CLASSES["fish"], 0, size=(80, 60))
+    >>> sorted(fish.maps), fish.maps["normal"].shape
+    (['ao', 'height', 'normal', 'roughness'], (60, 80, 3))
+    """
+    from scipy import ndimage
+
+    mask = depth > 0
+    luma = image @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    roughness = np.where(mask, part_roughness(parts, labels, luma), OTHER_ROUGHNESS)
+    # Blur within the object only (normalised convolution), so the silhouette is no relief.
+    weight = ndimage.gaussian_filter(mask.astype(np.float32), RELIEF_SIGMA)
+    smooth = ndimage.gaussian_filter(luma * mask, RELIEF_SIGMA) / np.maximum(weight, 1e-6)
+    height = np.where(mask, np.clip(0.5 + (luma - smooth), 0.0, 1.0), 0.5).astype(np.float32)
+    d_row, d_col = np.gradient(height)
+    # Rows grow downwards, tangent y upwards: the y slope is -d_row.
+    normals = np.stack(
+        [-RELIEF_STRENGTH * d_col, RELIEF_STRENGTH * d_row, np.ones_like(height)], axis=-1
+    )
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals[~mask] = (0.0, 0.0, 1.0)
+    local = ndimage.gaussian_filter(depth, AO_SIGMA) / np.maximum(
+        ndimage.gaussian_filter(mask.astype(np.float32), AO_SIGMA), 1e-6
+    )
+    below = np.maximum(local - depth, 0.0)
+    ao = np.where(mask, np.clip(1.0 - AO_STRENGTH * below, 0.0, 1.0), 1.0)
+    return {
+        "normal": ((normals + 1.0) / 2.0).astype(np.float32),
+        "roughness": roughness.astype(np.float32),
+        "height": height,
+        "ao": ao.astype(np.float32),
+    }
 
 
 def instance_rng(class_name: str, index: int, seed: int) -> np.random.Generator:
@@ -270,7 +375,10 @@ def make_instance(
         "faces": int(len(mesh.faces)),
         **params,
     }
-    return Instance(name, depth, image, labels, _jsonable(record), mesh if keep_mesh else None)
+    maps = instance_maps(object_class.parts, image, depth, labels)
+    return Instance(
+        name, depth, image, labels, _jsonable(record), mesh if keep_mesh else None, maps
+    )
 
 
 def _jsonable(value):

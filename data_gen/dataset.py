@@ -26,7 +26,9 @@ log = logging.getLogger(__name__)
 
 
 def write_instance(instance: Instance, directory: str | os.PathLike) -> list[Path]:
-    """Write ``NAME_depth.png`` (16-bit), ``NAME_image.png``, ``NAME_labels.png``, ``NAME.json``.
+    """Write ``NAME_depth.png`` (16-bit), ``NAME_image.png``, ``NAME_labels.png``, ``NAME.json``
+    and the PBR maps ``NAME_normal.png``, ``NAME_roughness.png``, ``NAME_height.png``
+    (16-bit), ``NAME_ao.png`` (see :func:`data_gen.core.instance_maps`).
 
     Every file is written atomically. Returns the paths written.
     """
@@ -37,6 +39,9 @@ def write_instance(instance: Instance, directory: str | os.PathLike) -> list[Pat
         write_image(directory / f"{name}_image.png", instance.image, bits=8),
         write_image(directory / f"{name}_labels.png", instance.labels),
     ]
+    for kind, array in sorted(instance.maps.items()):
+        bits = 16 if kind == "height" else 8
+        paths.append(write_image(directory / f"{name}_{kind}.png", array, bits=bits))
     sidecar = directory / f"{name}.json"
     with atomic_path(sidecar) as tmp:
         tmp.write_text(json.dumps(instance.params, indent=1, sort_keys=True) + "\n")
@@ -47,22 +52,27 @@ def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_
     """Instance ``index`` as a textured trimesh, posed as it is rendered (view jitter included).
 
     The class's colouring is evaluated at every texel of a UV atlas (``xatlas``), so
-    the mesh rendered from the front shows the instance's image-map. Same seed, same
-    mesh and texture.
+    the mesh rendered from the front shows the instance's image-map; its roughness
+    per part (:func:`data_gen.core.part_roughness`) is the material's roughness
+    texture. Same seed, same mesh and textures.
     """
 
+    from data_gen.core import part_roughness
     from imagemap.mesh import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
 
     params, _, assembly, pose, mesh = posed_instance(object_class, index, seed)
     vertices, faces, uv, source = uv_atlas(mesh)
     texel, face, bary = rasterize_uv(uv, faces, texture_size)
     points = np.einsum("nk,nkc->nc", bary, vertices[faces[face]])
-    _, rgb = colour_surface(object_class, params, assembly, pose, mesh, face, points)
-    texture = np.zeros((texture_size, texture_size, 3), dtype=np.float32)
-    texture.reshape(-1, 3)[texel] = rgb
+    labels, rgb = colour_surface(object_class, params, assembly, pose, mesh, face, points)
+    texture = np.zeros((texture_size, texture_size, 4), dtype=np.float32)
+    texture.reshape(-1, 4)[texel, :3] = rgb
+    luma = rgb @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    texture.reshape(-1, 4)[texel, 3] = part_roughness(object_class.parts, labels, luma)
     covered = np.zeros((texture_size, texture_size), dtype=bool)
     covered.flat[texel] = True
-    return textured_mesh(vertices, faces, uv, fill_from_nearest(texture, covered))
+    texture = fill_from_nearest(texture, covered)
+    return textured_mesh(vertices, faces, uv, texture[..., :3], maps={"roughness": texture[..., 3]})
 
 
 def contact_sheet(

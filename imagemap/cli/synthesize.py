@@ -79,6 +79,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--report", help="also write a JSON report (examples, timings, memory, target)")
     p.add_argument(
+        "--no-maps",
+        action="store_true",
+        help="write the colour only: by default the examples' PBR maps (NAME_normal.png, "
+        "_roughness, _metallic, _height, _ao) are carried through the same source map and "
+        "written beside the output (out.png -> out_roughness.png, ...)",
+    )
+    p.add_argument(
         "--overwrite",
         action="store_true",
         help="allow replacing files beside a query depth that look like its held-out truth "
@@ -219,6 +226,18 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
         ):
             if job[key]:
                 plan.add_output(job[key], option, suffixes=(".png",))
+    # PBR maps beside each map: every kind an example that may be used has.
+    from imagemap.materials import companion_path, database_map_kinds
+
+    names = [n.strip() for n in args.examples.split(",") if n.strip()] if args.examples else None
+    kinds = [] if getattr(args, "no_maps", False) else database_map_kinds(database, names)
+    for job in jobs:
+        if len(jobs) > 1:
+            job["maps"] = {k: job["output"].with_name(f"{job['name']}_{k}.png") for k in kinds}
+        else:
+            job["maps"] = {k: companion_path(job["output"], k) for k in kinds}
+        for kind, path in job["maps"].items():
+            plan.add_output(path, f"{kind} map beside -o", suffixes=(".png",))
     if args.report:
         plan.add_output(args.report, "--report", suffixes=(".json",))
     plan.check()
@@ -330,6 +349,12 @@ def _synthesize_one(args, job, depth, database, config, examples, background, ba
         writers[job["provenance"]] = image_writer(result.provenance)
     if job["preview"]:
         writers[job["preview"]] = image_writer(_preview(depth, result, database))
+    if job.get("maps"):
+        from imagemap.materials import transfer_maps
+
+        maps = transfer_maps(result, database, kinds=list(job["maps"]))
+        for kind, path in job["maps"].items():
+            writers[path] = image_writer(maps[kind], bits=16 if kind == "height" else 8)
     report = {
         "query": str(job["depth"]),
         "output": str(job["output"]),
