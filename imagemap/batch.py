@@ -51,6 +51,7 @@ import functools
 import hashlib
 import json
 import logging
+import multiprocessing
 import os
 import pickle
 import re
@@ -58,20 +59,27 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Mapping
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import imagemap
 from imagemap.database import Database, database_at_view, prepare_database
-from imagemap.io import InputError, atomic_path
+from imagemap.depth.config import resolve_config
+from imagemap.io import InputError, atomic_path, read_depth, write_image
 from imagemap.mesh import (
     DEFAULT_SIZE,
     FRONT,
     MESH_SUFFIXES,
     View,
+    export_textured,
     file_digest,
+    load_mesh,
     parse_views,
 )
+from imagemap.mesh.colorize import colorize_mesh
+from imagemap.progress import progress
 
 __all__ = ["BatchOptions", "BatchSummary", "Job", "plan_jobs", "prepare_databases", "run_batch"]
 
@@ -127,8 +135,6 @@ class BatchOptions:
 
     def config(self):
         """The :class:`~imagemap.depth.config.DepthConfig` every object is made with."""
-        from imagemap.depth.config import resolve_config
-
         return resolve_config(self.preset, **self.colorize_options())
 
 
@@ -227,8 +233,6 @@ def engine_digest() -> str:
 
     The files are read beside this one, not imported: no module's import cost or side
     effects for a digest."""
-    import imagemap
-
     digest = hashlib.sha256()
     package = Path(__file__).parent
     try:
@@ -281,9 +285,9 @@ def prepare_databases(database: Database, options: BatchOptions) -> dict[str, Da
 
 def process_job(job: Job, databases: dict[str, Database], options: BatchOptions) -> dict:
     """Synthesize one object and write its outputs, then its manifest (all atomically)."""
-    from imagemap.depth.pipeline import colorize
-    from imagemap.io import read_depth, write_image
-    from imagemap.mesh import colorize_mesh, export_textured, load_mesh
+    # A pool's parent process and a Dask client never synthesize: the pipeline and its
+    # numba kernels (2-3 s) are loaded in the workers only.
+    from imagemap.depth.pipeline import colorize  # deferred: start-up (see above)
 
     start = time.perf_counter()
     digest = file_digest(job.source)
@@ -351,7 +355,7 @@ def _init_pool_worker(databases, threads: int) -> None:
 
 def _set_threads(threads: int) -> None:
     """Each worker's share of the cores for numba's parallel kernels."""
-    import numba
+    import numba  # deferred: start-up (0.5 s; only workers set their threads)
 
     # numba.config makes its settings at run time from the environment (globals()), out of
     # a type checker's sight.
@@ -444,8 +448,6 @@ def run_batch(
 
 def _collect(results, total: int, summary: BatchSummary, quiet: bool, on_result) -> None:
     """Count the records as they come, with a progress bar."""
-    from imagemap.progress import progress
-
     try:
         for record in progress(results, total=total, desc="objects", quiet=quiet):
             summary.records.append(record)
@@ -476,9 +478,6 @@ def _run(todo: list[Job], databases, options: BatchOptions, workers: int, client
 
 
 def _run_pool(todo, databases, options, workers, cores):
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
     workers = min(workers, len(todo))
     executor = ProcessPoolExecutor(
         max_workers=workers,
@@ -507,7 +506,7 @@ def _run_pool(todo, databases, options, workers, cores):
 def _connect(scheduler):
     """(client, whether we opened it) for an address or a ``dask.distributed.Client``."""
     try:
-        from dask.distributed import Client
+        from dask.distributed import Client  # deferred: optional dependency (imagemap[dask])
     except ImportError as exc:
         raise InputError(
             "--scheduler needs Dask: pip install 'imagemap[dask]' (dask[distributed])"
@@ -522,7 +521,7 @@ def _connect(scheduler):
 
 def _dask_threads(host_threads: dict[str, int]) -> int:
     """This worker's share of its machine's cores (all Dask threads on a host share it)."""
-    from distributed import get_worker
+    from distributed import get_worker  # deferred: optional dependency (imagemap[dask])
 
     address = get_worker().address
     host = address.split("://")[-1].rsplit(":", 1)[0]
@@ -530,7 +529,7 @@ def _dask_threads(host_threads: dict[str, int]) -> int:
 
 
 def _run_dask(todo, databases, options, client):
-    from dask.distributed import as_completed
+    from dask.distributed import as_completed  # deferred: optional dependency (imagemap[dask])
 
     host_threads: dict[str, int] = {}
     for worker in client.scheduler_info().get("workers", {}).values():

@@ -12,6 +12,7 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from imagemap.io import (
     InputError,
@@ -151,8 +152,6 @@ class Example:
     def selection_stats(self) -> tuple[np.ndarray, float]:
         """(centroid (y, x) of the foreground, sum of squared depth): what example
         selection needs of this example, computed once (not once per query)."""
-        from scipy import ndimage
-
         depth = self.depth
         centroid = np.array(ndimage.center_of_mass(depth > 0), dtype=np.float64)
         return centroid, float(np.square(depth, dtype=np.float64).sum())

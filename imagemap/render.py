@@ -423,7 +423,7 @@ def preview_pair(
     >>> preview_pair(d, np.ones((32, 32, 3)), np.zeros((32, 32, 3)), gutter=2).shape
     (70, 70, 3)
     """
-    from skimage.transform import resize
+    from skimage.transform import resize  # deferred: start-up (0.4 s; only the preview resizes)
 
     depth = np.asarray(depth, dtype=np.float32)
     if depth.ndim != 2:

@@ -21,11 +21,14 @@ library).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import ctypes
 import gc
 import importlib
 import logging
 import sys
 
+import imagemap
 from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS
 from imagemap.depth.config import PRESETS
 from imagemap.errors import InputError
@@ -102,8 +105,6 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest=dest, default=argparse.SUPPRESS, nargs=0, **kwargs)
 
     def __call__(self, parser, namespace, values, option_string=None):
-        import imagemap
-
         print(f"imagemap {imagemap.__version__}")  # to stdout, as argparse's own action
         parser.exit()
 
@@ -165,9 +166,6 @@ def _map_large_blocks() -> None:
     process), not on import."""
     if not sys.platform.startswith("linux"):
         return
-    import contextlib
-    import ctypes
-
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL("libc.so.6").mallopt(-3, _MMAP_THRESHOLD)  # -3: M_MMAP_THRESHOLD
 

@@ -1,12 +1,25 @@
-"""``imagemap batch`` and the mesh options of ``imagemap synthesize``."""
+"""``imagemap batch``."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
+from imagemap.cli import PRESET_NAMES, add_common_options
+from imagemap.cli.options import (
+    add_config_options,
+    add_mesh_options,
+    config_options,
+    parse_colour,
+    views_of,
+)
 from imagemap.errors import InputError
 from imagemap.validate import positive_int
+
+#: Why the command functions import inside themselves (tests/test_imports_marked.py):
+#: the parser is built without NumPy, SciPy or numba, so ``imagemap --help`` answers at
+#: once; each command imports what it needs when it runs.
+DEFERRED_IMPORTS = "start-up: building the parser loads no scientific module"
 
 BATCH_HELP = """\
 Synthesize every depth map (NAME_depth.png|tif|tiff|npy -> NAME_image.png) and
@@ -38,9 +51,6 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import PRESET_NAMES, add_common_options
-    from imagemap.cli.options import add_config_options, add_mesh_options
-
     p = subparsers.add_parser(
         "batch",
         help="synthesize every depth map and mesh of a folder (local pool or Dask)",
@@ -83,7 +93,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_batch_cli(args: argparse.Namespace) -> int:
     from imagemap.batch import BatchOptions, run_batch
-    from imagemap.cli.options import config_options, parse_colour, views_of
 
     options = BatchOptions(
         preset=args.preset,

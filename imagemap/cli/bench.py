@@ -11,6 +11,7 @@ without a checkout ``imagemap bench`` says so.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -45,8 +46,6 @@ def load_script(path: Path | None = None) -> ModuleType:
     InputError
         If the checkout has no ``benchmarks/run.py`` (an installed wheel).
     """
-    import importlib.util
-
     path = SCRIPT if path is None else Path(path)
     if not path.is_file():
         raise InputError(

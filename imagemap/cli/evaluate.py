@@ -6,6 +6,17 @@ import argparse
 import math
 import sys
 
+from imagemap.cli import METHOD_NAMES, PRESET_NAMES, add_common_options
+from imagemap.cli.options import add_config_options, config_options
+from imagemap.depth.config import resolve_config
+from imagemap.errors import InputError
+from imagemap.validate import positive_int
+
+#: Why the command functions import inside themselves (tests/test_imports_marked.py):
+#: the parser is built without NumPy, SciPy or numba, so ``imagemap --help`` answers at
+#: once; each command imports what it needs when it runs.
+DEFERRED_IMPORTS = "start-up: building the parser loads no scientific module"
+
 EVALUATE_HELP = """\
 Leave-one-out evaluation of a database: every object's image-map is synthesized
 from the other objects only (automatic example selection, the class preset) and
@@ -41,10 +52,6 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import METHOD_NAMES, PRESET_NAMES, add_common_options
-    from imagemap.cli.options import add_config_options
-    from imagemap.validate import positive_int
-
     p = subparsers.add_parser(
         "evaluate",
         help="leave-one-out evaluation of a database against baselines, with an HTML report",
@@ -71,11 +78,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from imagemap.cli.options import config_options
     from imagemap.database import Database
-    from imagemap.depth.config import resolve_config
     from imagemap.evaluation import METHODS, check_report, leave_one_out, summarize, write_report
-    from imagemap.io import InputError
     from imagemap.outputs import check_output_directory, resolve
 
     options = config_options(args)
