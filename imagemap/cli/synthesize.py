@@ -9,9 +9,24 @@ import sys
 import time
 from pathlib import Path
 
+from imagemap.cli import PRESET_NAMES, add_common_options, map_large_blocks
+from imagemap.cli.mesh import is_mesh_request, run_mesh_synthesize
+from imagemap.cli.options import (
+    add_config_options,
+    add_mesh_options,
+    config_options,
+    parse_colour,
+)
+from imagemap.depth.config import resolve_config
 from imagemap.errors import InputError
+from imagemap.progress import progress
 
 log = logging.getLogger("imagemap")
+
+#: Why the command functions import inside themselves (tests/test_imports_marked.py):
+#: the parser is built without NumPy, SciPy or numba, so ``imagemap --help`` answers at
+#: once; each command imports what it needs when it runs.
+DEFERRED_IMPORTS = "start-up: building the parser loads no scientific module"
 
 SYNTHESIZE_HELP = """\
 Synthesize an image-map for a new depth map from a database of examples.
@@ -39,9 +54,6 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from imagemap.cli import PRESET_NAMES, add_common_options
-    from imagemap.cli.options import add_config_options, add_mesh_options
-
     p = subparsers.add_parser(
         "synthesize",
         help="make an image-map for a depth map from a database of examples",
@@ -121,8 +133,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _name_of(depth_path) -> str:
     """``fish_008_depth.png`` -> ``fish_008``."""
-    from pathlib import Path
-
     stem = Path(depth_path).stem
     return stem[: -len("_depth")] if stem.endswith("_depth") else stem
 
@@ -130,8 +140,6 @@ def _name_of(depth_path) -> str:
 def _plan_outputs(args: argparse.Namespace) -> list[dict]:
     """One job per query depth with its output paths (suffixes and kinds checked here;
     clashes and writability by :func:`_check_outputs` once the database is open)."""
-    from pathlib import Path
-
     batch = len(args.depth) > 1
     options = [("-o", args.output), ("--provenance", args.provenance), ("--preview", args.preview)]
     for option, path in options:
@@ -185,8 +193,6 @@ _TRUTH_SUFFIXES = ("_image.png", "_image.jpg", "_image.jpeg", "_image.tif", "_la
 
 def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None:
     """Every output against every input and every other output, and writable: before any work."""
-    from pathlib import Path
-
     from imagemap.outputs import OutputPlan, check_output_directory
 
     plan = OutputPlan()
@@ -244,14 +250,9 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
 
 
 def run_synthesize(args: argparse.Namespace) -> int:
-    from imagemap.cli import map_large_blocks
-    from imagemap.cli.mesh import is_mesh_request, run_mesh_synthesize
-    from imagemap.cli.options import config_options, parse_colour
     from imagemap.database import Database
     from imagemap.depth.budget import guard_colorize
-    from imagemap.depth.config import resolve_config
     from imagemap.io import read_depth
-    from imagemap.progress import progress
 
     if is_mesh_request(args):  # a mesh in, or a textured mesh out
         map_large_blocks(args)
@@ -321,7 +322,6 @@ def run_synthesize(args: argparse.Namespace) -> int:
 
 def _synthesize_one(args, job, depth, database, config, examples, background, batch) -> dict:
     """One map: synthesize, build every output, write them all-or-nothing."""
-    from imagemap.cli.options import config_options
     from imagemap.depth.budget import memory_check
     from imagemap.depth.pipeline import colorize
     from imagemap.io import image_writer
@@ -393,7 +393,7 @@ def _peak_rss_mb() -> float | None:
     except OSError:
         pass
     try:
-        import resource
+        import resource  # deferred: optional dependency (not on Windows: ImportError below)
 
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         return peak / 2**20 if sys.platform == "darwin" else peak / 1024.0  # bytes / KiB
