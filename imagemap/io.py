@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -59,9 +60,7 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     suffix = suffix if suffix is not None else "".join(path.suffixes)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    tmp_path = make_temporary(path, suffix)
     try:
         yield tmp_path
         # mkstemp creates 0600; a finished output gets the usual mode (0666 less umask).
@@ -73,6 +72,48 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
+
+
+#: Marks the temporary files of atomic writes (``.STEM.XXXXXXXX.imagemap-tmp.SUFFIX``): a
+#: resumed batch removes what a killed run left of its own writes by this mark, never a
+#: user's ``.STEM.*.png``.
+TEMPORARY_TAG = ".imagemap-tmp"
+_TEMPORARY_RE = re.compile(
+    r"^\.(?P<stem>.*)\.[a-z0-9_]{8}" + re.escape(TEMPORARY_TAG) + r"(?P<suffix>.*)$"
+)
+
+
+def make_temporary(path: str | os.PathLike, suffix: str | None = None) -> Path:
+    """Create an empty temporary file beside ``path`` (its folder must exist), named so
+    that :func:`is_temporary_of` knows it.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> tmp = make_temporary(folder / "map.png")
+    >>> is_temporary_of(tmp, folder / "map.png"), is_temporary_of(folder / ".map.x.png", "map.png")
+    (True, False)
+    """
+    path = Path(path)
+    suffix = suffix if suffix is not None else "".join(path.suffixes)
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.stem}.", suffix=TEMPORARY_TAG + suffix, dir=path.parent
+    )
+    os.close(fd)
+    return Path(tmp)
+
+
+def is_temporary_of(candidate: str | os.PathLike, target: str | os.PathLike) -> bool:
+    """Whether ``candidate`` is a temporary file :func:`make_temporary` made for ``target``."""
+    match = _TEMPORARY_RE.match(Path(candidate).name)
+    target = Path(target)
+    return bool(
+        match
+        and match["stem"] == target.stem
+        and match["suffix"] == "".join(target.suffixes)
+        and Path(candidate).parent == target.parent
+    )
 
 
 def _to_unit_float(array: np.ndarray, path: Path | str) -> np.ndarray:

@@ -45,15 +45,32 @@ OSError: disk full
 from __future__ import annotations
 
 import contextlib
+import json
 import os
+import re
+import shutil
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import unquote
 
-from imagemap.io import InputError
+from imagemap.io import InputError, make_temporary
 
-__all__ = ["OutputPlan", "check_writable", "resolve", "same_file", "write_all"]
+__all__ = [
+    "TRUTH_SUFFIXES",
+    "OutputPlan",
+    "check_output_directory",
+    "check_writable",
+    "exported",
+    "mesh_companions",
+    "query_name",
+    "resolve",
+    "same_file",
+    "truths_beside",
+    "write_all",
+    "written_companions",
+]
 
 
 def resolve(path: str | os.PathLike) -> Path:
@@ -113,60 +130,354 @@ def check_output_directory(path: str | os.PathLike, what: str = "output director
     check_writable(target / "probe", what)
 
 
+#: Files beside a query (depth map or mesh) that hold its truth, as ``data_gen --holdout``
+#: writes them: NAME followed by one of these. No output replaces them (unless
+#: ``imagemap synthesize --overwrite``).
+TRUTH_SUFFIXES = (
+    "_image.png",
+    "_image.jpg",
+    "_image.jpeg",
+    "_image.tif",
+    "_image.tiff",
+    "_labels.png",
+    ".json",
+)
+
+_DEPTH_NAME = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
+# MTL statements naming a file (a texture); options such as "-bm 1.0" may precede the name.
+_MTL_FILE = re.compile(r"^\s*(?:map_\w+|bump|disp|decal|norm|refl)\s+(?P<rest>.+?)\s*$", re.I)
+_OBJ_MTLLIB = re.compile(r"^\s*mtllib\s+(?P<rest>.+?)\s*$")
+
+
+def query_name(path: str | os.PathLike) -> str:
+    """The object name of a query: ``fish_008_depth.png`` -> ``fish_008``, ``a.glb`` -> ``a``.
+
+    Examples
+    --------
+    >>> query_name("holdout/fish_008_depth.png"), query_name("meshes/fish_008.glb")
+    ('fish_008', 'fish_008')
+    """
+    path = Path(path)
+    match = _DEPTH_NAME.match(path.name)
+    return match["name"] if match else path.stem
+
+
+def truths_beside(path: str | os.PathLike) -> list[Path]:
+    """The files beside a query that hold its truth (NAME + :data:`TRUTH_SUFFIXES`), if any."""
+    path = Path(path)
+    name = query_name(path)
+    return [p for s in TRUTH_SUFFIXES if (p := path.parent / f"{name}{s}").is_file()]
+
+
+def _named_files(folder: Path, rest: str) -> list[Path]:
+    # The file name is the whole rest, or its last token when options precede it.
+    names = [rest, rest.split()[-1]] if rest.split() else [rest]
+    return [folder / name for name in dict.fromkeys(names) if (folder / name).is_file()]
+
+
+def mesh_companions(path: str | os.PathLike) -> list[Path]:
+    """The files a mesh file reads besides itself: an OBJ's material libraries and their
+    textures, a glTF's external buffers and images (those that exist).
+
+    A mesh query's or example's companions are inputs: no output may replace them.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> _ = (folder / "a.obj").write_text("mtllib a.mtl\\nv 0 0 0\\n")
+    >>> _ = (folder / "a.mtl").write_text("newmtl m\\nmap_Kd -bm 1 photo.jpg\\n")
+    >>> _ = (folder / "photo.jpg").write_bytes(b"jpeg")
+    >>> [p.name for p in mesh_companions(folder / "a.obj")]
+    ['a.mtl', 'photo.jpg']
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    found: list[Path] = []
+    try:
+        if suffix == ".obj":
+            with open(path, errors="replace") as handle:
+                for line in handle:
+                    if match := _OBJ_MTLLIB.match(line):
+                        found += _named_files(path.parent, match["rest"])
+            for mtl in list(found):
+                for line in mtl.read_text(errors="replace").splitlines():
+                    if match := _MTL_FILE.match(line):
+                        found += _named_files(mtl.parent, match["rest"])
+        elif suffix == ".gltf":
+            document = json.loads(path.read_text(errors="replace"))
+            for item in [*document.get("buffers", []), *document.get("images", [])]:
+                uri = item.get("uri", "") if isinstance(item, dict) else ""
+                if uri and not uri.startswith("data:"):
+                    found += _named_files(path.parent, unquote(uri))
+    except (OSError, ValueError, AttributeError):
+        pass  # an unreadable mesh is reported by its reader; nothing more to protect
+    return list(dict.fromkeys(found))
+
+
+def written_companions(path: str | os.PathLike, map_kinds: Sequence[str] = ()) -> list[Path]:
+    """The files written beside a textured mesh or a map: an OBJ's ``STEM.mtl`` and its
+    texture ``STEM.png``; ``STEM_KIND.png`` for each PBR map kind written with it.
+
+    Examples
+    --------
+    >>> [p.name for p in written_companions("out/fish.obj", ["roughness"])]
+    ['fish.mtl', 'fish.png', 'fish_roughness.png']
+    >>> written_companions("out/fish.glb")
+    []
+    """
+    path = Path(path)
+    found = []
+    if path.suffix.lower() == ".obj":
+        found += [path.with_suffix(".mtl"), path.with_suffix(".png")]
+    found += [path.with_name(f"{path.stem}_{kind}.png") for kind in map_kinds]
+    return found
+
+
+@dataclass(frozen=True)
+class _Output:
+    path: Path
+    what: str
+    main: Path | None = None  # a companion: written beside this output, as part of its set
+    fresh: bool = False  # an existing file here is replaced only if claimed
+
+
+class _Files:
+    """Paths looked up by resolved name and by inode (hard links), built once."""
+
+    def __init__(self) -> None:
+        self.by_name: dict[str, tuple[Path, str]] = {}
+        self.by_inode: dict[tuple[int, int], tuple[Path, str]] = {}
+
+    def add(self, path: Path, what: str) -> None:
+        self.by_name.setdefault(os.path.normcase(resolve(path)), (path, what))
+        with contextlib.suppress(OSError):
+            stat = os.stat(path)
+            self.by_inode.setdefault((stat.st_dev, stat.st_ino), (path, what))
+
+    def find(self, path: Path) -> tuple[Path, str] | None:
+        found = self.by_name.get(os.path.normcase(resolve(path)))
+        if found is None:
+            with contextlib.suppress(OSError):
+                stat = os.stat(path)
+                found = self.by_inode.get((stat.st_dev, stat.st_ino))
+        return found
+
+
 @dataclass
 class OutputPlan:
-    """Inputs and outputs of one command, checked against each other before the work."""
+    """Inputs and outputs of one command, checked against each other before the work.
+
+    What may not be replaced: the inputs (:meth:`add_input`; a query with its mesh
+    companions and held-out truths, :meth:`add_query`), every file of a database and
+    anything in its folder (:meth:`add_database`). Outputs (:meth:`add_output`) may not
+    share a file, and their companions (an OBJ's ``.mtl`` and texture, PBR maps) are
+    checked as outputs too: an existing file in a companion's place is replaced only
+    when its main output exists as well (a previous run's set), never a user's file
+    that merely has the name. An output added with ``fresh=True`` (a batch's) replaces
+    an existing file only if :meth:`claim` was told it is a previous run's.
+    """
 
     inputs: list[tuple[Path, str]] = field(default_factory=list)
     protected_dirs: list[tuple[Path, str]] = field(default_factory=list)
-    outputs: list[tuple[Path, str]] = field(default_factory=list)
+    outputs: list[_Output] = field(default_factory=list)
+    claimed: set[str] = field(default_factory=set)
 
     def add_input(self, path: str | os.PathLike, what: str) -> None:
         """A file the command reads (or must keep): no output may replace it."""
         self.inputs.append((Path(path), what))
 
+    def add_query(
+        self, path: str | os.PathLike, what: str, *, overwrite: bool = False, hint: str = ""
+    ) -> None:
+        """A query (depth map or mesh): itself, the files a mesh reads (MTL, textures), and
+        unless ``overwrite`` the held-out truth beside it (:data:`TRUTH_SUFFIXES`; ``hint``
+        says how to replace it anyway)."""
+        path = Path(path)
+        self.add_input(path, what)
+        for companion in mesh_companions(path):
+            self.add_input(companion, f"a file {path.name} reads")
+        if not overwrite:
+            for truth in truths_beside(path):
+                self.add_input(truth, f"held-out truth beside {path.name}{hint}")
+
     def add_protected_dir(self, path: str | os.PathLike, what: str) -> None:
         """A directory (a database) no output may be written into."""
         self.protected_dirs.append((Path(path), what))
 
+    def add_database(self, database=None, directory: str | os.PathLike | None = None) -> None:
+        """A database: its folder (nothing is written into it) and every file of every
+        example wherever it lies (depth, image, labels, JSON, PBR maps, a mesh and the
+        files it reads)."""
+        if directory is not None:
+            self.add_protected_dir(directory, "the database")
+        for example in database or ():
+            paths = [
+                getattr(example, attribute, None)
+                for attribute in ("depth_path", "image_path", "labels_path", "json_path")
+            ]
+            image = getattr(example, "image_path", None)
+            if image is not None:
+                paths += [
+                    Path(image).with_name(f"{example.name}_{kind}{suffix}")
+                    for kind in ("normal", "roughness", "metallic", "height", "ao")
+                    for suffix in (".png", ".tif", ".tiff", ".jpg")
+                ]
+            mesh = getattr(example, "mesh_path", None)
+            if mesh is not None:
+                paths += [mesh, *mesh_companions(mesh)]
+            for path in paths:
+                if path is not None:
+                    self.add_input(path, f"database file of {example.name}")
+
     def add_output(
-        self, path: str | os.PathLike, what: str, suffixes: tuple[str, ...] | None = None
+        self,
+        path: str | os.PathLike,
+        what: str,
+        suffixes: tuple[str, ...] | None = None,
+        *,
+        companions: Sequence[str | os.PathLike] = (),
+        fresh: bool = False,
     ) -> Path:
-        """A file the command writes; ``suffixes`` are the accepted extensions."""
+        """A file the command writes; ``suffixes`` are the accepted extensions.
+
+        ``companions`` are the files written with it (:func:`written_companions`);
+        ``fresh``: an existing file in its place (or a companion's) is a user's unless
+        claimed (:meth:`claim`).
+        """
         path = Path(path)
         if suffixes and path.suffix.lower() not in suffixes:
             raise InputError(
                 f"{path}: {what} is written as {' or '.join(suffixes)}, "
                 f"not {path.suffix or 'a file without suffix'!r}"
             )
-        self.outputs.append((path, what))
+        self.outputs.append(_Output(path, what, fresh=fresh))
+        for companion in companions:
+            companion = Path(companion)
+            self.outputs.append(
+                _Output(companion, f"written beside {path.name} ({what})", path, fresh)
+            )
         return path
+
+    def add_companion(
+        self, path: str | os.PathLike, main: str | os.PathLike, what: str, *, fresh: bool = False
+    ) -> Path:
+        """A file written beside ``main`` as part of its set (a PBR map beside a map)."""
+        path = Path(path)
+        self.outputs.append(_Output(path, what, Path(main), fresh))
+        return path
+
+    def claim(self, paths: Iterable[str | os.PathLike]) -> None:
+        """Existing files a ``fresh`` output may replace: a previous run's outputs."""
+        self.claimed.update(os.path.normcase(resolve(p)) for p in paths)
 
     def check(self) -> None:
         """Raise :class:`InputError` on the first clash or unwritable output."""
-        seen: dict[str, tuple[Path, str]] = {}
-        for path, what in self.outputs:
-            key = os.path.normcase(resolve(path))
+        inputs = _Files()
+        for source, source_what in self.inputs:
+            inputs.add(source, source_what)
+        folders = {resolve(folder): (folder, what) for folder, what in self.protected_dirs}
+        seen: dict[str, _Output] = {}
+        probed: set[Path] = set()
+        for output in self.outputs:
+            path, what = output.path, output.what
+            full = resolve(path)
+            key = os.path.normcase(full)
             if key in seen:
-                other, other_what = seen[key]
+                other = seen[key]
                 raise InputError(
-                    f"{path} ({what}) and {other} ({other_what}) are the same file: "
+                    f"{path} ({what}) and {other.path} ({other.what}) are the same file: "
                     "give each output its own name"
                 )
-            seen[key] = (path, what)
-            for source, source_what in self.inputs:
-                if same_file(path, source):
+            seen[key] = output
+            if (found := inputs.find(path)) is not None:
+                source, source_what = found
+                raise InputError(
+                    f"{path} ({what}) would overwrite {source} ({source_what}): "
+                    "give the output another name"
+                )
+            for folder in (full.parent, full):
+                if folder in folders:
+                    shown, folder_what = folders[folder]
                     raise InputError(
-                        f"{path} ({what}) would overwrite {source} ({source_what}): "
-                        "give the output another name"
-                    )
-            for folder, folder_what in self.protected_dirs:
-                if resolve(path).parent == resolve(folder):
-                    raise InputError(
-                        f"{path} ({what}) would be written into {folder} ({folder_what}): "
+                        f"{path} ({what}) would be written into {shown} ({folder_what}): "
                         "write outputs outside the database"
                     )
-            check_writable(path, what)
+            if full.is_file() or full.is_symlink():
+                self._check_replace(output, key)
+            if full.parent not in probed or full.is_dir():
+                check_writable(path, what)
+                probed.add(full.parent)
+
+    def _check_replace(self, output: _Output, key: str) -> None:
+        """An existing file at an output: replaced only when it is the output's own."""
+        if output.fresh and key not in self.claimed:
+            raise InputError(
+                f"{output.path} ({output.what}) exists and no earlier run here wrote it: "
+                "it would be replaced; move it away or choose another output folder"
+            )
+        if output.main is not None and not output.fresh and not output.main.is_file():
+            raise InputError(
+                f"{output.path} exists and is not part of an earlier {output.main.name}; "
+                f"writing {output.main.name} would replace it ({output.what}): move it "
+                "away or choose another output name"
+            )
+
+
+def exported(
+    export: Callable[[Path], object], target: str | os.PathLike, planned: Iterable[Path] = ()
+) -> tuple[dict[Path, Callable[[Path], None]], Callable[[], None]]:
+    """Run a writer of several files (``export(path)``, such as a textured mesh's) into a
+    staging folder beside ``target``, and return :func:`write_all` writers moving each file
+    it made to its place, and a clean-up to call afterwards (it removes the staging
+    folder).
+
+    Every file made must be ``target`` or one of ``planned`` (the companions checked in
+    the plan): anything else is a ``RuntimeError`` before any target is touched.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> def export(path):
+    ...     path.write_text("obj"); path.with_suffix(".mtl").write_text("mtl")
+    >>> writers, cleanup = exported(export, folder / "m.obj", [folder / "m.mtl"])
+    >>> sorted(p.name for p in write_all(writers)); cleanup()
+    ['m.mtl', 'm.obj']
+    >>> sorted(p.name for p in folder.iterdir())
+    ['m.mtl', 'm.obj']
+    """
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=target.parent))
+
+    def cleanup() -> None:
+        shutil.rmtree(staging, ignore_errors=True)
+
+    try:
+        export(staging / target.name)
+        allowed = {target.name, *(Path(p).name for p in planned)}
+        made = sorted(p for p in staging.rglob("*") if p.is_file())
+        stray = [
+            p.relative_to(staging) for p in made if p.parent != staging or p.name not in allowed
+        ]
+        if stray or not (staging / target.name).is_file():
+            raise RuntimeError(
+                f"{target}: the writer made {', '.join(map(str, stray)) or 'no ' + target.name}, "
+                "which the output plan did not check"
+            )
+    except BaseException:
+        cleanup()
+        raise
+
+    def mover(source: Path) -> Callable[[Path], None]:
+        return lambda tmp: os.replace(source, tmp)
+
+    return {target.parent / p.name: mover(p) for p in made}, cleanup
+
+
+#: The staging folders of :func:`exported` (a killed run's are removed by a resumed batch).
+STAGING_PREFIX = ".imagemap-export."
 
 
 @contextlib.contextmanager
@@ -175,10 +486,7 @@ def _staged(targets: list[Path]) -> Iterator[list[Path]]:
     try:
         for target in targets:
             target.parent.mkdir(parents=True, exist_ok=True)
-            suffix = "".join(target.suffixes) or ".tmp"
-            fd, name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=suffix, dir=target.parent)
-            os.close(fd)
-            temporaries.append(Path(name))
+            temporaries.append(make_temporary(target, "".join(target.suffixes) or ".tmp"))
         yield temporaries
     except BaseException:
         for tmp in temporaries:

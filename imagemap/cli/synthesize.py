@@ -187,35 +187,20 @@ def _plan_outputs(args: argparse.Namespace) -> list[dict]:
     return jobs
 
 
-#: Files beside a query depth that hold its truth (a held-out object of data_gen).
-_TRUTH_SUFFIXES = ("_image.png", "_image.jpg", "_image.jpeg", "_image.tif", "_labels.png", ".json")
-
-
 def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None:
     """Every output against every input and every other output, and writable: before any work."""
     from imagemap.outputs import OutputPlan, check_output_directory
 
     plan = OutputPlan()
     for job in jobs:
-        depth = Path(job["depth"])
-        plan.add_input(depth, "query depth")
-        if not args.overwrite:
-            for suffix in _TRUTH_SUFFIXES:
-                truth = depth.parent / f"{job['name']}{suffix}"
-                if truth.exists():
-                    plan.add_input(
-                        truth, "held-out truth beside the query; --overwrite replaces it"
-                    )
-    plan.add_protected_dir(args.db, "the database")
-    for example in database:
-        for path in (
-            example.depth_path,
-            example.image_path,
-            example.labels_path,
-            example.json_path,
-        ):
-            if path is not None:
-                plan.add_input(path, "database file")
+        # The query, and the truth beside it (NAME_image.png ...): --overwrite replaces that.
+        plan.add_query(
+            job["depth"],
+            "query depth",
+            overwrite=args.overwrite,
+            hint="; --overwrite replaces it",
+        )
+    plan.add_database(database, args.db)
     if len(jobs) > 1:
         for option, folder in (
             ("-o", args.output),
@@ -243,7 +228,7 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
         else:
             job["maps"] = {k: companion_path(job["output"], k) for k in kinds}
         for kind, path in job["maps"].items():
-            plan.add_output(path, f"{kind} map beside -o", suffixes=(".png",))
+            plan.add_companion(path, job["output"], f"{kind} map beside -o")
     if args.report:
         plan.add_output(args.report, "--report", suffixes=(".json",))
     plan.check()
