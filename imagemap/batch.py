@@ -58,7 +58,7 @@ import re
 import sys
 import time
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Generator, Mapping
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -66,7 +66,7 @@ from typing import Any
 
 import imagemap
 from imagemap.database import Database, database_at_view, prepare_database
-from imagemap.depth.config import resolve_config
+from imagemap.depth.config import DepthConfig, resolve_config
 from imagemap.io import InputError, atomic_path, read_depth, write_image
 from imagemap.mesh import (
     DEFAULT_SIZE,
@@ -133,7 +133,7 @@ class BatchOptions:
         """The options as keywords of :func:`imagemap.colorize`."""
         return dict(self.options)
 
-    def config(self):
+    def config(self) -> DepthConfig:
         """The :class:`~imagemap.depth.config.DepthConfig` every object is made with."""
         return resolve_config(self.preset, **self.colorize_options())
 
@@ -173,7 +173,9 @@ class BatchSummary:
         )
 
 
-def plan_jobs(input_dir: str | os.PathLike, out_dir: str | os.PathLike, options: BatchOptions):
+def plan_jobs(
+    input_dir: str | os.PathLike, out_dir: str | os.PathLike, options: BatchOptions
+) -> list[Job]:
     """One :class:`Job` per depth map (``NAME_depth.*``) or mesh in ``input_dir``, by name."""
     input_dir, out_dir = Path(input_dir), Path(out_dir)
     if not input_dir.exists():
@@ -446,7 +448,13 @@ def run_batch(
     return summary
 
 
-def _collect(results, total: int, summary: BatchSummary, quiet: bool, on_result) -> None:
+def _collect(
+    results: Generator[dict, None, None],
+    total: int,
+    summary: BatchSummary,
+    quiet: bool,
+    on_result: Callable[[dict], None] | None,
+) -> None:
     """Count the records as they come, with a progress bar."""
     try:
         for record in progress(results, total=total, desc="objects", quiet=quiet):
@@ -463,7 +471,13 @@ def _collect(results, total: int, summary: BatchSummary, quiet: bool, on_result)
         results.close()
 
 
-def _run(todo: list[Job], databases, options: BatchOptions, workers: int, client):
+def _run(
+    todo: list[Job],
+    databases: dict[str, Database],
+    options: BatchOptions,
+    workers: int,
+    client: Any,
+) -> Generator[dict, None, None]:
     """A generator of records as objects complete (closing it stops the workers)."""
     if not todo:
         return
@@ -477,7 +491,13 @@ def _run(todo: list[Job], databases, options: BatchOptions, workers: int, client
         yield from _run_pool(todo, databases, options, workers, cores)
 
 
-def _run_pool(todo, databases, options, workers, cores):
+def _run_pool(
+    todo: list[Job],
+    databases: dict[str, Database],
+    options: BatchOptions,
+    workers: int,
+    cores: int,
+) -> Generator[dict, None, None]:
     workers = min(workers, len(todo))
     executor = ProcessPoolExecutor(
         max_workers=workers,
@@ -503,7 +523,7 @@ def _run_pool(todo, databases, options, workers, cores):
         executor.shutdown(wait=True, cancel_futures=True)
 
 
-def _connect(scheduler):
+def _connect(scheduler: Any) -> tuple[Any, bool]:
     """(client, whether we opened it) for an address or a ``dask.distributed.Client``."""
     try:
         from dask.distributed import Client  # deferred: optional dependency (imagemap[dask])
@@ -528,7 +548,9 @@ def _dask_threads(host_threads: dict[str, int]) -> int:
     return max(1, (os.cpu_count() or 1) // max(1, host_threads.get(host, 1)))
 
 
-def _run_dask(todo, databases, options, client):
+def _run_dask(
+    todo: list[Job], databases: dict[str, Database], options: BatchOptions, client: Any
+) -> Generator[dict, None, None]:
     from dask.distributed import as_completed  # deferred: optional dependency (imagemap[dask])
 
     host_threads: dict[str, int] = {}
