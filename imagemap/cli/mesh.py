@@ -21,14 +21,73 @@ def is_mesh_request(args: argparse.Namespace) -> bool:
     )
 
 
+#: Views of the --preview sheet: the front and a three-quarter view from above.
+PREVIEW_VIEWS = ("0,0", "35,20")
+#: A stated size outside this range (metres) gets a hint about --units: smaller than
+#: a coin or taller than a ten-storey building is rarely what an artist meant.
+PLAUSIBLE_METRES = (0.01, 30.0)
+
+
+def _render_mesh_examples(database, views, size, quiet: bool) -> None:
+    """Render (or read from the cache) every mesh example at every view, each named."""
+    from imagemap.database import database_at_view
+    from imagemap.mesh import MeshExample
+    from imagemap.progress import progress
+
+    for view in views:
+        examples = [e for e in database_at_view(database, view, size) if isinstance(e, MeshExample)]
+        todo = [e for e in examples if not e.cache_path().is_file()]
+        if not todo:
+            continue
+        if not quiet:
+            print(
+                f"imagemap: rendering {len(todo)} mesh example(s) from view {view} "
+                "(first use; cached for the next runs)",
+                file=sys.stderr,
+            )
+        for example in progress(todo, desc=f"mesh examples at {view}", quiet=quiet):
+            if not quiet and not sys.stderr.isatty():
+                print(f"imagemap:   {example.name} ({example.mesh_path.name})", file=sys.stderr)
+            _ = example.depth  # renders and caches
+
+
+def _mesh_preview(textured, database, first_name: str, size):
+    """The textured result from :data:`PREVIEW_VIEWS` beside the first example's picture
+    (a mesh example rendered the same way; a picture example as it is)."""
+    import numpy as np
+
+    from imagemap.mesh import MeshExample, load_mesh, render_textured
+    from imagemap.mesh.views import parse_view
+
+    example = database[first_name]
+    tiles = [render_textured(textured, parse_view(v), size, shaded=True) for v in PREVIEW_VIEWS]
+    if isinstance(example, MeshExample):
+        reference = load_mesh(example.mesh_path)
+        tiles += [
+            render_textured(reference, parse_view(v), size, shaded=True) for v in PREVIEW_VIEWS
+        ]
+    else:
+        from skimage.transform import resize
+
+        picture = np.where(example.mask[..., None], example.image, 1.0)
+        tiles.append(resize(picture, (size[1], size[0]), order=1, anti_aliasing=True))
+    gap = np.ones((size[1], 4, 3), dtype=np.float32)
+    row = [tiles[0]]
+    for tile in tiles[1:]:
+        row += [gap, np.asarray(tile, dtype=np.float32)]
+    return np.concatenate(row, axis=1)
+
+
 def run_mesh_synthesize(args: argparse.Namespace) -> int:
     """``imagemap synthesize MESH -o out.glb|out.obj|out.png``: one mesh, one or more views."""
     import time
 
+    import numpy as np
+
     from imagemap.cli.options import config_options, parse_colour, views_of
     from imagemap.database import Database
     from imagemap.depth.config import resolve_config
-    from imagemap.io import atomic_path, write_image
+    from imagemap.io import image_writer
     from imagemap.mesh import (
         TEXTURED_SUFFIXES,
         colorize_mesh,
@@ -36,6 +95,9 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         is_mesh_path,
         load_mesh,
     )
+    from imagemap.mesh.coverage import choose_views
+    from imagemap.mesh.files import keep_surface, unit_scale
+    from imagemap.outputs import OutputPlan, exported, write_all, written_companions
 
     output = Path(args.output)
     if len(args.depth) > 1:
@@ -50,16 +112,11 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         )
     if output.suffix.lower() not in (*TEXTURED_SUFFIXES, ".png"):
         raise InputError(f"{output}: output must be a .glb, .obj (textured mesh) or .png (map)")
-    if args.preview:
-        raise InputError("--preview is for depth-map inputs")
-    for path in (args.provenance,):
-        if path and Path(path).suffix.lower() != ".png":
-            raise InputError(f"{path}: output must be a .png")
-    if args.report and Path(args.report).suffix.lower() != ".json":
-        raise InputError(f"{args.report}: --report must be a .json")
     background = parse_colour(args.background)
     config = resolve_config(args.preset, **config_options(args))  # a bad combination stops here
+    scale = unit_scale(getattr(args, "units", None), getattr(args, "scale", None))
     views = views_of(args)
+    quiet = bool(args.quiet)
     mesh = load_mesh(source)  # bad input stops here, before any work
     database = Database.from_directory(args.db, view=views[0], size=args.size)
     if args.exclude:
@@ -67,26 +124,53 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     examples = [n.strip() for n in args.examples.split(",")] if args.examples else None
     for name in examples or []:
         database[name]  # unknown names fail here
+    plan = OutputPlan()
+    plan.add_query(source, "input mesh")  # with the MTL and textures it reads, and its truth
+    plan.add_database(database, args.db)
+    # An OBJ's .mtl and texture are checked with it (imagemap.outputs.written_companions).
+    companions = written_companions(output)
+    plan.add_output(output, "-o", suffixes=(*TEXTURED_SUFFIXES, ".png"), companions=companions)
+    for option, path, suffixes in (
+        ("--provenance", args.provenance, (".png",)),
+        ("--preview", args.preview, (".png",)),
+        ("--report", args.report, (".json",)),
+    ):
+        if path:
+            plan.add_output(path, option, suffixes=suffixes)
+    plan.check()
     start = time.perf_counter()
+    if getattr(args, "views", None) == "auto":
+        views = tuple(choose_views(mesh, views))
+        if not quiet:
+            print(
+                f"imagemap: views chosen by coverage: {'; '.join(str(v) for v in views)}",
+                file=sys.stderr,
+            )
+    _render_mesh_examples(database, views, args.size, quiet)
+    sizing = {"texture_size": args.texture_size} if args.texture_size else {}
     made = colorize_mesh(
         mesh,
         database,
         list(views),
         size=args.size,
-        texture_size=args.texture_size,
         preset=config,
         seed=args.seed,
         examples=examples,
-        quiet=args.quiet or not sys.stderr.isatty(),
+        quiet=quiet or not sys.stderr.isatty(),
+        **sizing,
     )
+    textured = keep_surface(made.mesh, mesh)
     seconds = time.perf_counter() - start
     first = made.results[0]
+    writers = {}
     if output.suffix.lower() == ".png":
-        write_image(output, first.rgba if background is None else first.on_background(background))
-    else:
-        export_textured(made.mesh, output)
+        picture = first.rgba if background is None else first.on_background(background)
+        writers[output] = image_writer(picture)
     if args.provenance:
-        write_image(args.provenance, first.provenance)
+        writers[Path(args.provenance)] = image_writer(first.provenance)
+    if args.preview:
+        sheet = _mesh_preview(textured, database, first.example_names[0], args.size)
+        writers[Path(args.preview)] = image_writer(sheet)
     if args.report:
         report = {
             "query": str(source),
@@ -96,12 +180,35 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
             "seconds": seconds,
             "preset": args.preset,
             "seed": args.seed,
+            "scale_to_metres": scale,
         }
-        with atomic_path(args.report) as tmp:
-            tmp.write_text(json.dumps(report, indent=2))
-    if not args.quiet:
+        text = json.dumps(report, indent=2)
+        writers[Path(args.report)] = lambda tmp: Path(tmp).write_text(text)
+    cleanup = None
+    if output.suffix.lower() != ".png":  # the mesh's files join the set (staged, then moved)
+        mesh_writers, cleanup = exported(
+            lambda path: export_textured(textured, path, scale=scale), output, companions
+        )
+        writers.update(mesh_writers)
+    try:
+        write_all(writers)
+    finally:
+        if cleanup is not None:
+            cleanup()
+    if not quiet:
+        extent = np.ptp(np.asarray(mesh.vertices), axis=0) * scale
+        size_text = " x ".join(f"{v:.3g}" for v in extent)
+        how = "source units kept, read as metres" if scale == 1.0 else f"scaled by {scale:g}"
         print(
-            f"wrote {output} from {len(views)} view(s) of {source.name} in {seconds:.2f} s",
+            f"wrote {output} from {len(views)} view(s) of {source.name} in {seconds:.2f} s; "
+            f"size {size_text} m ({how})",
             file=sys.stderr,
         )
+        low, high = PLAUSIBLE_METRES
+        if output.suffix.lower() != ".png" and not (low <= extent.max() <= high):
+            print(
+                f"imagemap: note: {extent.max():.3g} m across; if the mesh was modelled in "
+                "other units, give --units (mm, cm, in, ft) or --scale",
+                file=sys.stderr,
+            )
     return 0
