@@ -97,19 +97,19 @@ class MeshExample(Example):
         return self._arrays
 
     @property
-    def depth(self) -> np.ndarray:  # type: ignore[override]
+    def depth(self) -> np.ndarray:
         return self._render()["depth"]
 
     @property
-    def image(self) -> np.ndarray:  # type: ignore[override]
+    def image(self) -> np.ndarray:
         return self._render()["image"]
 
     @property
-    def labels(self) -> np.ndarray | None:  # type: ignore[override]
+    def labels(self) -> np.ndarray | None:
         return None
 
     @property
-    def info(self) -> dict:  # type: ignore[override]
+    def info(self) -> dict:
         return {"mesh": str(self.mesh_path), "view": str(self.view)}
 
     def __repr__(self) -> str:
