@@ -1,0 +1,190 @@
+"""Blender, headless (issue #34 items 1 and 3): our GLB imports as intended, and the add-on runs.
+
+Needs Blender's Python module: ``import bpy`` in this interpreter, a Python that has it
+(``IMAGEMAP_BPY_PYTHON=/path/to/python``; bpy's wheel wants numpy < 2, so it lives in its
+own environment: ``python3.11 -m venv v && v/bin/pip install bpy``), or ``blender`` on the
+PATH (run as ``blender -b --python``). Skipped, saying so, where none is present.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+import trimesh
+
+from imagemap.blender.package import build_zip
+from imagemap.mesh import project_texture, render_mesh
+from imagemap.mesh.files import export_textured, keep_surface, load_mesh
+
+
+def blender_runner() -> list[str] | None:
+    """The command prefix that runs a Python script inside Blender, or None."""
+    python = os.environ.get("IMAGEMAP_BPY_PYTHON")
+    if python:
+        return [python]
+    if importlib.util.find_spec("bpy") is not None:
+        return [sys.executable]
+    blender = shutil.which("blender")
+    if blender:
+        return [blender, "-b", "--factory-startup", "--python"]
+    return None
+
+
+RUNNER = blender_runner()
+pytestmark = pytest.mark.skipif(
+    RUNNER is None,
+    reason="no Blender: set IMAGEMAP_BPY_PYTHON to a Python with bpy (pip install bpy, "
+    "Python 3.11, numpy < 2) or put blender on the PATH",
+)
+
+#: Blender-side helpers: what the importer made of a material, as JSON-able facts.
+INSPECT = textwrap.dedent(
+    """
+    import json, sys
+    import bpy
+
+    def socket_value(socket):
+        # The constant a socket gets: unlinked, its value; through a MULTIPLY by a
+        # constant 0 (glTF's factor times a texture), 0; else 'texture'.
+        if not socket.is_linked:
+            value = socket.default_value
+            return value if isinstance(value, float) else list(value)
+        node = socket.links[0].from_node
+        if node.type == "MATH" and node.operation == "MULTIPLY":
+            constants = [i.default_value for i in node.inputs[:2] if not i.is_linked]
+            if constants and constants[0] == 0.0:
+                return 0.0
+        return "texture"
+
+    def facts(obj):
+        mesh = obj.data
+        material = mesh.materials[0]
+        bsdf = next(n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+        alpha = bsdf.inputs["Alpha"]
+        cutoff = None
+        if alpha.is_linked:
+            for node in material.node_tree.nodes:
+                if node.type == "MATH" and node.operation == "LESS_THAN":
+                    cutoff = node.inputs[1].default_value
+        kinds = sorted({n.type for n in material.node_tree.nodes})
+        corners = [tuple(v.co) for v in mesh.vertices]
+        return {
+            "faces": len(mesh.polygons),
+            "smooth": sum(p.use_smooth for p in mesh.polygons),
+            "metallic": socket_value(bsdf.inputs["Metallic"]),
+            "roughness": socket_value(bsdf.inputs["Roughness"]),
+            "base_colour": socket_value(bsdf.inputs["Base Color"]),
+            "normal_map": "NORMAL_MAP" in kinds,
+            "alpha_linked": alpha.is_linked,
+            "cutoff": cutoff,
+            "backface_culling": material.use_backface_culling,
+            "uv_layers": len(mesh.uv_layers),
+            "low": [min(c[k] for c in corners) for k in range(3)],
+            "high": [max(c[k] for c in corners) for k in range(3)],
+            "scale": list(obj.scale),
+        }
+    """
+)
+
+
+def run_in_blender(tmp_path, body: str, *args: str) -> dict:
+    script = tmp_path / "script.py"
+    out = tmp_path / "facts.json"
+    script.write_text(INSPECT + textwrap.dedent(body))
+    command = [*RUNNER, str(script), "--", str(out), *args]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0 and out.is_file(), done.stdout[-3000:] + done.stderr[-3000:]
+    return json.loads(out.read_text())
+
+
+def test_our_glb_imports_dielectric_smooth_and_alpha_masked(tmp_path):
+    """Issue #34: Blender imported Metallic 1.0, flat shading and opaque fins."""
+    from PIL import Image
+    from trimesh.visual.material import PBRMaterial
+
+    source = trimesh.creation.icosphere(subdivisions=3)
+    rgba = np.full((32, 32, 4), 255, np.uint8)
+    rgba[:, :16, 3] = 0
+    source.visual = trimesh.visual.TextureVisuals(
+        uv=(source.vertices[:, :2] + 1) / 2,
+        material=PBRMaterial(
+            baseColorTexture=Image.fromarray(rgba, "RGBA"),
+            alphaMode="MASK",
+            alphaCutoff=0.35,
+            doubleSided=True,
+        ),
+    )
+    source.export(tmp_path / "source.glb")
+    source = load_mesh(tmp_path / "source.glb")
+    render = render_mesh(source, "front", size=(48, 48))
+    textured = keep_surface(project_texture(source, render, np.full((48, 48, 3), 0.6)), source)
+    path = export_textured(textured, tmp_path / "ours.glb")[0]
+    facts = run_in_blender(
+        tmp_path,
+        """
+        out, path = sys.argv[sys.argv.index("--") + 1 :][:2]
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.ops.import_scene.gltf(filepath=path)
+        obj = next(o for o in bpy.context.scene.objects if o.type == "MESH")
+        json.dump(facts(obj), open(out, "w"))
+        """,
+        str(path),
+    )
+    assert facts["metallic"] == 0.0
+    assert facts["smooth"] == facts["faces"] == len(source.faces)
+    assert facts["alpha_linked"] and facts["cutoff"] == pytest.approx(0.35)
+    assert facts["backface_culling"] is False  # doubleSided
+
+
+def test_addon_operator_textures_the_selected_mesh_headless(tmp_path):
+    from data_gen.dataset import write_class
+
+    database = tmp_path / "db"
+    write_class("fish", database, count=3, size=(80, 60), quiet=True)
+    addon = build_zip(tmp_path / "imagemap_texture.zip")
+    command = shlex.join([sys.executable, "-m", "imagemap"])
+    facts = run_in_blender(
+        tmp_path,
+        """
+        out, addon, database, command = sys.argv[sys.argv.index("--") + 1 :][:4]
+        sys.path.insert(0, addon)  # the zip, as Blender's installer unpacks it
+        import imagemap_texture
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        imagemap_texture.register()
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+        obj = bpy.context.active_object
+        obj.scale = (1.6, 1.0, 0.7)  # the object's transform must survive
+        bpy.ops.object.shade_smooth()  # the artist's shading: the result must keep it
+        before = [list(v.co) for v in obj.data.vertices]
+        result = bpy.ops.imagemap.texture_from_examples(
+            database=database, preset="fish", views="front,back", command=command,
+            options="--size 80x60 --texture-size 128", wait=True,
+        )
+        found = facts(obj)
+        found["result"] = sorted(result)
+        found["materials"] = len(obj.data.materials)
+        found["low_before"] = [min(c[k] for c in before) for k in range(3)]
+        found["high_before"] = [max(c[k] for c in before) for k in range(3)]
+        json.dump(found, open(out, "w"))
+        """,
+        str(addon),
+        str(database),
+        command,
+    )
+    assert facts["result"] == ["FINISHED"]
+    assert facts["materials"] == 1 and facts["base_colour"] == "texture"
+    assert facts["metallic"] == 0.0
+    assert facts["smooth"] == facts["faces"]
+    assert facts["uv_layers"] >= 1
+    assert facts["scale"] == pytest.approx([1.6, 1.0, 0.7])
+    np.testing.assert_allclose(facts["low"], facts["low_before"], atol=1e-4)
+    np.testing.assert_allclose(facts["high"], facts["high_before"], atol=1e-4)
