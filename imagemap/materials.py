@@ -43,6 +43,8 @@ from imagemap.errors import InputError
 __all__ = [
     "MAP_KINDS",
     "NEUTRAL",
+    "atlas_normals_to_view",
+    "bake_maps",
     "companion_path",
     "database_map_kinds",
     "decode_normals",
@@ -51,7 +53,9 @@ __all__ = [
     "map_kinds",
     "map_paths",
     "transfer_maps",
+    "uv_frames",
     "view_normals_to_atlas",
+    "with_mesh_maps",
     "with_maps",
 ]
 
@@ -341,3 +345,163 @@ def view_normals_to_atlas(
         axis=1,
     )
     return encode_normals(out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12))
+
+
+def uv_frames(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> tuple:
+    """Per face, the world directions of increasing u and v (tangent, bitangent), (F, 3) each.
+
+    Examples
+    --------
+    >>> t, b = uv_frames(np.eye(3), np.array([[0, 1, 2]]), np.array([[0, 0], [1, 0], [0, 1]]))
+    >>> t.tolist(), b.tolist()
+    ([[-1.0, 1.0, 0.0]], [[-1.0, 0.0, 1.0]])
+    """
+    corners = np.asarray(vertices, dtype=np.float64)[faces]
+    corner_uv = np.asarray(uv, dtype=np.float64)[faces]
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    d1, d2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    inverse = np.where(np.abs(det) > 1e-12, 1.0 / np.where(det == 0, 1.0, det), 0.0)[:, None]
+    tangent = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inverse
+    bitangent = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inverse
+    return tangent, bitangent
+
+
+def _surface_normals(mesh, faces: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    normals = np.einsum("nk,nkc->nc", bary, np.asarray(mesh.vertex_normals)[mesh.faces[faces]])
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+
+
+def atlas_normals_to_view(encoded: np.ndarray, mesh, faces: np.ndarray, bary: np.ndarray, view):
+    """A mesh's UV tangent-space normals at surface points, in a picture's tangent frame.
+
+    The inverse of :func:`view_normals_to_atlas` for a mesh's own UVs: ``faces``
+    and ``bary`` name the points (as a render's hit faces and barycentrics).
+    """
+    normals = _surface_normals(mesh, faces, bary)
+    tangent, bitangent = uv_frames(mesh.vertices, mesh.faces, mesh.visual.uv)
+    local = decode_normals(encoded).astype(np.float64)
+    t = tangent[faces] - np.einsum("ij,ij->i", tangent[faces], normals)[:, None] * normals
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    handed = np.sign(np.einsum("ij,ij->i", np.cross(normals, t), bitangent[faces]))
+    b = np.cross(normals, t) * np.where(handed == 0, 1.0, handed)[:, None]
+    world = local[:, :1] * t + local[:, 1:2] * b + local[:, 2:] * normals
+    p_t, p_b = _picture_frame(view.rotation(), normals)
+    out = np.stack(
+        [
+            np.einsum("ij,ij->i", world, p_t),
+            np.einsum("ij,ij->i", world, p_b),
+            np.einsum("ij,ij->i", world, normals),
+        ],
+        axis=1,
+    )
+    return encode_normals(out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12))
+
+
+def bake_maps(mesh, renders: list, view_maps: list[dict], bake, textured) -> dict:
+    """The mesh route's maps: each view's maps baked into the colour's atlas.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The query mesh the views were rendered from.
+    renders : list of MeshRender
+        One per view.
+    view_maps : list of dict
+        Per view, :func:`transfer_maps` of its result (picture frame).
+    bake : callable (list of (H, W, 3) images) -> textured trimesh
+        The bake that made the colour's texture (same atlas for any images).
+    textured : trimesh.Trimesh
+        The colour's textured mesh (its UVs give the atlas' tangent frames).
+
+    Returns
+    -------
+    dict of texture-sized maps, as :func:`imagemap.mesh.textured_mesh` takes them.
+    """
+    from imagemap.mesh.bake import rasterize_uv
+    from imagemap.mesh.views import fill_from_nearest, texture_image
+
+    kinds = [k for k in ("roughness", "metallic", "ao") if any(k in m for m in view_maps)]
+    out: dict[str, np.ndarray] = {}
+    for start in range(0, len(kinds), 3):  # three grey maps per bake
+        group = kinds[start : start + 3]
+        images = []
+        for maps, render in zip(view_maps, renders, strict=True):
+            packed = np.zeros(render.depth.shape + (3,), dtype=np.float32)
+            for channel, kind in enumerate(group):
+                packed[..., channel] = maps.get(kind, NEUTRAL[kind][0])
+            images.append(packed)
+        baked = texture_image(bake(images))
+        for channel, kind in enumerate(group):
+            out[kind] = baked[..., channel]
+    if any("normal" in m for m in view_maps):
+        images = []
+        for maps, render in zip(view_maps, renders, strict=True):
+            world = np.zeros(render.depth.shape + (3,), dtype=np.float32)
+            world[..., 2] = 1.0
+            pixels = np.flatnonzero(render.mask)
+            if "normal" in maps and pixels.size:
+                faces = render.face.flat[pixels]
+                bary = render.barycentric.reshape(-1, 3)[pixels].astype(np.float64)
+                normals = _surface_normals(mesh, faces, bary)
+                local = decode_normals(maps["normal"].reshape(-1, 3)[pixels]).astype(np.float64)
+                p_t, p_b = _picture_frame(render.view.rotation(), normals)
+                vectors = local[:, :1] * p_t + local[:, 1:2] * p_b + local[:, 2:] * normals
+                world.reshape(-1, 3)[pixels] = vectors
+            images.append(encode_normals(world))
+        baked = texture_image(bake(images))
+        size = baked.shape[0]
+        texel, face, bary = rasterize_uv(np.asarray(textured.visual.uv), textured.faces, size)
+        tangent, bitangent = uv_frames(textured.vertices, textured.faces, textured.visual.uv)
+        surface = _surface_normals(textured, face, bary)
+        world = decode_normals(baked.reshape(-1, 3)[texel]).astype(np.float64)
+        t = tangent[face] - np.einsum("ij,ij->i", tangent[face], surface)[:, None] * surface
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+        handed = np.sign(np.einsum("ij,ij->i", np.cross(surface, t), bitangent[face]))
+        b = np.cross(surface, t) * np.where(handed == 0, 1.0, handed)[:, None]
+        local = np.stack([np.einsum("ij,ij->i", world, v) for v in (t, b, surface)], axis=1)
+        local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-12)
+        texture = np.zeros((size, size, 3), dtype=np.float32)
+        texture[..., 2] = 1.0
+        texture.reshape(-1, 3)[texel] = local
+        covered = np.zeros((size, size), dtype=bool)
+        covered.flat[texel] = True
+        out["normal"] = encode_normals(fill_from_nearest(texture, covered))
+    return out
+
+
+def with_mesh_maps(textured, mesh, renders: list, results: list, databases: list, bake):
+    """The mesh route's textured mesh with the examples' maps baked beside its colour.
+
+    Each view's maps come through its result's source map (:func:`transfer_maps`),
+    then go through the same ``bake`` as the colour (:func:`bake_maps`). Returns
+    ``textured`` itself when no example used has a map.
+
+    Parameters
+    ----------
+    textured : trimesh.Trimesh
+        The colour's textured mesh.
+    mesh : trimesh.Trimesh
+        The query mesh.
+    renders, results, databases : lists, one entry per view
+        The views' renders, :class:`~imagemap.depth.pipeline.ColorizeResult` and the
+        databases they were made from.
+    bake : callable (list of images) -> textured trimesh
+        The colour's bake, e.g. ``lambda images: bake_views(mesh, renders, images, size)``.
+    """
+    from imagemap.mesh.files import material_of, textured_mesh
+    from imagemap.mesh.views import texture_image
+
+    view_maps = [transfer_maps(r, db) for r, db in zip(results, databases, strict=True)]
+    if not any(view_maps):
+        return textured
+    maps = bake_maps(mesh, renders, view_maps, bake, textured)
+    return textured_mesh(
+        textured.vertices,
+        textured.faces,
+        textured.visual.uv,
+        texture_image(textured),
+        normals=np.asarray(textured.vertex_normals),
+        maps=maps,
+        material=material_of(textured),
+    )

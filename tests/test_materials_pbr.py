@@ -114,3 +114,60 @@ def test_cli_writes_the_set_beside_the_map_and_checks_it_before_any_work(fish_db
     again = tmp_path / "plain.png"
     assert main([*args, "-o", str(again), "--no-maps"]) == 0
     assert not companion_path(again, "roughness").exists()
+
+
+def test_mesh_route_bakes_the_roughness_a_mesh_example_carries(tmp_path, monkeypatch):
+    """A mesh example's roughness texture, rendered per view, copied through each view's
+    source map and baked like the colour: the example as its own query gets its own
+    roughness back where the views see it."""
+    import trimesh
+
+    from imagemap.database import database_at_view
+    from imagemap.materials import with_mesh_maps
+    from imagemap.mesh import bake_views, colorize_mesh, load_mesh
+    from imagemap.mesh.files import export_textured, textured_mesh
+    from imagemap.mesh.views import parse_views, sample_image
+
+    monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path / "cache"))
+    ball = trimesh.creation.icosphere(subdivisions=3)
+    ball.vertices *= [1.5, 1.0, 0.8]
+    uv = (ball.vertices[:, :2] / [3.0, 2.0]) + 0.5
+    rows, cols = np.mgrid[0:64, 0:64]
+    colour = np.stack([cols / 63, rows / 63, np.full((64, 64), 0.4)], axis=-1)
+    rough = np.where(cols < 32, 0.2, 0.8)  # left half glossy, right half rough
+    db = tmp_path / "db"
+    db.mkdir()
+    export_textured(
+        textured_mesh(ball.vertices, ball.faces, uv, colour, maps={"roughness": rough}),
+        db / "ball.glb",
+    )
+    mesh = load_mesh(db / "ball.glb")
+    views = parse_views("front,back")
+    database = Database.from_directory(db, view=views[0], size=(64, 48))
+    import inspect
+
+    # The views path (a mesh in its example's own UV layout may go the UV-space way).
+    views_path = (
+        {"uv_space": False} if "uv_space" in inspect.signature(colorize_mesh).parameters else {}
+    )
+    made = colorize_mesh(
+        mesh, database, views, size=(64, 48), texture_size=64, preset="busts", **views_path
+    )
+    databases = [database_at_view(database, v, (64, 48)) for v in views]
+    out = with_mesh_maps(
+        made.mesh,
+        mesh,
+        made.renders,
+        made.results,
+        databases,
+        lambda images: bake_views(mesh, made.renders, images, 64),
+    )
+    packed = np.asarray(out.visual.material.metallicRoughnessTexture.convert("RGB"), np.float32)
+    centre = np.full((len(out.faces), 3), 1 / 3)
+    face_uv = np.einsum("fk,fkc->fc", centre, out.visual.uv[out.faces])
+    baked = sample_image(packed[..., 1:2] / 255.0, face_uv)[:, 0]
+    truth_uv = np.einsum("fk,fkc->fc", centre, mesh.visual.uv[mesh.faces])
+    truth = np.where(truth_uv[:, 0] < 0.5, 0.2, 0.8)
+    away = np.abs(truth_uv[:, 0] - 0.5) > 0.1  # away from the step
+    assert np.median(np.abs(baked[away] - truth[away])) < 0.02
+    assert np.mean(np.abs(baked[away] - truth[away]) < 0.1) > 0.9

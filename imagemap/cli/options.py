@@ -79,18 +79,45 @@ def config_options(args: argparse.Namespace) -> dict[str, Any]:
     return {name: value for name, value in values.items() if value is not None}
 
 
+class _OneView(argparse.Action):
+    """``--view AZ,EL``: one view, instead of the default ``--views auto``."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        namespace.view = values
+        namespace.views = None
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return value
+
+
+#: Names of --units (metres per unit: imagemap.mesh.files.UNIT_SCALES).
+UNIT_NAMES = ("m", "cm", "mm", "in", "ft")
+
+
 def add_mesh_options(parser: argparse.ArgumentParser) -> None:
-    """--view, --views, --size, --texture-size: how meshes are seen and textured."""
+    """--view, --views, --size, --texture-size, --units, --scale: how meshes are seen,
+    textured and written."""
     group = parser.add_argument_group("meshes (input .glb .obj .ply ...; output .glb or .obj)")
     group.add_argument(
         "--view",
-        help="AZ,EL in degrees to look from (default front, 0,0: along -z as data_gen); "
-        "a negative value needs '=': --view=-90,0",
+        action=_OneView,
+        help="AZ,EL in degrees: one view only (0,0 is the front, looking along -z as "
+        "data_gen); a negative value needs '=': --view=-90,0",
     )
     group.add_argument(
         "--views",
-        help="several views baked into one UV atlas: names (front,back,left,right,top,"
-        "bottom) or AZ,EL pairs, e.g. 'front,back' or '0,0;90,0;180,0'",
+        default="auto",
+        help="views baked into the mesh's UV atlas: 'auto' (default: of front, back, top, "
+        "bottom, right, left, those that see the surface, chosen by coverage), names "
+        "(front,back,left,right,top,bottom) or AZ,EL pairs, e.g. 'front,back' or "
+        "'0,0;90,0;180,0'",
     )
     group.add_argument(
         "--size",
@@ -101,8 +128,21 @@ def add_mesh_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--texture-size",
         type=positive_int,
-        default=512,
-        help="texture width and height when several views are baked (default 512)",
+        default=None,
+        help="texture width and height (default: the resolution of the mesh's UV atlas: "
+        "its own texture's size, else chosen from its texel density)",
+    )
+    scale = group.add_mutually_exclusive_group()
+    scale.add_argument(
+        "--units",
+        choices=UNIT_NAMES,
+        help="the input mesh's units; the GLB is written in metres (--units mm: x 0.001). "
+        "Default: coordinates kept as they are (read as metres), and the size stated",
+    )
+    scale.add_argument(
+        "--scale",
+        type=_positive_float,
+        help="multiply the coordinates by this factor when writing (instead of --units)",
     )
 
 
@@ -110,6 +150,10 @@ def views_of(args: argparse.Namespace) -> tuple:
     """The views ``--views`` or ``--view`` name (default: the front)."""
     from imagemap.mesh import FRONT, parse_view, parse_views  # deferred: start-up (SciPy)
 
+    if getattr(args, "views", None) == "auto":  # the candidates; the mesh route narrows them
+        from imagemap.mesh.coverage import CANDIDATES
+
+        return CANDIDATES
     if getattr(args, "views", None):
         return tuple(parse_views(args.views))
     if getattr(args, "view", None):

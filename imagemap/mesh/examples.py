@@ -24,7 +24,7 @@ from imagemap.mesh.views import (
 __all__ = ["RENDER_VERSION", "MeshExample", "mesh_examples"]
 
 #: Bumped whenever rendering changes, so cached renders of examples are redone.
-RENDER_VERSION = 1
+RENDER_VERSION = 2  # 2: the material's PBR maps rendered and cached too
 
 
 def _default_cache() -> Path:
@@ -69,7 +69,7 @@ class MeshExample(Example):
         return self.cache_dir / "meshes" / f"{self.name}-{short}.npz"
 
     def _render(self) -> dict:
-        if self._arrays:
+        if "depth" in self._arrays:  # (maps may be cached before the render)
             return self._arrays
         cached = self.cache_path()
         if cached.is_file():
@@ -89,6 +89,7 @@ class MeshExample(Example):
         except InputError as exc:
             raise InputError(f"{self.mesh_path}: {exc} (an example needs colours)") from exc
         arrays = {"depth": render.depth, "image": image}
+        arrays.update({f"map_{k}": v for k, v in _maps_seen(mesh, render).items()})
         try:
             write_npz(cached, **arrays)
         except OSError:
@@ -108,12 +109,59 @@ class MeshExample(Example):
     def labels(self) -> np.ndarray | None:
         return None
 
+    def map_kinds(self) -> list[str]:
+        """The PBR maps this mesh's material carries (roughness, metallic, ao, normal)."""
+        from imagemap.mesh.files import _material_maps
+
+        if "map_kinds" not in self._arrays:
+            material = getattr(load_mesh(self.mesh_path).visual, "material", None)
+            self._arrays["map_kinds"] = sorted(_material_maps(material)) if material else []
+        return list(self._arrays["map_kinds"])
+
+    def rendered_maps(self) -> dict[str, np.ndarray]:
+        """The material's maps seen from this example's view, like its image-map
+        (rendered and cached with it; see :func:`_maps_seen`)."""
+        arrays = self._render()
+        return {k[4:]: v for k, v in arrays.items() if k.startswith("map_")}
+
     @property
     def info(self) -> dict:
         return {"mesh": str(self.mesh_path), "view": str(self.view)}
 
     def __repr__(self) -> str:
         return f"MeshExample({self.name!r}, {self.mesh_path.name!r}, view={self.view})"
+
+
+def _maps_seen(mesh, render) -> dict[str, np.ndarray]:
+    """A mesh material's PBR maps as ``render`` sees them: grey maps sampled at each
+    pixel's UVs; the normal map turned from the mesh's UV tangent frame into the
+    picture's (:func:`imagemap.materials.atlas_normals_to_view`)."""
+    from imagemap.materials import NEUTRAL, atlas_normals_to_view
+    from imagemap.mesh.files import _material_maps
+    from imagemap.mesh.views import sample_image
+
+    maps = _material_maps(getattr(mesh.visual, "material", None))
+    uv = getattr(mesh.visual, "uv", None)
+    if not maps or uv is None:
+        return {}
+    pixels = np.flatnonzero(render.mask)
+    faces = render.face.flat[pixels]
+    bary = render.barycentric.reshape(-1, 3)[pixels].astype(np.float64)
+    point_uv = np.einsum("nk,nkc->nc", bary, np.asarray(uv)[mesh.faces[faces]])
+    point_uv -= np.floor(point_uv)
+    height, width = render.depth.shape
+    out = {}
+    for kind, texture in maps.items():
+        channels = 3 if kind == "normal" else 1
+        values = sample_image(texture.reshape(texture.shape[:2] + (channels,)), point_uv)
+        if kind == "normal":
+            values = atlas_normals_to_view(values, mesh, faces, bary, render.view)
+        picture = np.empty((height * width, channels), dtype=np.float32)
+        picture[:] = NEUTRAL[kind]
+        picture[pixels] = values
+        picture = picture.reshape(height, width, channels)
+        out[kind] = picture if channels == 3 else picture[..., 0]
+    return out
 
 
 def mesh_examples(
