@@ -114,3 +114,32 @@ def test_the_sample_tells_which_scan_is_which_on_an_anisotropic_material():
         np.testing.assert_array_equal(got, want)
     ranked = sorted(costs.values())
     assert ranked[1] > 1.2 * ranked[0]  # measured 1.49
+
+
+def test_a_scan_of_another_material_is_flagged(cloth, caplog):
+    """The registration's confidence: correct alignments score 20 and more (measured
+    20.7-187 on the four materials), a scan of another material a few (1.5-13.5)."""
+    from imagemap.btf.materials import make_material, render_btf_matrix
+    from imagemap.btf.registration import MIN_CONFIDENCE
+
+    order, angles = [2, 0, 3, 1], [0.0, 3.0, -2.5, 1.5]
+    shifts = [(0.0, 0.0), (-2.5, 4.0), (3.0, -1.5), (1.0, 3.5)]
+    scans = _scans(cloth, order, angles, shifts)
+    good = register_scans(scans)
+    assert good.suspect == () and min(good.confidences) > 2 * MIN_CONFIDENCE  # measured 62
+    wood = make_material("wood", size=SIZE, seed=11)  # another material, another noise seed
+    lights = np.array([[22.0, a] for a in (0, 90, 180, 270)], np.float32)
+    matrix = render_btf_matrix(wood, lights, np.array([[0.0, 0.0]], np.float32))
+    wood_images = [
+        matrix[3 * i : 3 * i + 3].reshape(3, SIZE, SIZE).transpose(1, 2, 0) for i in range(4)
+    ]
+    scans[3] = _scans(wood_images, order, angles, shifts)[3]
+    names = ["a.png", "b.png", "c.png", "wood.png"]
+    with caplog.at_level("WARNING", logger="imagemap"):
+        bad = register_scans(scans, names=names)
+    assert bad.suspect == (3,) and bad.confidences[3] < MIN_CONFIDENCE / 3  # measured 3.3
+    assert "wood.png does not fit a.png" in caplog.text
+    # Scans too small to judge (48 px: correct alignments from 5.6) are not judged.
+    small = [s[32:80, 32:80] for s in _scans(cloth, [0, 1, 2, 3], [0.0] * 4, [(0.0, 0.0)] * 4)]
+    reg = register_scans(small, max_rotation=0)
+    assert reg.suspect == () and np.isnan(reg.confidences[1:]).all()

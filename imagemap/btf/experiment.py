@@ -77,6 +77,7 @@ __all__ = [
     "run_material",
     "run_experiment",
     "format_table",
+    "method_names",
 ]
 
 log = logging.getLogger("imagemap")
@@ -134,6 +135,14 @@ def _source(name: str, sources: Mapping[str, MaterialSource] | None) -> Material
     )
 
 
+#: Smallest full sample (texels): the cut-out needs room inside it and the scans' 16-texel
+#: margins (registration) a side of more.
+MIN_SIZE = 16
+
+#: Smallest cut-out side (texels): the pixel-wise R = 2 neighbourhoods are 5 wide.
+MIN_SAMPLE_SIZE = 8
+
+
 @dataclass(frozen=True)
 class ExperimentParams:
     """Sizes, compression and scanner simulation of the experiment.
@@ -178,9 +187,31 @@ class ExperimentParams:
     comparison_view: tuple[float, float] = (0.0, 0.0)
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        if isinstance(self.size, bool) or not isinstance(self.size, int) or self.size < MIN_SIZE:
+            raise InputError(f"size: an integer >= {MIN_SIZE} texels, got {self.size!r}")
+        self._check_side("sample_size", self.sample_size)
+        if not self.k >= 1:
+            raise InputError(f"k: at least 1 component, got {self.k}")
+
+    def _check_side(self, label: str, side) -> int:
+        if (
+            isinstance(side, bool)
+            or not isinstance(side, int | np.integer)
+            or not (MIN_SAMPLE_SIZE <= side < self.size)
+        ):
+            raise InputError(
+                f"{label}: the cut-out side must be an integer from {MIN_SAMPLE_SIZE} to "
+                f"size - 1 = {self.size - 1}, got {side!r} (a cut-out as large as the "
+                "sample is the reference itself: every error would be 0)"
+            )
+        return int(side)
+
     def sample_side(self, name: str) -> int:
-        """The cut-out side for material ``name`` (never more than ``size``)."""
-        return min(int(self.sample_sizes.get(name, self.sample_size)), self.size)
+        """The cut-out side for material ``name``, or InputError if it does not fit."""
+        if name in self.sample_sizes:
+            return self._check_side(f"sample_sizes[{name!r}]", self.sample_sizes[name])
+        return int(self.sample_size)
 
 
 def default_extra_methods() -> dict[str, ExtraMethod]:
@@ -188,6 +219,26 @@ def default_extra_methods() -> dict[str, ExtraMethod]:
     from imagemap.btf.moving_average import experiment_method
 
     return {"moving_average": experiment_method}
+
+
+def method_names(extra_methods: Mapping[str, ExtraMethod] | None = None) -> list[str]:
+    """Every method's name in table order; ``extra_methods`` None: the default extras.
+
+    Example
+    -------
+    >>> method_names({})[:2]
+    ['tiling', 'pixelwise_R0_ws0_wc1']
+    """
+    if extra_methods is None:
+        extra_methods = default_extra_methods()
+    return [
+        "tiling",
+        *PIXELWISE_SETTINGS,
+        "texture_optimization",
+        *TUNED_TEXTURE,
+        *PIXELWISE_MEAN_SETTINGS,
+        *extra_methods,
+    ]
 
 
 def _scan_rows(
@@ -300,14 +351,7 @@ def run_methods(
         method (and "reference") -> one (H, W, 3) linear image per comparison light.
     """
     extra_methods = dict(extra_methods or {})
-    all_methods = [
-        "tiling",
-        *PIXELWISE_SETTINGS,
-        "texture_optimization",
-        *TUNED_TEXTURE,
-        *PIXELWISE_MEAN_SETTINGS,
-        *extra_methods,
-    ]
+    all_methods = method_names(extra_methods)
     methods = list(methods) if methods else all_methods
     unknown = [m for m in methods if m not in all_methods]
     if unknown:
@@ -471,12 +515,20 @@ def run_experiment(
     -------
     rows : list of dict
     """
+    from imagemap.outputs import check_output_directory
+
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     for name in materials:
         _source(name, sources)  # fail before any work
+        params.sample_side(name)
     if extra_methods is None:
         extra_methods = default_extra_methods()
+    known = method_names(extra_methods)
+    unknown = [m for m in methods or () if m not in known]
+    if unknown:
+        raise InputError(f"methods: unknown {unknown}; choose from {known}")
+    check_output_directory(out, "output folder")
+    out.mkdir(parents=True, exist_ok=True)
     if params.search == "pynndescent":
         _warm_up_pynndescent(params.seed)
     rows: list[dict] = []

@@ -35,7 +35,10 @@ from imagemap.btf.core import BTF
 from imagemap.io import InputError
 
 __all__ = [
+    "BLACK_SCAN_LEVEL",
     "CONSTRAINT_AZIMUTHS",
+    "FLAT_SCAN_STD",
+    "check_scans",
     "CONSTRAINT_THETA",
     "PixelwiseParams",
     "ExtrapolationParams",
@@ -59,6 +62,70 @@ PIXELWISE_BACKENDS = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 
 #: Former names of the pixel-wise search (``search=``) -> the index that ran them.
 _OLD_SEARCH_NAMES = {"approximate": "pca_kdtree", "exact": "kdtree", "pynndescent": "pynndescent"}
+
+#: A scan whose brightest channel value is at or below this (fraction of full scale) saw
+#: no light: 2/255 is an 8-bit scanner's black (noise and offset; Table 1's offsets are
+#: 0.00-0.01, so a lit scan of any real material reaches far above).
+BLACK_SCAN_LEVEL = 2.0 / 255.0
+
+#: A scan whose standard deviation is below this shows no pattern to match (an 8-bit
+#: quantization step is 1/255; a scan of any textured sample varies by many steps).
+FLAT_SCAN_STD = 0.5 / 255.0
+
+
+def _weights(ws: float, wc: float) -> None:
+    for name, value in (("ws", ws), ("wc", wc)):
+        if not np.isfinite(value) or value < 0:
+            raise InputError(f"{name}: a finite weight >= 0, got {value}")
+    if ws == 0 and wc == 0:
+        raise InputError("ws, wc: both 0 leave no constraint to match (give one > 0)")
+
+
+def check_scans(scans: Sequence[np.ndarray], names: Sequence[str] | None = None) -> list:
+    """Four usable scans, or InputError naming the one at fault.
+
+    Refused: not four, not (H, W, 3), NaN, black (no value above
+    :data:`BLACK_SCAN_LEVEL`), a black channel, flat (std below :data:`FLAT_SCAN_STD`),
+    and two identical scans (one scan given twice: the lamp sides would agree by
+    construction and the surface descriptors vanish).
+
+    Example
+    -------
+    >>> scan = np.random.default_rng(0).random((8, 8, 3))
+    >>> check_scans([scan, scan + 0.01, scan + 0.02, scan + 0.03], ["a", "b", "c", "d"])[0].shape
+    (8, 8, 3)
+    >>> check_scans([scan, scan, scan, scan])  # doctest: +IGNORE_EXCEPTION_DETAIL
+    Traceback (most recent call last):
+    imagemap.errors.InputError: scans[1] is the same image as scans[0] ...
+    """
+    if len(scans) != 4:
+        raise InputError(
+            f"scans: expected four images (azimuths 0, 90, 180, 270), got {len(scans)}"
+        )
+    names = list(names) if names is not None else [f"scans[{i}]" for i in range(4)]
+    out = []
+    for name, scan in zip(names, scans, strict=True):
+        array = np.asarray(scan, dtype=np.float32)
+        if array.ndim != 3 or array.shape[2] != 3:
+            raise InputError(f"{name}: expected an (H, W, 3) image, got shape {array.shape}")
+        if not np.all(np.isfinite(array)):
+            raise InputError(f"{name}: has NaN or infinite values")
+        brightest = array.reshape(-1, 3).max(axis=0)
+        if brightest.max() <= BLACK_SCAN_LEVEL:
+            raise InputError(f"{name}: the scan is black (no value above {BLACK_SCAN_LEVEL:.4f})")
+        if brightest.min() <= BLACK_SCAN_LEVEL:
+            channel = "RGB"[int(np.argmin(brightest))]
+            raise InputError(f"{name}: channel {channel} is black everywhere")
+        if float(array.std()) < FLAT_SCAN_STD:
+            raise InputError(f"{name}: the scan is flat (one value everywhere): no pattern")
+        for other_name, other in zip(names, out, strict=False):
+            if other.shape == array.shape and np.array_equal(other, array):
+                raise InputError(
+                    f"{name} is the same image as {other_name}: four scans under four lamp "
+                    "directions are needed"
+                )
+        out.append(array)
+    return out
 
 
 @dataclass(frozen=True)
@@ -101,10 +168,7 @@ class PixelwiseParams:
             raise InputError(f"radius: an integer >= 0, got {self.radius!r}")
         if self.radius < 0:
             raise InputError(f"radius: an integer >= 0, got {self.radius}")
-        for name in ("ws", "wc"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                raise InputError(f"{name}: a finite weight >= 0, got {value}")
+        _weights(self.ws, self.wc)
 
 
 def ExtrapolationParams(  # noqa: N802 - the deprecated class name
@@ -178,6 +242,18 @@ class TextureOptimizationParams:
     final_copy: bool = False
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        for name in ("radius", "levels", "matched_components", "stride", "max_iterations"):
+            value = getattr(self, name)
+            low = 0 if name == "radius" else 1
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+                raise InputError(f"{name}: an integer >= {low}, got {value!r}")
+        _weights(self.ws, self.wc)
+        if not (np.isfinite(self.appearance_weight) and self.appearance_weight >= 0):
+            raise InputError(
+                f"appearance_weight: a finite weight >= 0, got {self.appearance_weight}"
+            )
+
 
 def constraint_images(
     btf: BTF, *, theta: float = CONSTRAINT_THETA, azimuths: Sequence[float] = CONSTRAINT_AZIMUTHS
@@ -216,10 +292,7 @@ def prepare_scans(
     response : ScannerResponse or None
         None when the scans are already linear.
     """
-    if len(scans) != 4:
-        raise InputError(
-            f"scans: expected four images (azimuths 0, 90, 180, 270), got {len(scans)}"
-        )
+    scans = check_scans(scans)
     corrected = [color_correct(s, response=response) if response else s for s in scans]
     factors = histogram_alignment_factors(reference_images, corrected)
     return align_histograms(corrected, factors)

@@ -57,6 +57,7 @@ from imagemap.io import InputError, read_npz, write_npz
 from imagemap.render import normals_from_height
 
 __all__ = [
+    "MIN_COARSE_SIDE",
     "MAParams",
     "MovingAverageModel",
     "collapse_periodic",
@@ -66,11 +67,14 @@ __all__ = [
     "fit_moving_average_btf",
     "inverse_karhunen_loeve",
     "karhunen_loeve",
+    "max_levels",
     "ma_kernel_from_signature",
     "moving_average_extrapolate",
     "parameter_count",
     "random_decrement_signature",
+    "sample_fingerprint",
     "segment_subspaces",
+    "synthesis_bytes",
     "synthesize_band",
     "synthesize_btf",
     "synthesize_appearance",
@@ -112,18 +116,66 @@ class MAParams:
     min_intensity: float = 0.0
 
     def __post_init__(self) -> None:
+        for name in ("levels", "support", "n_subspaces"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise InputError(f"{name}: an integer, got {value!r}")
         if self.levels < 1:
             raise InputError(f"levels: must be at least 1, got {self.levels}")
         if self.support < 1 or self.support % 2 == 0:
             raise InputError(f"support: must be a positive odd width, got {self.support}")
-        if self.threshold < 0:
-            raise InputError(f"threshold: must be >= 0 (in sigma), got {self.threshold}")
+        if not (np.isfinite(self.threshold) and self.threshold >= 0):
+            raise InputError(f"threshold: must be finite and >= 0 (in sigma), got {self.threshold}")
+        if not (np.isfinite(self.bump_scale) and self.bump_scale >= 0):
+            raise InputError(f"bump_scale: a finite height multiplier >= 0, got {self.bump_scale}")
+        if not np.isfinite(self.min_intensity):
+            raise InputError(f"min_intensity: must be finite, got {self.min_intensity}")
         if self.kernel not in ("spectral_root", "signature"):
             raise InputError(
                 f"kernel: expected 'spectral_root' or 'signature', got {self.kernel!r}"
             )
         if self.n_subspaces < 1:
             raise InputError(f"n_subspaces: must be at least 1, got {self.n_subspaces}")
+
+
+#: Coarsest pyramid level's shorter side at least (texels): its MA kernel is then at least
+#: 3 x 3 (a third of the side, see _fit_representative); at 4 texels it is 1 x 1, white noise.
+MIN_COARSE_SIDE = 8
+
+#: Format tag of a saved model.
+MODEL_FORMAT = "imagemap-moving-average-btf-1"
+
+
+def max_levels(shape: tuple[int, int]) -> int:
+    """The most pyramid levels a sample of ``shape`` supports (coarsest side >= 8).
+
+    Example
+    -------
+    >>> max_levels((16, 16)), max_levels((128, 100))
+    (2, 4)
+    """
+    side = min(int(shape[0]), int(shape[1]))
+    return max(1, 1 + int(np.floor(np.log2(max(side, 1) / MIN_COARSE_SIDE))))
+
+
+def sample_fingerprint(btf) -> str:
+    """A digest of a BTF's eigen-ABRDFs, directions and channels: what a model fitted on it
+    must be synthesized with (:func:`synthesize_btf` projects onto that U).
+
+    Example
+    -------
+    >>> from imagemap.btf import BTF
+    >>> btf = BTF(np.eye(3)[:, :1], [1.0], np.ones((2, 2, 1)), [[0, 0]], [[0, 0]])
+    >>> len(sample_fingerprint(btf))
+    16
+    """
+    import hashlib
+
+    digest = hashlib.sha256()
+    for array in (btf.eigen_abrdfs, btf.light_dirs, btf.view_dirs):
+        digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
+    digest.update(repr((btf.channels, btf.color_model)).encode())
+    return digest.hexdigest()[:16]
 
 
 # --------------------------------------------------------------------------------- the model
@@ -148,6 +200,8 @@ class MovingAverageModel:
         of the photometric-stereo heights), enlarged by tiling.
     sample_shape : (int, int)
     params : MAParams
+    sample_digest : str
+        :func:`sample_fingerprint` of the BTF it was fitted on ("" for plain images).
     """
 
     kernels: list
@@ -160,6 +214,7 @@ class MovingAverageModel:
     range_map: np.ndarray
     sample_shape: tuple[int, int]
     params: MAParams = field(default_factory=MAParams)
+    sample_digest: str = ""
 
     @property
     def n_subspaces(self) -> int:
@@ -183,7 +238,8 @@ class MovingAverageModel:
             range_map=self.range_map,
             sample_shape=np.array(self.sample_shape),
             params=np.array(repr(asdict(self.params))),
-            format=np.array("imagemap-moving-average-btf-1"),
+            sample_digest=np.array(self.sample_digest),
+            format=np.array(MODEL_FORMAT),
             **arrays,
         )
 
@@ -194,22 +250,33 @@ class MovingAverageModel:
 
         path = Path(path)
         fields = read_npz(path)
-        if str(fields.get("format", "")) != "imagemap-moving-average-btf-1":
+        if str(fields.get("format", "")) != MODEL_FORMAT:
             raise InputError(f"{path}: not a moving-average BTF model (see 'imagemap btf ma-fit')")
-        k_count, levels = fields["level_means"].shape[:2]
-        kernels = [[fields[f"kernel_{k}_{lv}"] for lv in range(levels)] for k in range(k_count)]
-        return cls(
-            kernels,
-            fields["level_means"],
-            fields["kl_means"],
-            fields["kl_bases"],
-            fields["subspace_of"],
-            fields["light_vectors"],
-            fields["view_vectors"],
-            fields["range_map"],
-            tuple(int(s) for s in fields["sample_shape"]),
-            MAParams(**ast.literal_eval(str(fields["params"]))),
-        )
+        try:
+            k_count, levels = fields["level_means"].shape[:2]
+            kernels = [[fields[f"kernel_{k}_{lv}"] for lv in range(levels)] for k in range(k_count)]
+            model = cls(
+                kernels,
+                fields["level_means"],
+                fields["kl_means"],
+                fields["kl_bases"],
+                fields["subspace_of"],
+                fields["light_vectors"],
+                fields["view_vectors"],
+                fields["range_map"],
+                tuple(int(s) for s in fields["sample_shape"]),
+                MAParams(**ast.literal_eval(str(fields["params"]))),
+                str(fields.get("sample_digest", "")),
+            )
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
+        except (KeyError, ValueError, TypeError, SyntaxError, IndexError) as exc:
+            raise InputError(f"{path}: damaged moving-average model ({exc!r})") from None
+        arrays = [model.level_means, model.kl_means, model.kl_bases, model.range_map]
+        arrays += [k for per_k in model.kernels for k in per_k]
+        if not all(np.all(np.isfinite(a)) for a in arrays):
+            raise InputError(f"{path}: damaged moving-average model (NaN or infinite values)")
+        return model
 
 
 def _bump_factor(normals: np.ndarray, light: np.ndarray, *, floor: float = 0.0) -> np.ndarray:
@@ -301,6 +368,12 @@ def fit_moving_average(
     top_view = int(np.argmax(views[:, 2]))
     top_stack = np.stack([image_of(light, top_view) for light in range(n_lights)])
     sample_shape = top_stack.shape[1:3]
+    if params.levels > max_levels(sample_shape):
+        raise InputError(
+            f"levels: {params.levels} pyramid levels need a sample of at least "
+            f"{MIN_COARSE_SIDE * 2 ** (params.levels - 1)} texels on its shorter side; this "
+            f"one is {sample_shape[0]}x{sample_shape[1]} (at most {max_levels(sample_shape)})"
+        )
     normals, _ = photometric_stereo(top_stack, lights, min_intensity=params.min_intensity)
     sample_height = frankot_chellappa(normals)
     # Deshading needs the heights registered with the sample; synthesis needs a tile.
@@ -349,7 +422,7 @@ def fit_moving_average_btf(
     """
     from imagemap.btf.photometric import btf_direction_vectors
 
-    return fit_moving_average(
+    model = fit_moving_average(
         None,
         btf_direction_vectors(btf.light_dirs),
         btf_direction_vectors(btf.view_dirs),
@@ -357,6 +430,8 @@ def fit_moving_average_btf(
         seed=seed,
         image_of=lambda light, view: btf.image(light, view),
     )
+    model.sample_digest = sample_fingerprint(btf)
+    return model
 
 
 def synthesize_smooth_textures(
@@ -483,6 +558,12 @@ def synthesize_btf(model: MovingAverageModel, sample, shape: tuple[int, int], *,
             f"model: fitted on {model.subspace_of.shape} (lights, views), sample has "
             f"{(sample.n_lights, sample.n_views)}"
         )
+    if model.sample_digest and model.sample_digest != sample_fingerprint(sample):
+        raise InputError(
+            "sample: not the BTF the model was fitted on (its eigen-ABRDFs, directions or "
+            "channels differ): the synthesized textures would be projected onto another "
+            "material's U"
+        )
     height, width = (int(s) for s in shape)
     textures = synthesize_smooth_textures(model, (height, width), seed=seed)
     normals = _enlarged_normals(model, (height, width), seed)
@@ -524,6 +605,43 @@ def moving_average_extrapolate(
     """
     model = fit_moving_average_btf(sample, params=params, seed=seed)
     return synthesize_btf(model, sample, output_shape, seed=seed)
+
+
+# ------------------------------------------------------------------------ memory
+#: Bytes per output texel that do not depend on the model: the finest level's FFT
+#: convolution (complex128 spectrum, kernel spectrum and product: 48) and the enlarged
+#: range map with its float64 gradients and float32 normals (about 60). With it the
+#: estimate is 1.18x the measured peak (tracemalloc) of an image and 1.35x that of a BTF
+#: (256^2 and 512^2, 4 subspaces, k = 24, 6 lights x 2 views): a margin, never short.
+_TEXEL_BYTES = 110
+
+
+def synthesis_bytes(
+    model: MovingAverageModel, shape: tuple[int, int], *, n_components: int | None = None
+) -> int:
+    """Estimated peak bytes of :func:`synthesize_appearance` (``n_components`` None) or of
+    :func:`synthesize_btf` onto a sample with ``n_components`` eigentextures.
+
+    Per texel: the white noise of every level and band (float64, 4/3 of the finest level),
+    every subspace's smooth texture (float32), the FFT work and the range map; for a BTF
+    also the bump factors of every light and the eigentextures with their products.
+
+    Example
+    -------
+    >>> model = MovingAverageModel([[np.ones((3, 1, 1))]], np.zeros((1, 1, 3)), np.zeros((1, 3)),
+    ...     np.eye(3)[None], np.zeros((1, 1), int), np.eye(3)[2:], np.eye(3)[2:],
+    ...     np.zeros((4, 4)), (4, 4))
+    >>> synthesis_bytes(model, (1000, 1000)) > 100 * 10**6
+    True
+    """
+    texels = float(shape[0]) * float(shape[1])
+    channels = model.kl_means.shape[1]
+    per_texel = 8 * channels * 4 / 3 + 4 * model.n_subspaces * channels + _TEXEL_BYTES
+    if n_components is None:
+        per_texel += 4 * channels  # the shaded image
+    else:
+        per_texel += 4 * len(model.light_vectors) + 3 * 4 * n_components
+    return int(per_texel * texels)
 
 
 # ------------------------------------------------------------------------ size and compression
@@ -577,6 +695,8 @@ def compression_ratios(
 def experiment_method(sample, shape: tuple[int, int], seed: int = 0):
     """Hook of :mod:`imagemap.btf.experiment` (``moving_average`` row), default parameters.
 
-    Same as ``moving_average_extrapolate(sample, shape, seed=seed)``.
+    Same as ``moving_average_extrapolate(sample, shape, seed=seed)``, with no more pyramid
+    levels than the sample supports (:func:`max_levels`; the default 4 from 64 texels).
     """
-    return moving_average_extrapolate(sample, shape, seed=seed)
+    levels = min(MAParams().levels, max_levels(sample.shape))
+    return moving_average_extrapolate(sample, shape, seed=seed, params=MAParams(levels=levels))

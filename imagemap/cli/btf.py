@@ -119,7 +119,12 @@ def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubP
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--materials", nargs="+", default=["cloth", "leather", "wallpaper", "wood"])
     p.add_argument("--size", type=int, default=512, help="full sample side (texels)")
-    p.add_argument("--sample-size", type=int, default=None, help="cut-out side (size / 4)")
+    p.add_argument(
+        "--sample-size",
+        type=int,
+        default=None,
+        help="cut-out side for every material (default: size / 4, size / 2 for cloth, velvet)",
+    )
     p.add_argument("--methods", nargs="+", default=None, help="subset of the methods")
     p.add_argument(
         "--search", choices=("approximate", "exact", "pynndescent"), default="approximate"
@@ -152,36 +157,52 @@ def _extrapolate(args: argparse.Namespace) -> int:
         raise InputError(f"--max-rotation: between 0 and 20 degrees, got {args.max_rotation}")
     if args.find_order and not args.register:
         raise InputError("--find-order: works on registered scans; add --register")
+    from imagemap.outputs import resolve
+
+    for i, path in enumerate(args.scans):
+        for earlier in args.scans[:i]:
+            if resolve(path) == resolve(earlier):
+                raise InputError(
+                    f"--scans: {path} is given twice (also as {earlier}); four scans under "
+                    "four lamp directions are needed"
+                )
     backend = args.backend
     if args.search is not None:
         log.warning("--search is deprecated; use --backend (approximate = pca_kdtree)")
         if backend is None:
             backend = {"approximate": "pca_kdtree", "exact": "kdtree"}.get(args.search, args.search)
-    if args.method == "pixelwise":
-        defaults = PixelwiseParams()
-        params = PixelwiseParams(
-            radius=defaults.radius if args.radius is None else args.radius,
-            ws=defaults.ws if args.ws is None else _weight(args.ws, "--ws"),
-            wc=defaults.wc if args.wc is None else _weight(args.wc, "--wc"),
-            backend=backend or defaults.backend,
-            seed=args.seed,
+    kind = PixelwiseParams if args.method == "pixelwise" else TextureOptimizationParams
+    defaults = kind()
+    ws = defaults.ws if args.ws is None else _weight(args.ws, "--ws")
+    wc = defaults.wc if args.wc is None else _weight(args.wc, "--wc")
+    if ws == 0 and wc == 0:
+        raise InputError(
+            f"--ws {ws:g}, --wc {wc:g}: both 0 leave nothing to match ({args.method} defaults: "
+            f"--ws {defaults.ws:g} --wc {defaults.wc:g}); give one > 0"
         )
+    radius = defaults.radius if args.radius is None else args.radius
+    if kind is PixelwiseParams:
+        backend = backend or defaults.backend
+        params = PixelwiseParams(radius=radius, ws=ws, wc=wc, backend=backend, seed=args.seed)
     else:
-        defaults = TextureOptimizationParams()
-        params = TextureOptimizationParams(
-            radius=defaults.radius if args.radius is None else args.radius,
-            ws=defaults.ws if args.ws is None else _weight(args.ws, "--ws"),
-            wc=defaults.wc if args.wc is None else _weight(args.wc, "--wc"),
-            seed=args.seed,
-        )
+        params = TextureOptimizationParams(radius=radius, ws=ws, wc=wc, seed=args.seed)
 
     sample = load_btf(args.sample, finite=True)
-    scans = [read_image(path) for path in args.scans]
+    from imagemap.btf.extrapolate import check_scans
+
+    scans = check_scans(
+        [read_image(path) for path in args.scans], [f"--scans {path}" for path in args.scans]
+    )
     response = None if args.linear_scans else _response(args.chart)
     if args.register:
         from imagemap.btf.registration import register_scans
 
-        registration = register_scans(scans, max_rotation=args.max_rotation, response=response)
+        registration = register_scans(
+            scans,
+            max_rotation=args.max_rotation,
+            response=response,
+            names=[f"--scans {path}" for path in args.scans],
+        )
         scans = registration.images
         if args.find_order:
             from imagemap.btf.extrapolate import constraint_images, prepare_scans
@@ -269,13 +290,50 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from imagemap.btf.experiment import ExperimentParams, format_table, run_experiment
+    from imagemap.btf.experiment import (
+        MATERIAL_SOURCES,
+        MIN_SAMPLE_SIZE,
+        MIN_SIZE,
+        ExperimentParams,
+        format_table,
+        run_experiment,
+    )
+    from imagemap.outputs import check_output_directory
 
-    if args.size < 16:
-        raise InputError(f"--size: at least 16 texels, got {args.size}")
-    sample_size = args.sample_size or max(8, args.size // 4)
+    if args.size < MIN_SIZE:
+        raise InputError(f"--size: at least {MIN_SIZE} texels, got {args.size}")
+    if args.sample_size is not None:
+        # One cut-out side for every material.
+        if not MIN_SAMPLE_SIZE <= args.sample_size < args.size:
+            raise InputError(
+                f"--sample-size: from {MIN_SAMPLE_SIZE} to --size - 1 = {args.size - 1}, got "
+                f"{args.sample_size} (a cut-out as large as the sample is the reference "
+                "itself: every error would be 0)"
+            )
+        sample_size, sample_sizes = args.sample_size, {}
+    else:
+        # The paper's proportions: a quarter of the side, half for the cloths (256 of 512).
+        sample_size = max(MIN_SAMPLE_SIZE, args.size // 4)
+        sample_sizes = {m: max(MIN_SAMPLE_SIZE, args.size // 2) for m in ("cloth", "velvet")}
+    unknown = [m for m in args.materials if m not in MATERIAL_SOURCES]
+    if unknown:
+        raise InputError(f"--materials: unknown {unknown}; choose from {sorted(MATERIAL_SOURCES)}")
+    if args.seed < 0:
+        raise InputError(f"--seed: must be >= 0, got {args.seed}")
+    if args.methods:
+        from imagemap.btf.experiment import method_names
+
+        known = method_names()
+        unknown = [m for m in args.methods if m not in known]
+        if unknown:
+            raise InputError(f"--methods: unknown {unknown}; choose from {known}")
+    check_output_directory(args.out, "--out folder")
     params = ExperimentParams(
-        size=args.size, sample_size=sample_size, search=args.search, seed=args.seed
+        size=args.size,
+        sample_size=sample_size,
+        sample_sizes=sample_sizes,
+        search=args.search,
+        seed=args.seed,
     )
     rows = run_experiment(
         args.out,

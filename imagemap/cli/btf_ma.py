@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
 from imagemap.cli.paths import check_paths
 from imagemap.errors import InputError
+
+log = logging.getLogger("imagemap")
 
 
 def register(btf_subparsers: argparse._SubParsersAction) -> None:
@@ -64,9 +67,11 @@ def _fit(args: argparse.Namespace) -> int:
 
     from imagemap.btf import load_btf
     from imagemap.btf.moving_average import (
+        MIN_COARSE_SIDE,
         MAParams,
         compression_ratios,
         fit_moving_average_btf,
+        max_levels,
         parameter_count,
     )
     from imagemap.io import write_image
@@ -76,6 +81,16 @@ def _fit(args: argparse.Namespace) -> int:
         {"sample": args.sample},
         {"-o": (".npz",), "--range-map": (".png",)},
     )
+    if args.levels < 1:
+        raise InputError(f"--levels: at least 1, got {args.levels}")
+    if args.support < 1 or args.support % 2 == 0:
+        raise InputError(f"--support: a positive odd width, got {args.support}")
+    if args.subspaces < 1:
+        raise InputError(f"--subspaces: at least 1, got {args.subspaces}")
+    if not (np.isfinite(args.bump_scale) and args.bump_scale >= 0):
+        raise InputError(f"--bump-scale: a finite multiplier >= 0, got {args.bump_scale}")
+    if args.seed < 0:
+        raise InputError(f"--seed: must be >= 0, got {args.seed}")
     params = MAParams(
         levels=args.levels,
         support=args.support,
@@ -84,7 +99,14 @@ def _fit(args: argparse.Namespace) -> int:
         deshade=not args.no_deshade,
         bump_scale=args.bump_scale,
     )
-    sample = load_btf(args.sample)
+    sample = load_btf(args.sample, finite=True)
+    most = max_levels(sample.shape)
+    if args.levels > most:
+        raise InputError(
+            f"--levels {args.levels}: the sample {args.sample} is {sample.shape[0]}x"
+            f"{sample.shape[1]} texels; its pyramid has room for at most {most} levels "
+            f"(the coarsest at least {MIN_COARSE_SIDE} texels)"
+        )
     model = fit_moving_average_btf(sample, params=params, seed=args.seed)
     model.save(args.output)
     if args.range_map:
@@ -110,11 +132,14 @@ def _synthesize(args: argparse.Namespace) -> int:
     from imagemap.btf import load_btf
     from imagemap.btf.moving_average import (
         MovingAverageModel,
+        sample_fingerprint,
+        synthesis_bytes,
         synthesize_appearance,
         synthesize_btf,
     )
     from imagemap.btf.photometric import btf_direction_vectors
     from imagemap.io import write_image
+    from imagemap.memory import check_memory
     from imagemap.render import display_gamma
 
     height, width = args.size
@@ -130,12 +155,34 @@ def _synthesize(args: argparse.Namespace) -> int:
             raise InputError(f"{name}: THETA in 0..90 and a finite PHI, got {theta} {phi}")
     if not (np.isfinite(args.exposure) and args.exposure > 0):
         raise InputError(f"--exposure: a finite number > 0, got {args.exposure}")
+    if args.seed < 0:
+        raise InputError(f"--seed: must be >= 0, got {args.seed}")
     model = MovingAverageModel.load(args.model)
     suffix = Path(args.output).suffix.lower()
+    sample = None
     if suffix == ".npz":
         if not args.sample:
             raise InputError("--sample: required for a BTF (.npz) output (its U is shared)")
-        result = synthesize_btf(model, load_btf(args.sample), (height, width), seed=args.seed)
+        sample = load_btf(args.sample, finite=True)
+        if model.subspace_of.shape != (sample.n_lights, sample.n_views) or (
+            model.sample_digest and model.sample_digest != sample_fingerprint(sample)
+        ):
+            raise InputError(
+                f"--sample {args.sample}: not the BTF the model {args.model} was fitted on "
+                "(give the sample of 'imagemap btf ma-fit'; another material's eigen-ABRDFs "
+                "would turn the synthesized textures into nonsense)"
+            )
+        if not model.sample_digest:
+            log.warning("%s: an older model without its sample's fingerprint", args.model)
+    check_memory(
+        synthesis_bytes(
+            model, (height, width), n_components=None if sample is None else sample.n_components
+        ),
+        f"--size {height} {width}",
+        advice="use a smaller --size (the result tiles seamlessly when repeated)",
+    )
+    if sample is not None:
+        result = synthesize_btf(model, sample, (height, width), seed=args.seed)
         result.save(args.output)
     elif suffix == ".png":
         light = btf_direction_vectors(np.array([args.light]))[0]
