@@ -2,8 +2,9 @@
 
 A database is a directory of ``NAME_depth.png`` (8- or 16-bit), ``NAME_depth.tif``
 (float) or ``NAME_depth.npy`` beside ``NAME_image.png``. Other files
-(``NAME_labels.png``, ``NAME.json``, contact sheets) may sit beside them and are
-read when present. Arrays are loaded on first use and cached, so opening a large
+(``NAME_labels.png``, ``NAME.json``, PBR maps ``NAME_normal.png``, ``NAME_roughness.png``
+... of :mod:`imagemap.materials`, contact sheets) may sit beside them and are read when
+present. Arrays are loaded on first use and cached, so opening a large
 database costs nothing until its examples are needed.
 """
 
@@ -15,6 +16,7 @@ from pathlib import Path
 
 from imagemap.example import Example
 from imagemap.io import InputError
+from imagemap.materials import MAP_KINDS, example_maps
 from imagemap.mesh.examples import MeshExample, mesh_examples
 from imagemap.mesh.views import View
 
@@ -210,7 +212,7 @@ def check_database(
     rows : list of dict
         One per readable example: name, source (``"images"`` or the mesh file's
         name), size, depth range, foreground fraction, whether labels and JSON are
-        present.
+        present, and the PBR maps it carries (``maps``: normal, roughness, ...).
     problems : list of str
         One message per problem (unpaired, unreadable, mismatched files, a mesh
         with nothing visible or no colours).
@@ -241,6 +243,7 @@ def check_database(
             depth, image = example.depth, example.image
             labels = example.labels
             _ = example.info  # a corrupt sidecar is a problem too
+            maps = sorted(example_maps(example))  # a bad PBR map is a problem too
         except InputError as exc:
             problems.append(str(exc))
             continue
@@ -256,6 +259,7 @@ def check_database(
                 "mean_colour": [round(float(c), 3) for c in image[depth > 0].mean(axis=0)],
                 "labels": labels is not None,
                 "json": example.json_path is not None,
+                "maps": [k for k in MAP_KINDS if k in maps],
             }
         )
     if not examples and not problems:
@@ -283,5 +287,8 @@ def prepare_database(database: Database) -> Database:
     for example in database:
         prepared = Example.from_arrays(example.name, example.depth, example.image, example.labels)
         prepared.__dict__["info"] = dict(example.info)
+        maps = example_maps(example)  # PBR maps travel with the colour
+        if maps:
+            prepared._arrays["maps"] = dict(maps)
         examples.append(prepared)
     return Database(examples, source=database.source)

@@ -23,7 +23,8 @@ import trimesh
 
 from imagemap.blender.package import build_zip
 from imagemap.mesh import project_texture, render_mesh
-from imagemap.mesh.files import export_textured, keep_surface, load_mesh
+from imagemap.mesh.files import export_textured, load_mesh
+from imagemap.mesh.surface import keep_surface
 
 
 def blender_runner() -> list[str] | None:

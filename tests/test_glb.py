@@ -19,12 +19,12 @@ from imagemap.mesh.files import (
     SurfaceMaterial,
     corner_normals,
     export_textured,
-    keep_surface,
     load_mesh,
     material_of,
     textured_mesh,
     unit_scale,
 )
+from imagemap.mesh.surface import keep_surface
 
 
 def glb_json(path) -> dict:

@@ -96,7 +96,8 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         load_mesh,
     )
     from imagemap.mesh.coverage import choose_views
-    from imagemap.mesh.files import keep_surface, unit_scale
+    from imagemap.mesh.files import unit_scale
+    from imagemap.mesh.surface import keep_surface
     from imagemap.outputs import OutputPlan, exported, write_all, written_companions
 
     output = Path(args.output)

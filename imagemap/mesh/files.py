@@ -11,7 +11,7 @@ What a written mesh carries so that it imports as intended (issue #34):
   :data:`CREASE_DEGREES`, so a UV seam shows no crease and a box keeps its edges.
 - **The input material's** ``alphaMode``, ``alphaCutoff``, ``doubleSided`` and the alpha
   of its base colour (texture alpha sampled at the same surface points), so
-  alpha-masked fins stay fins.
+  alpha-masked fins stay fins (:func:`imagemap.mesh.surface.keep_surface`).
 - **Units**: glTF is in metres; coordinates are written as the source has them
   unless a scale is given (:data:`UNIT_SCALES`), and the size is stated.
 - **PBR maps** beside the colour: ``normal`` (tangent space, OpenGL +Y), and
@@ -43,7 +43,6 @@ __all__ = [
     "export_textured",
     "file_digest",
     "is_mesh_path",
-    "keep_surface",
     "load_mesh",
     "material_of",
     "textured_mesh",
@@ -393,95 +392,6 @@ def _material_maps(material) -> dict[str, np.ndarray]:
     if getattr(material, "occlusionTexture", None) is not None:
         maps["ao"] = np.asarray(material.occlusionTexture.convert("L"), np.float32) / 255.0
     return maps
-
-
-def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
-    """``textured`` with what the artist set on ``source`` kept.
-
-    ``textured`` is ``source`` textured anew (the same faces in the same order, as
-    :func:`~imagemap.mesh.bake.bake_views` and
-    :func:`~imagemap.mesh.bake.project_texture` make it). Kept, face by face:
-
-    - the normals: ``source``'s own where its file had them, else smooth normals
-      with creases over :data:`CREASE_DEGREES` (vertices split where corners differ);
-    - the alpha of ``source``'s base colour (its texture's alpha sampled at the same
-      surface points, times its factor), into the new texture's alpha channel;
-    - ``alphaMode``, ``alphaCutoff``, ``doubleSided`` and stated factors
-      (:func:`material_of`), unless ``material`` is given.
-
-    Maps already on ``textured`` (normal, roughness, metallic, ao) stay.
-
-    Examples
-    --------
-    >>> import trimesh
-    >>> box = trimesh.creation.box()
-    >>> plain = textured_mesh(box.vertices, box.faces, box.vertices[:, :2] + 0.5,
-    ...                       np.full((4, 4, 3), 0.5))
-    >>> kept = keep_surface(plain, box)
-    >>> len(kept.vertices), bool(np.allclose(kept.vertex_normals[kept.faces],
-    ...                                       box.face_normals[:, None, :]))
-    (24, True)
-    """
-    from imagemap.mesh.views import texture_image
-
-    settings = material if material is not None else material_of(source)
-    vertices = np.asarray(textured.vertices, dtype=np.float64)
-    faces = np.asarray(textured.faces, dtype=np.int64)
-    uv = np.asarray(textured.visual.uv, dtype=np.float64)
-    same = len(source.faces) == len(faces)
-    if same and source.metadata.get("file_normals") and "vertex_normals" in source._cache:
-        corners = np.asarray(source.vertex_normals, dtype=np.float64)[source.faces]
-    elif same:
-        corners = corner_normals(source.vertices, source.faces)
-    else:
-        corners = corner_normals(vertices, faces)
-    new_faces, origin = _split_by_normals(faces, corners)
-    normals = np.zeros((len(origin), 3))
-    normals[new_faces.ravel()] = corners.reshape(-1, 3)
-    image = texture_image(textured)
-    alpha = _carried_alpha(textured, source, image.shape[:2]) if same else None
-    if alpha is None:
-        _, factor = texture_alpha(source)
-        alpha = None if factor >= 1.0 else np.full(image.shape[:2], factor, np.float32)
-    if alpha is not None:
-        image = np.concatenate([image, alpha[..., None]], axis=2)
-    maps = _material_maps(textured.visual.material)
-    return textured_mesh(
-        vertices[origin],
-        new_faces,
-        uv[origin],
-        image,
-        normals=normals,
-        maps=maps,
-        material=settings,
-    )
-
-
-def _carried_alpha(textured, source, shape: tuple[int, int]) -> np.ndarray | None:
-    """``source``'s base colour alpha at every texel of ``textured``'s texture (same faces)."""
-    from imagemap.mesh.bake import rasterize_uv
-    from imagemap.mesh.views import fill_from_nearest, sample_image
-
-    alpha, factor = texture_alpha(source)
-    source_uv = getattr(source.visual, "uv", None)
-    if alpha is None or source_uv is None:
-        return None
-    height, width = shape
-    size = max(height, width)
-    texel, face, bary = rasterize_uv(np.asarray(textured.visual.uv), textured.faces, size)
-    corner_uv = np.asarray(source_uv, dtype=np.float64)[np.asarray(source.faces)[face]]
-    point_uv = np.einsum("nk,nkc->nc", bary, corner_uv)
-    point_uv -= np.floor(point_uv)  # textures repeat
-    values = np.ones((size, size), dtype=np.float32)
-    values.flat[texel] = sample_image(alpha[..., None], point_uv)[:, 0] * factor
-    covered = np.zeros((size, size), dtype=bool)
-    covered.flat[texel] = True
-    values = fill_from_nearest(values, covered)
-    if (height, width) != (size, size):
-        from skimage.transform import resize
-
-        values = resize(values, (height, width), order=1, anti_aliasing=False)
-    return values.astype(np.float32)
 
 
 def unit_scale(units: str | None = None, scale: float | None = None) -> float:
