@@ -7,13 +7,24 @@ examples rendered for each requested view) and ships it to the workers once: a
 local process pool gets it in its initializer, a Dask cluster by
 ``client.scatter(..., broadcast=True)``.
 
-Resumable: after an object's outputs are written (each atomically), a small
-manifest ``OUT/.imagemap-done/SOURCE.json`` is written last, holding the input's
-content hash, the options and the outputs' sizes; an object whose manifest matches
-(same input, same options, same engine code, outputs present with the recorded sizes) is
-skipped.
-A failing object is reported and the others go on. The summary counts done,
-skipped and failed objects and the throughput (objects per minute).
+Safe: every output (and what it brings: an OBJ's ``.mtl`` and texture) is checked
+before any work by the same rule as ``imagemap synthesize``
+(:class:`imagemap.outputs.OutputPlan`): none is an input, a file an input mesh reads,
+a held-out truth beside an input (``NAME_image.png``...), a database file, or in the
+database's folder; two inputs may not make one output; an existing file is replaced
+only when an earlier batch here wrote it. The output folder must be writable, and is
+locked for the run (a second batch into it stops at once). Paths are absolute before
+they are shipped (Dask workers have their own working directories). Local workers end
+when the batch's process does, even by ``kill -9``.
+
+Resumable: an object's outputs are written as a set (all or none), then a small
+manifest ``OUT/.imagemap-done/SOURCE.json`` holding the input's content hash, the
+options, and each output's SHA-256; an object whose manifest matches (same input, same
+options, same engine code, every output present with the recorded content) is skipped,
+so an output changed or damaged since, even at the same size, is made again. Ctrl-C
+writes the report and says how to resume. A failing object is reported and the others
+go on. The summary counts done, skipped and failed objects and the throughput (objects
+per minute).
 
 Examples
 --------
@@ -47,6 +58,8 @@ in this process (``workers=1``), then the same batch again:
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import functools
 import hashlib
 import json
@@ -55,7 +68,10 @@ import multiprocessing
 import os
 import pickle
 import re
+import shutil
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Generator, Mapping
@@ -67,7 +83,7 @@ from typing import Any
 import imagemap
 from imagemap.database import Database, database_at_view, prepare_database
 from imagemap.depth.config import DepthConfig, resolve_config
-from imagemap.io import InputError, atomic_path, read_depth, write_image
+from imagemap.io import InputError, atomic_path, image_writer, is_temporary_of, read_depth
 from imagemap.mesh import (
     DEFAULT_SIZE,
     FRONT,
@@ -79,7 +95,17 @@ from imagemap.mesh import (
     parse_views,
 )
 from imagemap.mesh.colorize import colorize_mesh
+from imagemap.outputs import (
+    STAGING_PREFIX,
+    OutputPlan,
+    check_output_directory,
+    exported,
+    resolve,
+    write_all,
+    written_companions,
+)
 from imagemap.progress import progress
+from imagemap.validate import check_float, check_int, check_seed
 
 __all__ = ["BatchOptions", "BatchSummary", "Job", "plan_jobs", "prepare_databases", "run_batch"]
 
@@ -87,6 +113,8 @@ log = logging.getLogger("imagemap")
 
 _DEPTH_RE = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
 DONE_DIR = ".imagemap-done"
+#: The smallest side of a view's depth map (``--size``'s own minimum).
+MIN_VIEW_SIDE = 16
 
 
 @dataclass(frozen=True)
@@ -111,21 +139,50 @@ class BatchOptions:
     background: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
-        pairs = self.options.items() if isinstance(self.options, Mapping) else self.options
-        options = tuple(sorted((str(k), v) for k, v in dict(pairs).items() if v is not None))
+        if not isinstance(self.options, Mapping | tuple | list):
+            raise InputError(f"options: expected a mapping of option names, got {self.options!r}")
+        try:
+            pairs = self.options.items() if isinstance(self.options, Mapping) else self.options
+            options = tuple(sorted((str(k), v) for k, v in dict(pairs).items() if v is not None))
+        except (TypeError, ValueError):
+            raise InputError(
+                f"options: expected (name, value) pairs, got {self.options!r}"
+            ) from None
         object.__setattr__(self, "options", options)
         self.config()  # refuses a bad preset, option or combination now
+        check_seed(self.seed)
         if isinstance(self.views, str):
             object.__setattr__(self, "views", tuple(parse_views(self.views)))
+        if isinstance(self.views, View) or not all(isinstance(v, View) for v in self.views):
+            raise InputError(f"views: expected a sequence of View or a string, got {self.views!r}")
+        object.__setattr__(self, "views", tuple(self.views))
+        if not self.views:
+            raise InputError("views: at least one view is needed")
+        if len(set(self.views)) != len(self.views):
+            raise InputError(f"views: a view is given twice in {[str(v) for v in self.views]}")
+        if not (isinstance(self.size, tuple | list) and len(self.size) == 2):
+            raise InputError(f"size: expected (width, height), got {self.size!r}")
+        size = tuple(check_int("size", v, minimum=MIN_VIEW_SIDE) for v in self.size)
+        object.__setattr__(self, "size", size)
+        if self.texture_size is not None:
+            check_int("texture_size", self.texture_size, minimum=1)
         if self.mesh_format not in ("glb", "obj"):
             raise InputError(f"mesh format must be glb or obj, got {self.mesh_format!r}")
-        if not self.views:
-            raise InputError("at least one view is needed")
+        if self.background is not None:
+            colour = tuple(check_float("background", c, 0.0, 1.0) for c in self.background)
+            if len(colour) != 3:
+                raise InputError(f"background: expected (r, g, b) in [0, 1], got {colour}")
+            object.__setattr__(self, "background", colour)
+
+    def record(self) -> dict:
+        """The options as a JSON-ready dict (what a manifest records beside :meth:`key`)."""
+        record = asdict(self)
+        record["views"] = [str(v) for v in self.views]
+        return record
 
     def key(self) -> str:
         """A digest of everything that changes the outputs: the options and the engine's code."""
-        record = asdict(self)
-        record["views"] = [str(v) for v in self.views]
+        record = self.record()
         record["engine"] = engine_digest()
         return hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -147,6 +204,10 @@ class Job:
     kind: str  # "depth" or "mesh"
     output: Path
     manifest: Path
+    companions: tuple[Path, ...] = ()  # written with the output (an OBJ's .mtl and texture)
+    # BatchOptions.key() as the batch's process computed it: a worker started later would
+    # digest the engine's files as they are then (an upgrade mid-batch), not as they were.
+    options_key: str = ""
 
 
 @dataclass
@@ -176,17 +237,28 @@ class BatchSummary:
 def plan_jobs(
     input_dir: str | os.PathLike, out_dir: str | os.PathLike, options: BatchOptions
 ) -> list[Job]:
-    """One :class:`Job` per depth map (``NAME_depth.*``) or mesh in ``input_dir``, by name."""
-    input_dir, out_dir = Path(input_dir), Path(out_dir)
+    """One :class:`Job` per depth map (``NAME_depth.*``) or mesh in ``input_dir``, by name.
+
+    Every path is absolute (a Dask worker resolves a relative one against its own working
+    directory). Two inputs whose outputs meet (``a_depth.png`` and ``a.npy``, or a depth
+    ``a_depth.png`` and an OBJ mesh ``a_image.obj``, whose texture is ``a_image.png``) are
+    an :class:`InputError` naming both.
+    """
+    shown_input = input_dir
+    input_dir, out_dir = resolve(input_dir), resolve(out_dir)
     if not input_dir.exists():
-        raise InputError(f"{input_dir}: input directory not found")
+        raise InputError(f"{shown_input}: input directory not found")
     if not input_dir.is_dir():
-        raise InputError(f"{input_dir}: not a directory")
+        raise InputError(f"{shown_input}: not a directory")
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir}: output exists and is not a directory")
     jobs = []
     outputs: dict[Path, Path] = {}
-    for entry in sorted(input_dir.iterdir()):
+    try:
+        entries = sorted(input_dir.iterdir())
+    except OSError as exc:
+        raise InputError(f"{shown_input}: cannot be listed ({exc.strerror or exc})") from None
+    for entry in entries:
         if not entry.is_file():
             continue
         if match := _DEPTH_RE.match(entry.name):
@@ -197,11 +269,16 @@ def plan_jobs(
             output = out_dir / f"{name}.{options.mesh_format}"
         else:
             continue
-        if output in outputs:
-            raise InputError(f"{entry}: same output {output.name} as {outputs[output].name}")
-        outputs[output] = entry
+        companions = tuple(written_companions(output))
+        for path in (output, *companions):
+            if path in outputs:
+                raise InputError(
+                    f"{entry} and {outputs[path]} would both write {path.name} in {out_dir}: "
+                    "rename one of them"
+                )
+            outputs[path] = entry
         manifest = out_dir / DONE_DIR / f"{entry.name}.json"
-        jobs.append(Job(entry, name, kind, output, manifest))
+        jobs.append(Job(entry, name, kind, output, manifest, companions))
     if not jobs:
         raise InputError(
             f"{input_dir}: no depth maps (NAME_depth.png|tif|npy) or meshes "
@@ -211,9 +288,68 @@ def plan_jobs(
 
 
 def _outputs_of(job: Job) -> list[Path]:
-    if job.output.suffix == ".obj":
-        return [job.output.with_suffix(".png"), job.output.with_suffix(".mtl"), job.output]
-    return [job.output]
+    return [*job.companions, job.output]
+
+
+def _names(job: Job) -> list[str]:
+    return [p.name for p in _outputs_of(job)]
+
+
+def _started(job: Job) -> Path:
+    """Where a job records, before writing, the outputs it is about to write."""
+    return job.manifest.with_name(job.manifest.name + ".started")
+
+
+#: The batch's summary, written into the output folder.
+REPORT_NAME = "batch_report.json"
+
+
+def _claimed(out_dir: Path) -> list[Path]:
+    """The files an earlier batch wrote into ``out_dir``: every output its manifests name
+    (finished or started), and its report."""
+    claimed = []
+    done = out_dir / DONE_DIR
+    manifests = [*done.glob("*.json"), *done.glob("*.json.started")] if done.is_dir() else []
+    for manifest in sorted(manifests):
+        try:
+            record = json.loads(manifest.read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(record, dict):
+            names = [*(record.get("outputs") or {}), *(record.get("planned") or [])]
+            claimed += [out_dir / str(name) for name in names if Path(str(name)).name == name]
+    report = out_dir / REPORT_NAME
+    try:
+        if {"done", "objects"} <= set(json.loads(report.read_text())):
+            claimed.append(report)
+    except (OSError, ValueError, TypeError):
+        pass
+    return claimed
+
+
+def check_outputs(
+    jobs: list[Job], database: Database, out_dir: str | os.PathLike, database_dir=None
+) -> None:
+    """Every output of a batch checked before any work (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        Naming the output and what it would replace, or the folder that cannot be written.
+    """
+    out_dir = resolve(out_dir)
+    check_output_directory(out_dir, "-o directory")
+    plan = OutputPlan()
+    for job in jobs:
+        plan.add_query(job.source, f"input {job.kind}")
+    if database_dir is None and database.source and Path(database.source).is_dir():
+        database_dir = database.source
+    plan.add_database(database, database_dir)
+    for job in jobs:
+        plan.add_output(job.output, "-o", companions=job.companions, fresh=True)
+    plan.add_output(out_dir / REPORT_NAME, "the batch report", fresh=True)
+    plan.claim(_claimed(out_dir))
+    plan.check()
 
 
 #: The modules whose code shapes a map or a texture. A batch resumed after one of them
@@ -253,28 +389,42 @@ def engine_digest() -> str:
 
 
 def is_complete(job: Job, options: BatchOptions, digest: str | None = None) -> bool:
-    """True when ``job``'s manifest matches its input, the options and its outputs."""
+    """True when ``job``'s manifest matches its input, the options and its outputs' content.
+
+    Each output's SHA-256 is compared with the manifest's: an output changed or damaged
+    since it was written (even at the same size) makes the object incomplete.
+    """
     try:
         manifest = json.loads(job.manifest.read_text())
     except (OSError, ValueError):
         return False
-    if manifest.get("options") != options.key():
+    if not isinstance(manifest, dict) or manifest.get("options") != options.key():
         return False
     if manifest.get("input_sha256") != (digest or file_digest(job.source)):
         return False
-    for name, size in manifest.get("outputs", {}).items():
+    outputs = manifest.get("outputs")
+    if not isinstance(outputs, dict) or set(outputs) != {p.name for p in _outputs_of(job)}:
+        return False
+    for name, recorded in outputs.items():
         path = job.output.parent / name
-        if not path.is_file() or path.stat().st_size != size:
+        if not path.is_file() or not isinstance(recorded, str) or file_digest(path) != recorded:
             return False
-    return bool(manifest.get("outputs"))
+    return True
 
 
 def _remove_stale_temporaries(job: Job) -> None:
-    """Delete what a killed run left of this job's atomic writes (``.STEM.xxxx.SUFFIX``)."""
+    """Delete what a killed run left of this job's writes: temporary files named by
+    :func:`imagemap.io.make_temporary` for its outputs and manifest, and staging folders
+    (never a user's ``.NAME.*.png``)."""
     for output in [*_outputs_of(job), job.manifest]:
-        for stale in output.parent.glob(f".{output.stem}.*{output.suffix}"):
-            if stale.name != output.name:
+        if not output.parent.is_dir():
+            continue
+        for stale in output.parent.glob(f".{output.stem}.*"):
+            if is_temporary_of(stale, output):
                 stale.unlink(missing_ok=True)
+    for staging in job.output.parent.glob(f"{STAGING_PREFIX}*"):
+        if staging.is_dir() and (staging / job.output.name).exists():
+            shutil.rmtree(staging, ignore_errors=True)
 
 
 def prepare_databases(database: Database, options: BatchOptions) -> dict[str, Database]:
@@ -293,6 +443,10 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
 
     start = time.perf_counter()
     digest = file_digest(job.source)
+    # Started: the outputs about to be written are this batch's (a rerun may replace them).
+    started = {"name": job.name, "source": str(job.source), "planned": _names(job)}
+    with atomic_path(_started(job)) as tmp:
+        tmp.write_text(json.dumps(started, indent=1, sort_keys=True) + "\n")
     if job.kind == "depth":
         depth = read_depth(job.source)
         result = colorize(
@@ -304,7 +458,7 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
         picture = (
             result.rgba if options.background is None else result.on_background(options.background)
         )
-        write_image(job.output, picture)
+        write_all({job.output: image_writer(picture)})
         examples = result.example_names
     else:
         mesh = load_mesh(job.source)
@@ -317,21 +471,29 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
             preset=options.config(),
             seed=options.seed,
         )
-        export_textured(made.mesh, job.output)
+        writers, cleanup = exported(
+            lambda path: export_textured(made.mesh, path), job.output, job.companions
+        )
+        try:
+            write_all(writers)
+        finally:
+            cleanup()
         examples = sorted({n for r in made.results for n in r.example_names})
-    outputs = {p.name: p.stat().st_size for p in _outputs_of(job) if p.is_file()}
+    outputs = {p.name: file_digest(p) for p in _outputs_of(job) if p.is_file()}
     seconds = time.perf_counter() - start
     record = {
         "name": job.name,
         "source": str(job.source),
         "input_sha256": digest,
-        "options": options.key(),
+        "options": job.options_key or options.key(),
+        "settings": options.record(),
         "outputs": outputs,
         "examples": examples,
         "seconds": round(seconds, 3),
     }
     with atomic_path(job.manifest) as tmp:
         tmp.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
+    _started(job).unlink(missing_ok=True)
     return {"status": "done", **record}
 
 
@@ -350,9 +512,39 @@ def _safe_process(job: Job, databases, options: BatchOptions) -> dict:
 _WORKER: dict = {}
 
 
-def _init_pool_worker(databases, threads: int) -> None:
+#: How often a pool worker looks whether the batch's process is still there (seconds):
+#: after a ``kill -9`` of the batch its workers end within this (where prctl's
+#: parent-death signal is not available).
+PARENT_POLL_SECONDS = 1.0
+
+
+def _init_pool_worker(databases, threads: int, parent: int | None = None) -> None:
     _WORKER["databases"] = databases
+    _end_with_parent(parent)
     _set_threads(threads)
+
+
+def _end_with_parent(parent: int | None) -> None:
+    """End this worker when the batch's process ends, however it ends (``kill -9`` too):
+    on Linux the kernel sends SIGKILL (prctl PR_SET_PDEATHSIG); everywhere a watcher
+    thread exits when the parent is gone."""
+    if parent is None:
+        return
+    if sys.platform.startswith("linux"):
+        import ctypes  # deferred: only pool workers on Linux need it
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # gone before the signal was asked for
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(PARENT_POLL_SECONDS)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="imagemap-parent-watch", daemon=True).start()
 
 
 def _set_threads(threads: int) -> None:
@@ -417,35 +609,116 @@ def run_batch(
     BatchSummary
     """
     options = options or BatchOptions()
-    if workers < 1:
-        raise InputError(f"--workers must be at least 1, got {workers}")
+    if not isinstance(options, BatchOptions):
+        raise InputError(f"options: expected BatchOptions, got {type(options).__name__}")
+    workers = check_int("workers", workers, minimum=1)
+    if scheduler is not None and not isinstance(scheduler, str) and not _is_client(scheduler):
+        raise InputError(f"scheduler: expected an address or a Dask Client, got {scheduler!r}")
     jobs = plan_jobs(input_dir, out_dir, options)
+    out_dir = resolve(out_dir)
+    database_dir = None
     if not isinstance(database, Database):
+        if not isinstance(database, str | os.PathLike):
+            raise InputError(f"database: expected a Database or a folder, got {database!r}")
+        database_dir = database
         database = Database.from_directory(database, view=options.views[0], size=options.size)
+    check_outputs(jobs, database, out_dir, database_dir)  # before any work
+    workers = _usable_workers(workers, len(jobs))
     summary = BatchSummary()
-    todo = []
-    for job in jobs:
-        if not force and is_complete(job, options):
-            summary.skipped += 1
-            summary.records.append({"status": "skipped", "name": job.name})
-        else:
-            todo.append(job)
-            _remove_stale_temporaries(job)
-    client, own_client = _connect(scheduler) if scheduler is not None and todo else (None, False)
-    try:
+    with _locked(out_dir):
+        todo = []
+        for job in jobs:
+            if not force and is_complete(job, options):
+                summary.skipped += 1
+                summary.records.append({"status": "skipped", "name": job.name})
+            else:
+                todo.append(job)
+                _remove_stale_temporaries(job)
+        key = options.key()
+        todo = [dataclasses.replace(job, options_key=key) for job in todo]
         start = time.perf_counter()
-        databases = prepare_databases(database, options) if todo else {}
-        summary.prepare_seconds = time.perf_counter() - start
-        if todo:
-            log.info("database prepared in %.1f s", summary.prepare_seconds)
-        results = _run(todo, databases, options, workers, client)
-        _collect(results, len(todo), summary, quiet, on_result)
+        try:
+            client, own = _connect(scheduler) if scheduler is not None and todo else (None, False)
+            try:
+                databases = prepare_databases(database, options) if todo else {}
+                summary.prepare_seconds = time.perf_counter() - start
+                if todo:
+                    log.info("database prepared in %.1f s", summary.prepare_seconds)
+                results = _run(todo, databases, options, workers, client)
+                _collect(results, len(todo), summary, quiet, on_result)
+            finally:
+                if own and client is not None:  # own: _connect opened client
+                    client.close()
+        except KeyboardInterrupt:
+            summary.seconds = time.perf_counter() - start
+            _write_report(out_dir, summary, options, interrupted=True)
+            print(
+                f"imagemap: batch interrupted: {summary.done} done, {summary.skipped} skipped, "
+                f"{summary.failed} failed of {len(jobs)}; every finished object is kept and "
+                "no partial file is left: run the same command again to resume "
+                f"(finished objects are skipped; report in {out_dir / REPORT_NAME})",
+                file=sys.stderr,
+            )
+            raise
         summary.seconds = time.perf_counter() - start
-    finally:
-        if own_client and client is not None:  # own_client: _connect opened client
-            client.close()
-    _write_report(Path(out_dir), summary, options)
+        _write_report(out_dir, summary, options)
     return summary
+
+
+def _is_client(value) -> bool:
+    client = sys.modules.get("distributed")
+    return client is not None and isinstance(value, client.Client)
+
+
+def _usable_workers(workers: int, objects: int) -> int:
+    """At most one local worker per core and per object: each holds the whole database,
+    and more processes than cores only share the same cores (said with a warning)."""
+    cores = os.cpu_count() or 1
+    if workers > cores:
+        log.warning(
+            "--workers %d: this machine has %d cores; using %d worker processes",
+            workers,
+            cores,
+            min(cores, objects),
+        )
+    return max(1, min(workers, cores, objects))
+
+
+#: The lock file of an output folder (inside :data:`DONE_DIR`): held while a batch writes.
+LOCK_NAME = "lock"
+
+
+@contextlib.contextmanager
+def _locked(out_dir: Path):
+    """Hold ``out_dir``'s lock for the batch; another batch holding it is an InputError.
+
+    An advisory ``flock`` on ``OUT/.imagemap-done/lock``: the system releases it when the
+    holder ends, however it ends, so a killed batch never leaves a stale lock."""
+    try:
+        import fcntl  # deferred: optional dependency (POSIX only; no lock elsewhere)
+    except ImportError:
+        yield
+        return
+    folder = out_dir / DONE_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    handle = open(folder / LOCK_NAME, "a+")  # noqa: SIM115 (held for the whole batch)
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.seek(0)
+            holder = handle.read().strip() or "unknown"
+            raise InputError(
+                f"{out_dir}: another batch is writing into this folder (process {holder}); "
+                "wait for it to finish, or give another -o"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(f"{os.getpid()}\n")
+        handle.flush()
+        yield
+    finally:
+        handle.close()
 
 
 def _collect(
@@ -503,7 +776,7 @@ def _run_pool(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=_init_pool_worker,
-        initargs=(databases, max(1, cores // workers)),
+        initargs=(databases, max(1, cores // workers), os.getpid()),
     )
     # At most one job per worker in flight: a stop (Ctrl-C) waits only for those,
     # and a batch of thousands holds no queue of pickled jobs.
@@ -523,6 +796,12 @@ def _run_pool(
         executor.shutdown(wait=True, cancel_futures=True)
 
 
+#: Seconds a scheduler has to answer. dask's own ``timeout`` is not kept when the port
+#: accepts but never speaks its protocol (a silent port or an HTTP server: measured, a
+#: 5 s timeout still waiting at 100 s), so the connection is given this long in a thread.
+CONNECT_SECONDS = 20.0
+
+
 def _connect(scheduler: Any) -> tuple[Any, bool]:
     """(client, whether we opened it) for an address or a ``dask.distributed.Client``."""
     try:
@@ -533,10 +812,28 @@ def _connect(scheduler: Any) -> tuple[Any, bool]:
         ) from exc
     if isinstance(scheduler, Client):
         return scheduler, False
-    try:
-        return Client(scheduler, timeout="20s"), True
-    except OSError as exc:
-        raise InputError(f"--scheduler {scheduler}: cannot connect ({exc})") from exc
+    outcome: dict[str, Any] = {}
+
+    def connect() -> None:
+        try:
+            outcome["client"] = Client(scheduler, timeout=f"{CONNECT_SECONDS:g}s")
+        except BaseException as exc:  # reported below, in the caller's thread
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=connect, name="imagemap-dask-connect", daemon=True)
+    thread.start()
+    thread.join(CONNECT_SECONDS + 1.0)
+    if thread.is_alive():
+        raise InputError(
+            f"--scheduler {scheduler}: no answer from a Dask scheduler in "
+            f"{CONNECT_SECONDS:g} s (is it a Dask scheduler's address, tcp://HOST:8786?)"
+        )
+    if "error" in outcome:
+        exc = outcome["error"]
+        raise InputError(
+            f"--scheduler {scheduler}: cannot connect ({type(exc).__name__}: {exc})"
+        ) from None
+    return outcome["client"], True
 
 
 def _dask_threads(host_threads: dict[str, int]) -> int:
@@ -579,10 +876,13 @@ def _run_dask(
         client.cancel(futures)
 
 
-def _write_report(out_dir: Path, summary: BatchSummary, options: BatchOptions) -> None:
-    if not summary.records:
+def _write_report(
+    out_dir: Path, summary: BatchSummary, options: BatchOptions, interrupted: bool = False
+) -> None:
+    if not summary.records and not interrupted:
         return
     report = {
+        "interrupted": interrupted,
         "done": summary.done,
         "skipped": summary.skipped,
         "failed": summary.failed,

@@ -146,11 +146,15 @@ def test_killed_batch_resumes_with_every_output_complete(fish, tmp_path):
     process.wait()
     finished = len(list((out / ".imagemap-done").glob("*.json")))
     assert 1 <= finished < 4, "the batch must be killed mid-way"
-    (out / ".fish_005.stale1234.glb").write_bytes(b"half a file")  # as a kill leaves it
+    (out / ".fish_005.stale123.imagemap-tmp.glb").write_bytes(b"half a file")  # as a kill leaves it
+    mine = out / ".fish_005.holiday.png"  # a user's file that merely looks like one
+    mine.write_bytes(b"keep me")
     again = subprocess.run(command, env=env, capture_output=True, text=True)
     assert again.returncode == 0, again.stderr
     report = json.loads((out / "batch_report.json").read_text())
     assert (report["skipped"], report["done"]) == (finished, 4 - finished)
+    assert mine.read_bytes() == b"keep me"
+    mine.unlink()
     assert_valid_outputs(out)
 
 
