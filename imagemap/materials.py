@@ -73,6 +73,12 @@ NEUTRAL: dict[str, tuple[float, ...]] = {
 }
 
 
+#: Baked tangent-space normals with a smaller z (over ~72 degrees from the surface's)
+#: are taken as flat: on the fish, such texels were those filled from another surface
+#: (a fin's hidden side from its visible one), not relief.
+MIN_NORMAL_Z = 0.3
+
+
 def encode_normals(normals: np.ndarray) -> np.ndarray:
     """Unit vectors (..., 3) -> RGB in [0, 1] (``(n + 1) / 2``)."""
     return np.clip((np.asarray(normals, dtype=np.float32) + 1.0) / 2.0, 0.0, 1.0)
@@ -398,7 +404,9 @@ def atlas_normals_to_view(encoded: np.ndarray, mesh, faces: np.ndarray, bary: np
     return encode_normals(out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12))
 
 
-def bake_maps(mesh, renders: list, view_maps: list[dict], bake, textured) -> dict:
+def bake_maps(
+    mesh, renders: list, view_maps: list[dict], bake, textured, projection: bool = False
+) -> dict:
     """The mesh route's maps: each view's maps baked into the colour's atlas.
 
     Parameters
@@ -413,6 +421,8 @@ def bake_maps(mesh, renders: list, view_maps: list[dict], bake, textured) -> dic
         The bake that made the colour's texture (same atlas for any images).
     textured : trimesh.Trimesh
         The colour's textured mesh (its UVs give the atlas' tangent frames).
+    projection : bool
+        ``bake`` projects one view (projection UVs): normals need no turning.
 
     Returns
     -------
@@ -434,7 +444,12 @@ def bake_maps(mesh, renders: list, view_maps: list[dict], bake, textured) -> dic
         baked = texture_image(bake(images))
         for channel, kind in enumerate(group):
             out[kind] = baked[..., channel]
-    if any("normal" in m for m in view_maps):
+    if any("normal" in m for m in view_maps) and projection:
+        # Projection UVs are the picture's own axes: its tangent frame is the atlas'.
+        flat = [m.get("normal", np.broadcast_to(NEUTRAL["normal"], r.depth.shape + (3,)))
+                for m, r in zip(view_maps, renders, strict=True)]  # fmt: skip
+        out["normal"] = texture_image(bake(flat))
+    elif any("normal" in m for m in view_maps):
         images = []
         for maps, render in zip(view_maps, renders, strict=True):
             world = np.zeros(render.depth.shape + (3,), dtype=np.float32)
@@ -461,6 +476,9 @@ def bake_maps(mesh, renders: list, view_maps: list[dict], bake, textured) -> dic
         b = np.cross(surface, t) * np.where(handed == 0, 1.0, handed)[:, None]
         local = np.stack([np.einsum("ij,ij->i", world, v) for v in (t, b, surface)], axis=1)
         local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-12)
+        # A texel whose baked normal leans too far from its surface came from another
+        # surface (a hidden fin back filled from its front): flat there.
+        local[local[:, 2] < MIN_NORMAL_Z] = (0.0, 0.0, 1.0)
         texture = np.zeros((size, size, 3), dtype=np.float32)
         texture[..., 2] = 1.0
         texture.reshape(-1, 3)[texel] = local
@@ -470,7 +488,9 @@ def bake_maps(mesh, renders: list, view_maps: list[dict], bake, textured) -> dic
     return out
 
 
-def with_mesh_maps(textured, mesh, renders: list, results: list, databases: list, bake):
+def with_mesh_maps(
+    textured, mesh, renders: list, results: list, databases: list, bake, projection=False
+):
     """The mesh route's textured mesh with the examples' maps baked beside its colour.
 
     Each view's maps come through its result's source map (:func:`transfer_maps`),
@@ -488,6 +508,8 @@ def with_mesh_maps(textured, mesh, renders: list, results: list, databases: list
         databases they were made from.
     bake : callable (list of images) -> textured trimesh
         The colour's bake, e.g. ``lambda images: bake_views(mesh, renders, images, size)``.
+    projection : bool
+        One view projected (``project_texture``) rather than baked into an atlas.
     """
     from imagemap.mesh.files import material_of, textured_mesh
     from imagemap.mesh.views import texture_image
@@ -495,7 +517,7 @@ def with_mesh_maps(textured, mesh, renders: list, results: list, databases: list
     view_maps = [transfer_maps(r, db) for r, db in zip(results, databases, strict=True)]
     if not any(view_maps):
         return textured
-    maps = bake_maps(mesh, renders, view_maps, bake, textured)
+    maps = bake_maps(mesh, renders, view_maps, bake, textured, projection)
     return textured_mesh(
         textured.vertices,
         textured.faces,

@@ -78,6 +78,32 @@ def _mesh_preview(textured, database, first_name: str, size):
     return np.concatenate(row, axis=1)
 
 
+def _with_view_maps(made, mesh, database, size):
+    """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
+    from imagemap.database import database_at_view
+    from imagemap.materials import with_mesh_maps
+    from imagemap.mesh import bake_views, project_texture
+
+    if getattr(made, "path", "views") != "views" or not made.renders:
+        return made.mesh
+    renders = made.renders
+    width = made.mesh.visual.material.baseColorTexture.size[0]
+    if len(renders) == 1:
+
+        def bake(images):
+            return project_texture(mesh, renders[0], images[0])
+
+    else:
+
+        def bake(images):
+            return bake_views(mesh, renders, images, width)
+
+    databases = [database_at_view(database, r.view, size) for r in renders]
+    return with_mesh_maps(
+        made.mesh, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
+    )
+
+
 def run_mesh_synthesize(args: argparse.Namespace) -> int:
     """``imagemap synthesize MESH -o out.glb|out.obj|out.png``: one mesh, one or more views."""
     import time
@@ -160,7 +186,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         quiet=quiet or not sys.stderr.isatty(),
         **sizing,
     )
-    textured = keep_surface(made.mesh, mesh)
+    textured = keep_surface(_with_view_maps(made, mesh, database, args.size), mesh)
     seconds = time.perf_counter() - start
     first = made.results[0]
     writers = {}
