@@ -983,9 +983,13 @@ GRAIN_MIN_SIGMA = 1.0
 #: (2 px at 200x150, 13 px at 1024^2; at least CONTINUITY_MIN_SIGMA px): a patchwork
 #: of 10 px pieces of the truth (offsets within +-5 px) then scores 0.73 / 0.66 / 0.81
 #: of the truth at 200x150 / 512^2 / 1024^2, blurs of 1 px to 2 % of the object
-#: 0.96-1.01, a flat map 0.31-0.52.
+#: 0.96-1.01.
 CONTINUITY_INTEGRATION = 0.02
 CONTINUITY_MIN_SIGMA = 1.0
+#: Mean squared luminance gradient ((L*/px)^2, after the grain smoothing) below which
+#: an image has no structure and no coherence: a constant map's round-off is about
+#: 1e-29, the weakest structure measured (the outside task's truth at 1024^2) 1.9.
+COHERENCE_FLAT = 1e-6
 
 
 def _object_side(mask: np.ndarray) -> float:
@@ -1064,7 +1068,8 @@ def structure_coherence(
     trace = (jxx + jyy)[inner]
     difference = np.sqrt(np.square(jxx - jyy) + 4.0 * np.square(jxy))[inner]  # l1 - l2
     total = float(trace.sum())
-    return float(difference.sum()) / total if total > 0 else math.nan
+    flat = np.mean(np.square(gy[inner]) + np.square(gx[inner])) < COHERENCE_FLAT
+    return math.nan if flat or total <= 0 else float(difference.sum()) / total
 
 
 def structure_continuity(
@@ -1126,9 +1131,9 @@ def structure_continuity(
 #: Window of the local tones of :func:`midtone_share`, as a share of the object's size
 #: (about a stripe's width on the outside task; 11 px at 200x150, 33 px at 1024^2).
 #: Measured on the outside task at 200x150 / 512^2 / 1024^2: with 0.05 a crisp copy of
-#: the truth shifted by 7 % or 20 % of the object scores 1.02-1.26 of the truth, a 2 %
-#: blur 1.9-2.8, two copies 3 % apart averaged 1.7-2.3, a flat map 3.5-4.3; in a first
-#: study a window of 0.1 read a 1 % blur as 1.1 and one of 0.03 was lost on shifts.
+#: the truth shifted by 7 % or 20 % of the object scores 1.01-1.04 of the truth, a 2 %
+#: blur 1.9-2.8, two copies 3 % apart averaged 1.7-2.3; in a first study a window of
+#: 0.1 read a 1 % blur as 1.1 and one of 0.03 was lost on shifts.
 MIDTONE_WINDOW = 0.05
 #: The smallest window in pixels: the presets' finest patch width. In smaller windows
 #: a crisp edge shifted by a few pixels leaves the truth's edge a window with one tone
@@ -1142,10 +1147,6 @@ MIDTONE_MIN_CONTRAST = 10.0
 #: [dark, light] range: the middle half, so that grain on a flat tone (a quarter of a
 #: 10 L* minimum contrast is 2.5 L*, about 3x the grain left after smoothing) is not one.
 MIDTONE_BAND = (0.25, 0.75)
-#: Where the truth has an edge and the map none, the map is searched for the edge in a
-#: window this many times wider (a crisp stripe drawn with another phase is not lost);
-#: contrast below half the truth's there counts every such pixel as a mid-tone.
-MIDTONE_SEARCH = 3
 
 
 def _window_tones(luma: np.ndarray, region: np.ndarray, size: int) -> tuple:
@@ -1228,10 +1229,10 @@ def midtone_share(
     half of the range. A crisp edge has few (its anti-aliasing, the truth's own
     soft edges); a blurred one or two copies averaged a few pixels apart have a
     ramp of them. Each image is judged in its own tones and its own edges, so a
-    palette other than the truth's, or stripes drawn with another phase, do not
-    count. Where the truth has an edge that the map does not show even in a window
-    ``MIDTONE_SEARCH`` times wider (contrast below half the truth's), the map has
-    lost it: those pixels count as mid-tones too, so a flat map is not crisp.
+    palette other than the truth's, stripes drawn with another phase or a plain
+    garment where the truth's is checked do not count: this is crispness only.
+    Structure the map lacks altogether is for :func:`structure_continuity` and the
+    feature and SSIM measures (a map with no edge at all has no mid-tone share).
 
     Parameters
     ----------
@@ -1247,7 +1248,8 @@ def midtone_share(
     -------
     float
         The map's mid-tone share over the truth's: about 1 as crisp as the truth,
-        above 1 softer; NaN when the truth has no edge or no mid-tone at all.
+        above 1 softer; NaN when the truth has no edge or no mid-tone at all, or the
+        map no edge.
 
     Example
     -------
@@ -1266,17 +1268,14 @@ def midtone_share(
     side = _object_side(mask)
     size = max(MIDTONE_MIN_WINDOW, int(round(window * side)) | 1)
     smoothing = max(GRAIN_SCALE * side, GRAIN_MIN_SIGMA)
-    truth_share, truth_edges, truth_contrast = midtone_fraction(
+    truth_share, _, _ = midtone_fraction(
         truth, mask, window=size, smoothing=smoothing, channel_axis=channel_axis
     )
     if not truth_share > 0:
         return math.nan
-    luma = _smooth_inside(_luminance(image, channel_axis), mask, smoothing)
-    middle, edges, _ = _midtones(luma, mask, size)
-    wide_dark, wide_light = _window_tones(luma, mask, MIDTONE_SEARCH * size)
-    lost = truth_edges & ~edges & (wide_light - wide_dark < 0.5 * truth_contrast)
-    counted = int(edges.sum()) + int(lost.sum())
-    share = (int(middle.sum()) + int(lost.sum())) / counted
+    share, _, _ = midtone_fraction(
+        image, mask, window=size, smoothing=smoothing, channel_axis=channel_axis
+    )
     return share / truth_share
 
 
