@@ -222,6 +222,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         k = min(plan.patch_size, smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
         level_params = replace(params, exemplar_costs=plan.exemplar_costs)
+        if plan.position_weight is not None:
+            level_params = replace(level_params, position_weight=plan.position_weight)
         query = query_levels[level]
         context = None
         if plan.has_context and level < n_levels - 1:

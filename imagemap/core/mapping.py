@@ -21,11 +21,19 @@ class Mapping:
         Bands to synthesise: given for exemplars, None for the query.
     mask : ndarray of bool, shape (H, W), optional
         Where the mapping matters (the object); None means everywhere.
+    position : ndarray, shape (H, W, 2), optional
+        Where each pixel lies in a frame common to the query and the exemplars
+        (y, x), in units of the query object's size: the engine's position term
+        compares these. None: the pixel's position relative to the mask's centroid,
+        in units of the mask's RMS radius (Hassner & Basri's relative position). A
+        front end that has registered its exemplars onto the query gives each
+        exemplar pixel the query position it corresponds to.
     """
 
     guide: np.ndarray
     appearance: np.ndarray | None = None
     mask: np.ndarray | None = None
+    position: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         guide = np.asarray(self.guide, dtype=np.float32)
@@ -50,6 +58,15 @@ class Mapping:
             if not mask.any():
                 raise ValueError("mask is empty")
             object.__setattr__(self, "mask", mask)
+        if self.position is not None:
+            position = np.asarray(self.position, dtype=np.float32)
+            if position.shape != guide.shape[:2] + (2,):
+                raise ValueError(
+                    f"position must be (H, W, 2) of the guide's size, got {position.shape}"
+                )
+            if not np.all(np.isfinite(position)):
+                raise ValueError("position has NaN or infinite values")
+            object.__setattr__(self, "position", position)
 
     @property
     def shape(self) -> tuple[int, int]:

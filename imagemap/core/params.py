@@ -65,6 +65,8 @@ class LevelPlan:
         fraction of its distance and carries at least as much appearance detail (a
         reseed may draw a feature, never erase one); 0: off. Where a finer level
         follows, the appearance is voted again so that it starts from these matches.
+    position_weight : float, optional
+        The position term's weight at this level (None: ``EngineParams.position_weight``).
     """
 
     patch_size: int
@@ -73,8 +75,11 @@ class LevelPlan:
     context_weights: tuple[float, ...] = ()
     guide_reseed: float = 0.0
     final_reseed: float = 0.0
+    position_weight: float | None = None
 
     def __post_init__(self) -> None:
+        if self.position_weight is not None and not self.position_weight >= 0:
+            raise ValueError("position_weight must be >= 0")
         if self.patch_size < 1 or self.patch_size % 2 == 0:
             raise ValueError(f"patch size must be odd and positive, got {self.patch_size}")
         if self.max_iterations < 0:

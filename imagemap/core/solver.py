@@ -417,7 +417,10 @@ class LevelSolver:
             cand_e.append(np.full(len(ys), e, dtype=np.int32))
             cand_y.append(ys.astype(np.int32))
             cand_x.append(xs.astype(np.int32))
-            positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
+            if ex.position is not None:
+                positions.append(ex.position[ys, xs])
+            else:
+                positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
             del ex
             if release is not None:  # packed: the caller's mapping may go now
                 exemplars[e] = None
@@ -451,9 +454,12 @@ class LevelSolver:
         self.query_y, self.query_x = (a.astype(np.int32) for a in np.nonzero(centres))
         self.query_lookup = np.full((h, w), -1, dtype=np.int32)
         self.query_lookup[self.query_y, self.query_x] = np.arange(len(self.query_y))
-        self.query_position = _positions(
-            self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
-        )
+        if query.position is not None:
+            self.query_position = query.position[self.query_y, self.query_x]
+        else:
+            self.query_position = _positions(
+                self.query_y, self.query_x, _centroid_frame(query.mask, (h, w))
+            )
         # The query's matched bands, like the exemplars', for the box around its window
         # centres only: query_band_y, query_band_x are a centre's window's top-left there,
         # query_crop the box's rows and columns of the padded frame.

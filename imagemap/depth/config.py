@@ -130,6 +130,18 @@ class Guides:
     #: Weight of the position relative to the object's centroid, per RMS radius of the
     #: object (Table 1's relative position; fish 0.5, humans 3).
     position_weight: float = 1.0
+    #: Register each example onto the query (a smooth non-rigid warp of the whole object,
+    #: :mod:`imagemap.depth.register`) and compare positions where the warp puts the
+    #: example's pixels, instead of positions relative to each object's centroid.
+    registration: bool = False
+    #: The position weight when registered (the warp's positions are far more precise
+    #: than the centroid's, so they may weigh more).
+    registered_position_weight: float = 1.0
+    #: The object size (square root of its area, pixels of a level) at which
+    #: ``registered_position_weight`` holds; at a level where the object is larger the
+    #: weight grows with its size, so that a pixel of drift from the warp costs the same
+    #: at any resolution (window-sized fragments otherwise return at 4x).
+    registered_reference_size: float = 100.0
     #: Weight of the coarser levels' luminance as an extra guide band (times the Y
     #: weight) at levels finer than ``Pyramid.context_fraction``: a large map's fine
     #: levels keep the eyes, lips and palette the coarser levels chose (Cb and Cr too gave
@@ -150,6 +162,8 @@ class Guides:
             "silhouette_range",
             "extension_sigma",
             "position_weight",
+            "registered_position_weight",
+            "registered_reference_size",
             "context_weight",
             "wide_context_weight",
         ):

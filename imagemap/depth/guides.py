@@ -228,6 +228,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
     # The mean vote's map is the EM's own vote: matches changed after it would describe
     # (source, provenance) a map that was not made from them.
     final_reseed = matching.final_reseed if config.finish.vote != "mean" else 0.0
+    size = float(np.sqrt(mask.sum()))
     plans = []
     for level, k in enumerate(pyramid.patch_sizes):
         preferred = matching.example_preference and (
@@ -248,6 +249,12 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
                 context_weights=context,
                 guide_reseed=matching.guide_reseed,
                 final_reseed=final_reseed if level == feature else 0.0,
+                position_weight=(
+                    guides.registered_position_weight
+                    * max(1.0, size / 2**level / guides.registered_reference_size)
+                    if guides.registration
+                    else None
+                ),
             )
         )
     return tuple(plans)
@@ -312,13 +319,22 @@ def _depth_guides(depth: np.ndarray, masks: list[np.ndarray], guides: Guides) ->
     return [np.stack(level_bands, axis=-1) for level_bands in bands]
 
 
-def depth_mappings(depth: np.ndarray, levels: int = 3, guides: Guides = _GUIDES) -> list[Mapping]:
-    """The query's pyramid of mappings (guide bands and mask) for a depth map."""
+def depth_mappings(
+    depth: np.ndarray,
+    levels: int = 3,
+    guides: Guides = _GUIDES,
+    positions: list[np.ndarray] | None = None,
+) -> list[Mapping]:
+    """The query's pyramid of mappings (guide bands and mask) for a depth map;
+    ``positions`` (per level, (H_l, W_l, 2)) replace the engine's relative position."""
     depth = validate_depth(depth)
     masks = mask_pyramid(depth > 0, levels)
+    positions = positions or [None] * levels
     return [
-        Mapping(guide=guide, mask=mask if mask.any() else None)
-        for guide, mask in zip(_depth_guides(depth, masks, guides), masks, strict=True)
+        Mapping(guide=guide, mask=mask if mask.any() else None, position=position)
+        for guide, mask, position in zip(
+            _depth_guides(depth, masks, guides), masks, positions, strict=True
+        )
     ]
 
 
@@ -370,8 +386,10 @@ def example_mappings(
     levels: int = 3,
     appearance_pyramid: str = "gaussian",
     guides: Guides = _GUIDES,
+    positions: list[np.ndarray] | None = None,
 ) -> list[Mapping]:
-    """An example's pyramid of mappings: depth bands, YCbCr (Gaussian or Laplacian) levels, mask."""
+    """An example's pyramid of mappings: depth bands, YCbCr (Gaussian or Laplacian) levels,
+    mask, and (``positions``, per level) where its pixels lie on the query."""
     if appearance_pyramid not in APPEARANCE_PYRAMIDS:
         raise ValueError(f"appearance_pyramid must be one of {APPEARANCE_PYRAMIDS}")
     mask = example.mask
@@ -381,9 +399,15 @@ def example_mappings(
     else:
         appearance = gaussian_pyramid(ycbcr, levels)
     masks = mask_pyramid(mask, levels)
+    positions = positions or [None] * levels
     return [
-        Mapping(guide=guide, appearance=bands, mask=level_mask if level_mask.any() else None)
-        for guide, bands, level_mask in zip(
-            _depth_guides(example.depth, masks, guides), appearance, masks, strict=True
+        Mapping(
+            guide=guide,
+            appearance=bands,
+            mask=level_mask if level_mask.any() else None,
+            position=position,
+        )
+        for guide, bands, level_mask, position in zip(
+            _depth_guides(example.depth, masks, guides), appearance, masks, positions, strict=True
         )
     ]

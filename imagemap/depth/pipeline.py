@@ -39,7 +39,7 @@ Examples
 >>> result.image.shape, result.example_names
 ((40, 48, 3), ['blob_0', 'blob_2'])
 >>> [stage.name for stage in result.stages][:4]
-['select', 'pyramid', 'bands', 'synthesize']
+['select', 'pyramid', 'register', 'bands']
 """
 
 from __future__ import annotations
@@ -75,6 +75,7 @@ from imagemap.depth.guides import (
     sized_pyramid,
     to_rgb,
 )
+from imagemap.depth.register import Warp, register, registered_positions
 from imagemap.depth.selection import select_examples
 from imagemap.example import Example
 from imagemap.io import InputError, validate_depth
@@ -113,6 +114,7 @@ class State:
     names: list[str] | None = None
     mask: np.ndarray | None = None
     chosen: list[Example] = field(default_factory=list)
+    warps: list[Warp] = field(default_factory=list)  # each example onto the query
     query_levels: ReleasableLevels | None = None
     exemplar_levels: list[ReleasableLevels] | None = None
     engine: EngineResult | None = None
@@ -176,15 +178,30 @@ def _pyramid(state: State, config: DepthConfig) -> State:
     return state
 
 
+def _register(state: State, config: DepthConfig) -> State:
+    state.warps = [register(state.depth, example.depth) for example in state.chosen]
+    state.changed = f"{len(state.warps)} examples warped onto the query"
+    return state
+
+
 def _bands(state: State, config: DepthConfig) -> State:
     levels = config.pyramid.levels
+    query_positions, example_positions = None, [None] * len(state.chosen)
+    if state.warps:
+        query_positions, example_positions = registered_positions(
+            state.mask, [e.depth.shape for e in state.chosen], state.warps, levels
+        )
     # Handed over to the engine, which drops each level once it has packed its bands.
-    state.query_levels = ReleasableLevels(depth_mappings(state.depth, levels, config.guides))
+    state.query_levels = ReleasableLevels(
+        depth_mappings(state.depth, levels, config.guides, query_positions)
+    )
     state.exemplar_levels = [
         ReleasableLevels(
-            example_mappings(e, levels, config.matching.appearance_pyramid, config.guides)
+            example_mappings(
+                e, levels, config.matching.appearance_pyramid, config.guides, positions
+            )
         )
-        for e in state.chosen
+        for e, positions in zip(state.chosen, example_positions, strict=True)
     ]
     state.changed = f"{len(state.chosen)} examples"
     return state
@@ -206,7 +223,9 @@ def engine_params(config: DepthConfig, mask: np.ndarray, n_examples: int) -> Eng
         guide_weights=(guides.depth_weight, guides.depth_detail_weight)
         + ((guides.silhouette_weight,) if guides.silhouette_weight else ()),
         appearance_weights=(matching.luma_weight, matching.chroma_weight, matching.chroma_weight),
-        position_weight=guides.position_weight,
+        position_weight=(
+            guides.registered_position_weight if guides.registration else guides.position_weight
+        ),
         pca_fraction=matching.pca_fraction,
         backend=matching.backend,
         max_iterations=matching.max_iterations,
@@ -371,6 +390,7 @@ def _copies(config: DepthConfig) -> bool:
 STAGES: tuple[Stage, ...] = (
     Stage("select", _select),
     Stage("pyramid", _pyramid),
+    Stage("register", _register, lambda c: c.guides.registration),
     Stage("bands", _bands),
     Stage("synthesize", _synthesize),
     Stage("collapse", _collapse),
@@ -390,7 +410,12 @@ STAGES: tuple[Stage, ...] = (
 
 #: Stages whose seconds are reported as ``timings["selection"]``, ``["pyramids"]``; the
 #: engine reports its own; every stage after it counts as ``timings["collapse"]``.
-_TIMING_GROUPS = {"select": "selection", "pyramid": "pyramids", "bands": "pyramids"}
+_TIMING_GROUPS = {
+    "select": "selection",
+    "pyramid": "pyramids",
+    "register": "pyramids",
+    "bands": "pyramids",
+}
 
 
 def run_pipeline(

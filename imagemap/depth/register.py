@@ -1,0 +1,331 @@
+"""Registration of each example onto the query: a smooth non-rigid warp of the whole object.
+
+Two objects of one class differ in proportions and pose, not in what they are: a
+fish's eye sits behind its mouth, its fins where its body narrows. A smooth warp
+that carries the example's outline and relief onto the query's says where every
+query pixel lies on the example, so that an example's stripes, spots and parts
+can be copied as whole regions, bent with the object, instead of one window at a
+time (the coherence window-by-window matching lacks: fragments no larger than a
+window, at any resolution).
+
+The warp is an affine map from the objects' second moments composed with a cubic
+B-spline free-form deformation (Rueckert et al. 1999), fitted by Levenberg-Marquardt
+to a guide image of each object: its signed distance to the outline (soft-clipped)
+and its depth relative to its own deepest point, so that depth units do not
+matter. It is fitted at a working resolution where the object is
+``WORK_SIZE`` pixels across, coarse to fine over control grids of growing
+density, and evaluated at any resolution.
+
+Examples
+--------
+>>> yy, xx = np.mgrid[:60, :80]
+>>> def blob(cy, cx, ry, rx):
+...     u = ((yy - cy) / ry) ** 2 + ((xx - cx) / rx) ** 2
+...     return np.where(u < 1, 0.2 + np.sqrt(np.clip(1 - u, 0, 1)), 0).astype(np.float32)
+>>> query, example = blob(30, 40, 12, 25), blob(28, 36, 15, 30)
+>>> warp = register(query, example)
+>>> y, x = warp.forward(np.array([30.0]), np.array([65.0]))  # the query's right tip
+>>> round(float(y[0])), round(float(x[0]))
+(28, 66)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from threadpoolctl import threadpool_limits
+
+__all__ = ["Warp", "register", "registered_positions", "registration_guide"]
+
+#: The working resolution: the object is about this many pixels across (square root of
+#: its area) while the warp is fitted. A smooth warp of a whole object needs no more; a
+#: 4x map costs what a 1x one does.
+WORK_SIZE = 64.0
+#: Control points per side of the B-spline grids, coarse to fine (over the query
+#: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
+CONTROL_GRIDS = (4, 5, 7)
+#: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture range
+#: first, the outline's detail last.
+GRID_SMOOTHING = (2.0, 1.0, 0.5)
+#: Levenberg-Marquardt iterations per grid at most.
+ITERATIONS = 12
+#: Weight of the control points' squared displacement against the mean squared guide
+#: difference: keeps the warp smooth where the guide says nothing (inside a flat body).
+STIFFNESS = 1e-2
+#: Pixels of the working grid used for the fit at most (a regular subsample).
+FIT_PIXELS = 3000
+#: Soft clip (fraction of the object's size) of the signed distance in the guide image:
+#: the outline and the band within a few percent of it lead the fit.
+OUTLINE_REACH = 0.04
+
+
+def registration_guide(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The image the warp is fitted on: soft-clipped signed distance to the outline plus
+    the depth relative to the object's deepest point (both in [-0.5, 1]).
+
+    Examples
+    --------
+    >>> depth = np.zeros((5, 9), np.float32); depth[1:4, 2:7] = 2.0
+    >>> guide = registration_guide(depth, depth > 0)
+    >>> bool(guide[2, 4] > 0.5 > guide[0, 0])
+    True
+    """
+    size = max(float(np.sqrt(mask.sum())), 1.0)
+    signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
+    outline = np.tanh(signed / (OUTLINE_REACH * size))
+    deepest = float(depth[mask].max()) if mask.any() else 1.0
+    relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
+    return (0.5 * outline + 0.5 * relief).astype(np.float32)
+
+
+def _moments(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ys, xs = np.nonzero(mask)
+    return np.array([ys.mean(), xs.mean()]), np.maximum([ys.std(), xs.std()], 1e-3)
+
+
+def _bspline_weights(t: np.ndarray) -> np.ndarray:
+    """Cubic B-spline weights of the four control points around fractional ``t``."""
+    return np.stack(
+        [
+            (1 - t) ** 3 / 6,
+            (3 * t**3 - 6 * t**2 + 4) / 6,
+            (-3 * t**3 + 3 * t**2 + 3 * t + 1) / 6,
+            t**3 / 6,
+        ],
+        axis=-1,
+    )
+
+
+def _basis(coords: np.ndarray, low: float, high: float, n: int) -> np.ndarray:
+    """(len(coords), n) cubic B-spline basis of ``n`` control points over [low, high]."""
+    spacing = max(high - low, 1e-6) / (n - 3)
+    u = (np.asarray(coords, dtype=np.float64) - low) / spacing
+    first = np.clip(np.floor(u).astype(np.int64), 0, n - 4)
+    weights = _bspline_weights(np.clip(u - first, 0.0, 1.0))
+    out = np.zeros((len(u), n))
+    rows = np.arange(len(u))
+    for k in range(4):
+        out[rows, first + k] = weights[:, k]
+    return out
+
+
+def _tensor_basis(ys, xs, box, n) -> np.ndarray:
+    by = _basis(ys, box[0], box[1], n)
+    bx = _basis(xs, box[2], box[3], n)
+    return (by[:, :, None] * bx[:, None, :]).reshape(len(ys), n * n)
+
+
+@dataclass(frozen=True)
+class Warp:
+    """A query-to-example map: ``forward(y, x)`` gives the example coordinates of query
+    pixel coordinates (any resolution: coordinates are in pixels of the full images).
+
+    Attributes
+    ----------
+    query_centre, example_centre, scale : ndarray (2,)
+        The affine part: ``example = example_centre + scale * (query + d - query_centre)``.
+    box : tuple of float
+        The control grid's extent in query pixels (y0, y1, x0, x1).
+    coefficients : ndarray (2, n * n)
+        The B-spline displacement ``d`` (query pixels) per control point.
+    n : int
+        Control points per side.
+    """
+
+    query_centre: np.ndarray
+    example_centre: np.ndarray
+    scale: np.ndarray
+    box: tuple[float, float, float, float]
+    coefficients: np.ndarray
+    n: int
+
+    def displacement(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The B-spline displacement (query pixels) at query coordinates."""
+        basis = _tensor_basis(np.ravel(ys), np.ravel(xs), self.box, self.n)
+        shape = np.shape(ys)
+        return (basis @ self.coefficients[0]).reshape(shape), (
+            basis @ self.coefficients[1]
+        ).reshape(shape)
+
+    def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Example coordinates (y, x) of query coordinates."""
+        dy, dx = self.displacement(ys, xs)
+        return (
+            self.example_centre[0] + self.scale[0] * (ys + dy - self.query_centre[0]),
+            self.example_centre[1] + self.scale[1] * (xs + dx - self.query_centre[1]),
+        )
+
+    def inverse(self, ys: np.ndarray, xs: np.ndarray, iterations: int = 12) -> tuple:
+        """Query coordinates of example coordinates (fixed-point iteration: the displacement
+        is smooth and small against the object)."""
+        ty = self.query_centre[0] + (ys - self.example_centre[0]) / self.scale[0]
+        tx = self.query_centre[1] + (xs - self.example_centre[1]) / self.scale[1]
+        qy, qx = ty.copy(), tx.copy()
+        for _ in range(iterations):
+            dy, dx = self.displacement(qy, qx)
+            qy, qx = ty - dy, tx - dx
+        return qy, qx
+
+
+def _fit(fixed, moving, fixed_mask, moving_mask) -> Warp:
+    """The warp of ``moving`` onto ``fixed`` (same working resolution), fitted coarse to
+    fine by Levenberg-Marquardt."""
+    query_centre, query_spread = _moments(fixed_mask)
+    example_centre, example_spread = _moments(moving_mask)
+    scale = example_spread / query_spread
+    region = ndimage.binary_dilation(fixed_mask, iterations=3)
+    ys, xs = np.nonzero(region)
+    step = max(1, int(np.ceil(len(ys) / FIT_PIXELS)))
+    ys, xs = ys[::step].astype(np.float64), xs[::step].astype(np.float64)
+    box = (ys.min() - 2.0, ys.max() + 2.0, xs.min() - 2.0, xs.max() + 2.0)
+    displacement = None
+    coefficients = np.zeros((2, 16))
+    n = CONTROL_GRIDS[0]
+    for n, sigma in zip(CONTROL_GRIDS, GRID_SMOOTHING, strict=True):
+        target = ndimage.gaussian_filter(fixed, sigma)[ys.astype(int), xs.astype(int)]
+        image = ndimage.gaussian_filter(moving, sigma * float(scale.mean()))
+        grad_y, grad_x = np.gradient(image)
+        basis = _tensor_basis(ys, xs, box, n)
+        if displacement is None:
+            coefficients = np.zeros((2, n * n))
+        else:  # the coarser grid's displacement, refitted on this grid
+            coefficients = np.linalg.lstsq(basis, displacement.T, rcond=None)[0].T
+        penalty = STIFFNESS * len(ys) / (n * n)
+
+        def residual(c, basis=basis, image=image, target=target, penalty=penalty):
+            wy = example_centre[0] + scale[0] * (ys + basis @ c[0] - query_centre[0])
+            wx = example_centre[1] + scale[1] * (xs + basis @ c[1] - query_centre[1])
+            r = ndimage.map_coordinates(image, [wy, wx], order=1, mode="nearest") - target
+            return r, wy, wx, float(r @ r + penalty * np.sum(c * c))
+
+        r, wy, wx, energy = residual(coefficients)
+        damping = 1e-3
+        for _ in range(ITERATIONS):
+            gy = ndimage.map_coordinates(grad_y, [wy, wx], order=1, mode="nearest") * scale[0]
+            gx = ndimage.map_coordinates(grad_x, [wy, wx], order=1, mode="nearest") * scale[1]
+            jacobian = np.concatenate([gy[:, None] * basis, gx[:, None] * basis], axis=1)
+            hessian = jacobian.T @ jacobian + penalty * np.eye(2 * n * n)
+            gradient = jacobian.T @ r + penalty * coefficients.ravel()
+            improved = False
+            while damping < 1e6:
+                lhs = hessian + damping * np.diag(np.diag(hessian) + 1e-12)
+                trial = coefficients + np.linalg.solve(lhs, -gradient).reshape(2, -1)
+                r_new, wy_new, wx_new, energy_new = residual(trial)
+                if energy_new < energy:
+                    coefficients, r, wy, wx, energy = trial, r_new, wy_new, wx_new, energy_new
+                    damping *= 0.3
+                    improved = True
+                    break
+                damping *= 10.0
+            if not improved:
+                break
+        displacement = np.stack([basis @ coefficients[0], basis @ coefficients[1]])
+    return Warp(query_centre, example_centre, scale, box, coefficients, n)
+
+
+def register(query_depth: np.ndarray, example_depth: np.ndarray) -> Warp:
+    """The smooth warp from the query's object onto the example's (full-resolution pixels).
+
+    Parameters
+    ----------
+    query_depth, example_depth : ndarray (H, W)
+        Depth maps, background 0 (any units: each is taken relative to its own range).
+
+    Returns
+    -------
+    Warp
+    """
+    query_mask, example_mask = query_depth > 0, example_depth > 0
+    size = float(np.sqrt(query_mask.sum()))
+    zoom = min(1.0, WORK_SIZE / max(size, 1.0))
+
+    def working(depth, mask):
+        guide = registration_guide(depth, mask)
+        if zoom >= 1.0:
+            return guide, mask
+        small = ndimage.zoom(guide, zoom, order=1, prefilter=False)
+        small_mask = ndimage.zoom(mask.astype(np.float32), zoom, order=1, prefilter=False) > 0.5
+        return small, small_mask if small_mask.any() else small > 0.25
+
+    fixed, fixed_mask = working(query_depth, query_mask)
+    moving, moving_mask = working(example_depth, example_mask)
+    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
+        warp = _fit(fixed, moving, fixed_mask, moving_mask)
+    if zoom >= 1.0:
+        return warp
+
+    # Back to full-resolution pixels: a working pixel centre j is full-resolution
+    # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
+    def full(v):
+        return (np.asarray(v) + 0.5) / zoom - 0.5
+
+    return Warp(
+        query_centre=full(warp.query_centre),
+        example_centre=full(warp.example_centre),
+        scale=warp.scale,
+        box=tuple(float(full(b)) for b in warp.box),  # type: ignore[arg-type]
+        coefficients=warp.coefficients / zoom,
+        n=warp.n,
+    )
+
+
+def _frame(mask: np.ndarray) -> np.ndarray:
+    """(yc, xc, r): the query object's centroid and RMS radius (the engine's frame)."""
+    ys, xs = np.nonzero(mask)
+    radius = max(float(np.sqrt(ys.var() + xs.var())), 1.0)
+    return np.array([ys.mean(), xs.mean(), radius])
+
+
+def _level_coordinates(shape: tuple[int, int], level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Full-resolution coordinates of the pixel centres of pyramid level ``level``."""
+    factor = 2**level
+    height, width = (shape[0] + factor - 1) // factor, (shape[1] + factor - 1) // factor
+    ys = np.arange(height) * factor + (factor - 1) / 2.0
+    xs = np.arange(width) * factor + (factor - 1) / 2.0
+    return ys, xs
+
+
+def registered_positions(
+    query_mask: np.ndarray,
+    example_shapes: list[tuple[int, int]],
+    warps: list[Warp],
+    levels: int,
+    grid_step: int = 4,
+) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
+    """Position bands for the engine: per level, the query's own position and each
+    example pixel's position where its warp puts it on the query, both relative to the
+    query object's centroid in units of its RMS radius.
+
+    The inverse warp is evaluated on a grid of every ``grid_step``-th pixel and
+    interpolated (it is smooth).
+
+    Returns
+    -------
+    query : list of ndarray (H_l, W_l, 2)
+    examples : list (per example) of list (per level) of ndarray (H_l, W_l, 2)
+    """
+    frame = _frame(query_mask)
+    query_levels = []
+    for level in range(levels):
+        ys, xs = _level_coordinates(query_mask.shape, level)
+        grid_y, grid_x = np.meshgrid((ys - frame[0]) / frame[2], (xs - frame[1]) / frame[2])
+        query_levels.append(np.stack([grid_y.T, grid_x.T], axis=-1).astype(np.float32))
+    example_levels = []
+    for shape, warp in zip(example_shapes, warps, strict=True):
+        coarse_y = np.arange(0, shape[0] + grid_step, grid_step, dtype=np.float64)
+        coarse_x = np.arange(0, shape[1] + grid_step, grid_step, dtype=np.float64)
+        cy, cx = np.meshgrid(coarse_y, coarse_x, indexing="ij")
+        qy, qx = warp.inverse(cy, cx)
+        positions = np.stack([(qy - frame[0]) / frame[2], (qx - frame[1]) / frame[2]])
+        per_level = []
+        for level in range(levels):
+            ys, xs = _level_coordinates(shape, level)
+            gy, gx = np.meshgrid(ys / grid_step, xs / grid_step, indexing="ij")
+            sampled = [
+                ndimage.map_coordinates(p, [gy, gx], order=1, mode="nearest") for p in positions
+            ]
+            per_level.append(np.stack(sampled, axis=-1).astype(np.float32))
+        example_levels.append(per_level)
+    return query_levels, example_levels
