@@ -12,7 +12,10 @@ the screen, z out of the surface). Two integrations:
   pair of horizontally or vertically adjacent mask pixels, z[j] - z[i] equals the mean of
   their two slopes. Pixels outside the mask take no part; each connected part of the mask
   gets its own zero mean (the offset between parts is not observable). The normal
-  equations are a sparse graph Laplacian, solved directly (scipy.sparse).
+  equations are a sparse graph Laplacian, solved directly (scipy.sparse's SuperLU): about
+  1 s for the 37,000 pixels of a 108 px sphere, but it grows faster than the pixel count
+  (on a loaded 2-core machine a 512^2 frame took 14 s; 1024^2 almost 3 minutes with the
+  default ordering). A multigrid solver (pyamg) would scale; not a dependency yet.
 
 :func:`integrate_normals` chooses between them. Heights are in pixels.
 
@@ -195,7 +198,9 @@ def poisson_integration(
     values = np.tile([1.0, -1.0], n_pairs)
     difference = sparse.csr_matrix((values, (rows, columns)), shape=(n_pairs, n_pixels))
     laplacian = (difference.T @ difference + POISSON_RIDGE * sparse.identity(n_pixels)).tocsc()
-    solution = spsolve(laplacian, difference.T @ target)
+    # A symmetric matrix: the minimum-degree ordering of A^T + A fills in less than the
+    # default COLAMD (512^2 frame: 13.8 s against 22.2 s on a loaded 2-core machine).
+    solution = spsolve(laplacian, difference.T @ target, permc_spec="MMD_AT_PLUS_A")
     # Each connected part floats on its own: give each a zero mean.
     labels, count = ndimage.label(mask)
     part = labels[mask] - 1
