@@ -16,8 +16,9 @@ which at every size
   to its object's box and stretched onto the query's box: the floor any method must
   beat), and for EbSynth when the ``EBSYNTH`` environment variable names its binary
   (one exemplar, the nearest, with a depth guide and a position guide);
-- prints one table and writes ``SIZE.png`` (truth | ours | bbox copy [| EbSynth]) and
-  the task's close-ups, and with ``--json`` the figures.
+- prints one table and writes ``SIZE.png`` (truth | ours | bbox copy [| EbSynth]),
+  ``SIZE_fragments.png`` (ours | its fragments in random colours) and the task's
+  close-ups, and with ``--json`` the figures.
 
 EbSynth (https://github.com/jamriska/ebsynth, public domain) is not part of imagemap;
 build it from source (``docs/measures.md``) and point ``EBSYNTH`` at the binary.
@@ -179,6 +180,16 @@ def measure(image, task: Task, mask, source=None) -> dict:
     return figures
 
 
+def fragment_picture(image: np.ndarray, source: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The map beside its fragments, each in a colour of its own (white background)."""
+    from imagemap.metrics import fragment_labels
+
+    labels = fragment_labels(source, mask)
+    colours = np.random.default_rng(0).uniform(0.15, 1.0, (labels.max() + 1, 3))
+    colours[0] = 1.0
+    return np.concatenate([image, colours[labels]], axis=1)
+
+
 def _cell(value) -> str:
     if isinstance(value, str):
         return value
@@ -266,6 +277,7 @@ def main(
         rows.append({"size": size, "method": "truth", **truth_figures})
         pictures = [task.truth] + [image for image, _, _ in maps.values()]
         _png(args.out / f"{size}.png", np.concatenate(pictures, axis=1))
+        _png(args.out / f"{size}_fragments.png", fragment_picture(ours, result.source, mask))
         for name, (ys, xs) in task.closeups.items():
             close = np.concatenate([task.truth[ys, xs], ours[ys, xs]], axis=1)
             zoom = max(1, 240 // max(close.shape[0], 1))
