@@ -51,6 +51,79 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: What ``write_class`` writes into --out (besides ``contact_sheet.png`` and the
+#: ``holdout/`` and ``meshes/`` folders of the same): CLASS_NNN + a suffix.
+_OURS = (
+    r"^{cls}_\d{{3,}}"
+    r"(?:_(?:depth|image|labels|normal|roughness|metallic|height|ao))?\.(?:png|json)$"
+)
+
+
+def check_out_holds_only_ours(out: str, class_name: str) -> None:
+    """Refuse an --out folder holding anything this command would not write itself (a
+    database of other examples, a user's folder): it would be mixed with, or partly
+    replaced by, the new instances. A folder of an earlier run of the same class is
+    made anew."""
+    import re
+    from pathlib import Path
+
+    from imagemap.io import is_temporary
+
+    root = Path(out)
+    if not root.is_dir():
+        return
+    ours = re.compile(_OURS.format(cls=re.escape(class_name)))
+    mesh = re.compile(rf"^{re.escape(class_name)}_\d{{3,}}\.glb$")
+
+    def foreign(folder: Path, depth: int) -> Path | None:
+        for entry in sorted(folder.iterdir()):
+            if entry.is_dir() and depth == 0 and entry.name in ("holdout", "meshes"):
+                found = foreign(entry, 1 if entry.name == "holdout" else 2)
+                if found is not None:
+                    return found
+                continue
+            if entry.is_dir() and depth == 1 and entry.name == "meshes":
+                if (found := foreign(entry, 2)) is not None:
+                    return found
+                continue
+            name = entry.name
+            if entry.is_file() and (
+                (depth < 2 and ours.match(name))
+                or (depth == 2 and mesh.match(name))
+                or (depth == 0 and name == "contact_sheet.png")
+                or is_temporary(entry)
+            ):
+                continue
+            return entry
+        return None
+
+    if (found := foreign(root, 0)) is not None:
+        raise InputError(
+            f"--out {out}: holds {found}, which this command does not write: the folder is "
+            f"someone's data (a database or your files), not an earlier {class_name} run; "
+            "give a new or empty folder"
+        )
+
+
+#: Peak bytes per pixel of one instance while a class is made, measured (VmHWM, count 1):
+#: fish 722 bytes/pixel from 800x600 to 1600x1200 (567 MB, 1.58 GB), busts at 800x600
+#: 992 MB (about 1,800 above the start-up); bounded by busts'.
+_INSTANCE_PIXEL_BYTES = 2000
+#: Kept per instance until the contact sheet is drawn (depth, image, labels, PBR maps).
+_KEPT_PIXEL_BYTES = 64
+
+
+def check_memory_for(class_name: str, count: int, size) -> None:
+    """Refuse a --size (and --count) the memory this process may use cannot hold."""
+    from data_gen import CLASSES
+    from imagemap.memory import check_memory
+
+    width, height = size or CLASSES[class_name].default_size
+    pixels = int(width) * int(height)
+    needed = pixels * (_INSTANCE_PIXEL_BYTES + _KEPT_PIXEL_BYTES * max(int(count), 1))
+    check_memory(needed, f"--size {width}x{height}", advice="give a smaller --size")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(
@@ -63,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
         from imagemap.outputs import check_output_directory
 
         check_output_directory(args.out, "--out directory")
+        check_out_holds_only_ours(args.out, args.class_name)
+        check_memory_for(args.class_name, args.count, args.size)
         instances = write_class(
             CLASSES[args.class_name],
             args.out,

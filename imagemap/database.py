@@ -10,6 +10,7 @@ database costs nothing until its examples are needed.
 
 from __future__ import annotations
 
+import numbers
 import os
 import re
 from pathlib import Path
@@ -21,6 +22,10 @@ from imagemap.mesh.examples import MeshExample, mesh_examples
 from imagemap.mesh.views import View
 
 __all__ = ["Database", "Example", "check_database", "database_at_view", "prepare_database"]
+
+#: The smallest object an example may have: one window of the finest level (7x7 in every
+#: preset, the paper's Table 1). A smaller example cannot give a single whole window.
+MIN_EXAMPLE_PIXELS = 49
 
 _DEPTH_RE = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
 _IMAGE_RE = re.compile(r"^(?P<name>.+)_image\.(?:png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
@@ -73,6 +78,8 @@ class Database:
         Textured meshes in it (``NAME.glb``, ``.obj``, ``.ply``...) are examples too,
         rendered from ``view`` at ``size`` (W, H) on first use (see :mod:`imagemap.mesh`).
         """
+        if not isinstance(path, str | os.PathLike) or not str(path):
+            raise InputError(f"Database.from_directory: expected a folder, got {path!r}")
         examples, problems = _scan(Path(path))
         meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
         examples, problems = [*examples, *meshes], problems + mesh_problems
@@ -99,6 +106,16 @@ class Database:
             raise InputError(
                 f"{self.source or 'database'}: no example named {key!r} "
                 f"(have: {', '.join(self.names[:10])}{'...' if len(self) > 10 else ''})"
+            )
+        if isinstance(key, bool) or not isinstance(key, numbers.Integral):
+            raise InputError(
+                f"{self.source or 'database'}: examples are found by name or position, "
+                f"got {key!r}"
+            )
+        if not -len(self) <= key < len(self):
+            raise InputError(
+                f"{self.source or 'database'}: no example at position {key} "
+                f"(it has {len(self)})"
             )
         return self.examples[key]
 
@@ -248,6 +265,11 @@ def check_database(
             problems.append(str(exc))
             continue
         foreground = depth[depth > 0]
+        if foreground.size < MIN_EXAMPLE_PIXELS:
+            problems.append(
+                f"{example.depth_path or example.name}: its object has {foreground.size} "
+                f"pixel(s); an example needs at least {MIN_EXAMPLE_PIXELS} (one window)"
+            )
         rows.append(
             {
                 "name": example.name,

@@ -104,6 +104,11 @@ def make_temporary(path: str | os.PathLike, suffix: str | None = None) -> Path:
     return Path(tmp)
 
 
+def is_temporary(candidate: str | os.PathLike) -> bool:
+    """Whether ``candidate`` is named as :func:`make_temporary` names its files."""
+    return bool(_TEMPORARY_RE.match(Path(candidate).name))
+
+
 def is_temporary_of(candidate: str | os.PathLike, target: str | os.PathLike) -> bool:
     """Whether ``candidate`` is a temporary file :func:`make_temporary` made for ``target``."""
     match = _TEMPORARY_RE.match(Path(candidate).name)
@@ -266,6 +271,11 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         image = np.repeat(image[..., None], 3, axis=2)
     if image.ndim != 3 or image.shape[2] not in (3, 4):
         raise InputError(f"{path}: expected an RGB(A) or grey image, got shape {image.shape}")
+    if image.shape[2] == 4 and not np.any(image[..., 3] > 0):
+        raise InputError(
+            f"{path}: the image is fully transparent (alpha 0 everywhere): its colours are "
+            "hidden; save it without alpha, or with the object opaque"
+        )
     image = image[..., :3]
     if not np.all(np.isfinite(image)):
         raise InputError(f"{path}: image has NaN or infinite values")

@@ -150,9 +150,12 @@ def test_mesh_route_bakes_the_roughness_a_mesh_example_carries(tmp_path, monkeyp
     views_path = (
         {"uv_space": False} if "uv_space" in inspect.signature(colorize_mesh).parameters else {}
     )
-    made = colorize_mesh(
-        mesh, database, views, size=(64, 48), texture_size=64, preset="busts", **views_path
-    )
+    from imagemap.depth.units import query_in_database
+
+    with query_in_database():  # the example is its own query, on purpose
+        made = colorize_mesh(
+            mesh, database, views, size=(64, 48), texture_size=64, preset="busts", **views_path
+        )
     databases = [database_at_view(database, v, (64, 48)) for v in views]
     out = with_mesh_maps(
         made.mesh,

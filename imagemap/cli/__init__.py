@@ -170,6 +170,37 @@ def _map_large_blocks() -> None:
         ctypes.CDLL("libc.so.6").mallopt(-3, _MMAP_THRESHOLD)  # -3: M_MMAP_THRESHOLD
 
 
+def _record_given(parser: argparse.ArgumentParser) -> None:
+    """Make every action of ``parser`` (and its subcommands') note its destination in the
+    namespace's ``_given`` set when the command line invokes it."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for subparser in action.choices.values():
+                _record_given(subparser)
+            continue
+        base = type(action)
+
+        class Recorded(base):  # type: ignore[misc,valid-type]  (a subclass made per action)
+            def __call__(self, parser, namespace, values, option_string=None):
+                namespace.__dict__.setdefault("_given", set()).add(self.dest)
+                return super().__call__(parser, namespace, values, option_string)
+
+        action.__class__ = Recorded
+
+
+def _given_options(argv: list[str] | None) -> frozenset[str]:
+    """The destinations of the options the command line gives itself (not their defaults):
+    a command refuses an option that does not apply to its input, and two that conflict,
+    whatever their order (``--views A --view B``)."""
+    parser = build_parser()
+    _record_given(parser)
+    try:
+        namespace, _ = parser.parse_known_args(argv)
+    except SystemExit:  # parsed once already; kept safe
+        return frozenset()
+    return frozenset(getattr(namespace, "_given", ()))
+
+
 def _main(argv: list[str] | None, own_process: bool = False) -> int:
     parser = build_parser()
     try:
@@ -192,6 +223,7 @@ def _main(argv: list[str] | None, own_process: bool = False) -> int:
         level = logging.ERROR
     logging.basicConfig(level=level, format="imagemap: %(message)s", stream=sys.stderr)
     args.own_process = own_process
+    args.given = _given_options(argv)
     if args.command != "synthesize":  # synthesize decides by the map's size
         map_large_blocks(args)
     try:

@@ -93,7 +93,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_batch_cli(args: argparse.Namespace) -> int:
     from imagemap.batch import BatchOptions, run_batch
+    from imagemap.cli.synthesize import check_cache, check_views_given
 
+    check_views_given(args)
+    check_cache()
     options = BatchOptions(
         preset=args.preset,
         options=config_options(args),

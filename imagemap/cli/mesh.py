@@ -104,6 +104,28 @@ def _with_view_maps(made, mesh, database, size):
     )
 
 
+def _guard_memory(args: argparse.Namespace, mesh, views) -> None:
+    """The memory guard of the mesh route (imagemap.depth.budget.guard_mesh): the views'
+    size and the texture's (the one the bake would choose when not given)."""
+    import numpy as np
+
+    from imagemap.depth.budget import guard_mesh
+    from imagemap.mesh.bake import texture_size_for
+    from imagemap.mesh.views import DEFAULT_MARGIN
+
+    size = args.size
+    texture = args.texture_size
+    if texture is None:
+        extent = float(np.ptp(np.asarray(mesh.vertices), axis=0).max())
+        pixel = extent / (min(size) * (1 - 2 * DEFAULT_MARGIN))
+        try:
+            texture = texture_size_for(mesh, pixel)
+        except InputError:  # no usable UVs: the bake says so itself
+            texture = 512
+    check = False if args.no_memory_check else None  # None: IMAGEMAP_NO_MEMORY_CHECK decides
+    guard_mesh(size, max(len(views), 1), texture, str(args.depth[0]), check)
+
+
 def run_mesh_synthesize(args: argparse.Namespace) -> int:
     """``imagemap synthesize MESH -o out.glb|out.obj|out.png``: one mesh, one or more views."""
     import time
@@ -152,7 +174,8 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     for name in examples or []:
         database[name]  # unknown names fail here
     plan = OutputPlan()
-    plan.add_query(source, "input mesh")  # with the MTL and textures it reads, and its truth
+    # With the MTL and textures it reads, and its truth (kept unless --overwrite).
+    plan.add_query(source, "input mesh", overwrite=args.overwrite, hint="; --overwrite replaces it")
     plan.add_database(database, args.db)
     # An OBJ's .mtl and texture are checked with it (imagemap.outputs.written_companions).
     companions = written_companions(output)
@@ -165,6 +188,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         if path:
             plan.add_output(path, option, suffixes=suffixes)
     plan.check()
+    _guard_memory(args, mesh, views)  # before any work: --size and --texture-size
     start = time.perf_counter()
     if getattr(args, "views", None) == "auto":
         views = tuple(choose_views(mesh, views))

@@ -110,7 +110,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run even when the estimated memory exceeds what is available (see -v for the "
         "estimate)",
     )
+    before = {action.dest for action in p._actions}
     add_mesh_options(p)  # mesh input and .glb/.obj output: imagemap/cli/mesh.py
+    MESH_FLAGS.update(
+        {a.dest: "/".join(a.option_strings) for a in p._actions if a.dest not in before}
+    )
     add_common_options(p)
     p.set_defaults(func=run_synthesize)
 
@@ -129,6 +133,85 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     check.add_argument("--json", action="store_true", help="print the report as JSON")
     check.set_defaults(func=run_db_check)
     db.set_defaults(func=lambda args: db.print_help() or 2)
+
+
+#: The mesh options (``add_mesh_options``: destination -> flags), filled when the parser is
+#: built: on depth-map input each is refused, not ignored.
+MESH_FLAGS: dict[str, str] = {}
+
+
+def check_applicable(args: argparse.Namespace, mesh: bool) -> None:
+    """Refuse options that do not apply to the input, and options that conflict.
+
+    ``args.given`` holds the options the command line gave (see ``imagemap.cli``); a
+    Namespace built elsewhere, without it, is checked for conflicts only.
+    """
+    given = getattr(args, "given", frozenset())
+    if not mesh:
+        for dest, flags in MESH_FLAGS.items():
+            if dest in given:
+                raise InputError(
+                    f"{flags}: applies to mesh input (.glb .obj .ply ...); "
+                    f"{args.depth[0]} is a depth map (its size is its own)"
+                )
+    check_views_given(args)
+    for option, text in (("--examples", args.examples), ("--exclude", args.exclude)):
+        if text is not None and not [n for n in text.split(",") if n.strip()]:
+            raise InputError(f"{option} {text!r}: no example name given")
+    if args.examples and args.exclude:
+        both = {n.strip() for n in args.examples.split(",")} & {
+            n.strip() for n in args.exclude.split(",")
+        }
+        if both:
+            raise InputError(
+                f"--examples and --exclude both name {', '.join(sorted(both))}: "
+                "an example cannot be used and left out"
+            )
+    if args.examples:
+        names = [n.strip() for n in args.examples.split(",") if n.strip()]
+        if len(set(names)) != len(names):
+            raise InputError(f"--examples {args.examples!r}: a name is given twice")
+    output = Path(args.output).suffix.lower()
+    if mesh and "background" in given and output in (".glb", ".obj"):
+        raise InputError(
+            f"--background: applies to .png maps; {args.output} is a textured mesh "
+            "(its texture has no background)"
+        )
+
+
+def check_cache() -> None:
+    """``IMAGEMAP_CACHE`` (where mesh examples' renders are kept), when set, must be a folder
+    this process can read and write, or one it can make: said at the door, not as a
+    traceback from the first mesh example."""
+    import os
+
+    root = os.environ.get("IMAGEMAP_CACHE")
+    if not root:
+        return
+    path = Path(root).expanduser()
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing == path and not path.is_dir():
+        raise InputError(f"IMAGEMAP_CACHE={root}: is a file, not a folder")
+    if not existing.is_dir():
+        raise InputError(f"IMAGEMAP_CACHE={root}: {existing} is a file, not a folder")
+    if not os.access(existing, os.R_OK | os.W_OK | os.X_OK):
+        raise InputError(
+            f"IMAGEMAP_CACHE={root}: {existing} cannot be read and written by this user; "
+            "point IMAGEMAP_CACHE at a folder you own (or unset it)"
+        )
+
+
+def check_views_given(args: argparse.Namespace) -> None:
+    """--view beside --views (in either order) is a conflict; an empty one is an error."""
+    given = getattr(args, "given", frozenset())
+    if "view" in given and "views" in given:
+        raise InputError("--view and --views: give one (--view AZ,EL is --views AZ,EL)")
+    for dest, option in (("view", "--view"), ("views", "--views")):
+        value = getattr(args, dest, None)
+        if (dest in given or value is not None) and isinstance(value, str) and not value.strip():
+            raise InputError(f"{option} '': no view given (e.g. {option} front, or 30,10)")
 
 
 def _name_of(depth_path) -> str:
@@ -239,7 +322,10 @@ def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.depth.budget import guard_colorize
     from imagemap.io import read_depth
 
-    if is_mesh_request(args):  # a mesh in, or a textured mesh out
+    mesh = is_mesh_request(args)  # a mesh in, or a textured mesh out
+    check_applicable(args, mesh)
+    check_cache()
+    if mesh:
         map_large_blocks(args)
         return run_mesh_synthesize(args)
     background = parse_colour(args.background)

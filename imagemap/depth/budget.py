@@ -27,13 +27,12 @@ import logging
 import os
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
+from imagemap import memory
 from imagemap.depth.config import resolve_config
 from imagemap.depth.guides import sized_pyramid
-from imagemap.io import InputError
 
 __all__ = [
     "Estimate",
@@ -79,8 +78,9 @@ LONG_RUN_SECONDS = 300.0
 _CHECK = contextvars.ContextVar("imagemap_memory_check", default=True)
 
 
-class MemoryBudgetError(InputError):
-    """A run whose estimated memory exceeds what this machine has available."""
+#: A run whose estimated memory exceeds what this process may use (one type for every
+#: guard: :class:`imagemap.memory.MemoryBudgetError`).
+MemoryBudgetError = memory.MemoryBudgetError
 
 
 @dataclass(frozen=True)
@@ -194,20 +194,11 @@ def estimate_colorize(
 
 
 def available_memory() -> int | None:
-    """Bytes this process can still use: MemAvailable or a smaller cgroup limit (None: unknown)."""
-    available = None
-    with contextlib.suppress(OSError, ValueError):
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                available = int(line.split()[1]) * 1024
-                break
-    with contextlib.suppress(OSError, ValueError):
-        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
-        current = int(Path("/sys/fs/cgroup/memory.current").read_text())
-        if limit != "max":
-            room = int(limit) - current
-            available = room if available is None else min(available, room)
-    return available
+    """Bytes this process can still use: the smallest of MemAvailable, a cgroup's room (v1 or
+    v2) and ``RLIMIT_AS``'s room (``ulimit -v``, where an allocation past it fails at once
+    whatever the machine has free); None when none is known. See
+    :func:`imagemap.memory.available_memory`."""
+    return memory.available_memory()
 
 
 @contextlib.contextmanager
@@ -316,3 +307,74 @@ def guard_colorize(
             "(Python: with imagemap.depth.budget.memory_check(False))"
         )
     return estimate
+
+
+# The mesh route, measured as VmHWM of ``imagemap synthesize MESH -o out.glb`` (a 10,560-face
+# fish against five fish meshes): one view at 400x300 355 MB, 800x600 656 MB, so 856 bytes
+# per pixel of a view (render, synthesis and the view's results); the bake, two views at
+# 100x75: texture 2048^2 1.09 GB, 4096^2 3.55 GB, so 195 bytes per texel.
+_VIEW_PIXEL_BYTES = 860
+_KEPT_VIEW_PIXEL_BYTES = 60  # each finished view's map, source map and render, kept
+_TEXEL_BYTES = 200
+
+
+def estimate_mesh(size: tuple[int, int], views: int, texture_size: int) -> int:
+    """Estimated peak bytes of a mesh synthesis: ``views`` views of ``size`` (W, H), baked
+    into a ``texture_size``^2 atlas (see the measurements above).
+
+    Examples
+    --------
+    >>> round(estimate_mesh((800, 600), 1, 512) / 2**20)
+    524
+    >>> estimate_mesh((20000, 20000), 1, 512) > 300 * 2**30
+    True
+    """
+    pixels = int(size[0]) * int(size[1])
+    return int(
+        _OVERHEAD_BYTES
+        + pixels * (_VIEW_PIXEL_BYTES + _KEPT_VIEW_PIXEL_BYTES * max(views - 1, 0))
+        + int(texture_size) ** 2 * _TEXEL_BYTES
+    )
+
+
+def guard_mesh(
+    size: tuple[int, int],
+    views: int,
+    texture_size: int,
+    what: str = "the mesh",
+    check: bool | None = None,
+) -> int | None:
+    """Refuse a mesh synthesis whose estimate (:func:`estimate_mesh`) exceeds the memory this
+    process may use (:func:`available_memory`: RLIMIT_AS and cgroup limits included).
+
+    ``check`` None follows :func:`memory_check` and ``IMAGEMAP_NO_MEMORY_CHECK``; False
+    estimates and logs only. Returns the estimate (None when switched off).
+
+    Raises
+    ------
+    MemoryBudgetError
+        Naming ``--size`` and ``--texture-size`` and the way out.
+    """
+    if check is None:
+        if not _enabled():
+            return None
+        check = True
+    needed = estimate_mesh(size, views, texture_size)
+    log.info(
+        "estimate for %s (%d view(s) at %dx%d, texture %d): %s",
+        what,
+        views,
+        size[0],
+        size[1],
+        texture_size,
+        _format_bytes(needed),
+    )
+    available = available_memory()
+    if check and available is not None and needed > available:
+        raise MemoryBudgetError(
+            f"{what}: {views} view(s) at --size {size[0]}x{size[1]} and --texture-size "
+            f"{texture_size} need about {_format_bytes(needed)}, but only "
+            f"{_format_bytes(available)} of memory is available: use a smaller --size or "
+            "--texture-size, fewer --views, or run anyway with --no-memory-check"
+        )
+    return needed

@@ -376,6 +376,10 @@ class _Instance(NamedTuple):
 
 
 def _within(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]) -> bool:
+    """Whether every pixel (ys, xs) lies in ``shape``; False for no pixels (a displaced copy
+    wholly outside the object has nothing to recopy: the map is left as it is)."""
+    if ys.size == 0:
+        return False
     return ys.min() >= 0 and xs.min() >= 0 and ys.max() < shape[0] and xs.max() < shape[1]
 
 

@@ -9,6 +9,7 @@ per stage with its paper or reason.
 =====================  ==================================================
 stage                  what it does
 =====================  ==================================================
+``units``              the query at the examples' depth scale; not an example
 ``select``             the examples: named, or the nearest ``m`` in depth
 ``pyramid``            as many levels as the object's size calls for
 ``bands``              guide bands of query and examples, their colour levels
@@ -38,8 +39,8 @@ Examples
 >>> result = colorize(blob(20), db.without("blob_1"), preset="fish", seed=0)
 >>> result.image.shape, result.example_names
 ((40, 48, 3), ['blob_0', 'blob_2'])
->>> [stage.name for stage in result.stages][:4]
-['select', 'pyramid', 'register', 'bands']
+>>> [stage.name for stage in result.stages][:3]
+['units', 'select', 'pyramid']
 """
 
 from __future__ import annotations
@@ -77,6 +78,7 @@ from imagemap.depth.guides import (
 )
 from imagemap.depth.register import Warp, register, registered_positions
 from imagemap.depth.selection import select_examples
+from imagemap.depth.units import units_stage
 from imagemap.example import Example
 from imagemap.io import InputError, validate_depth
 from imagemap.validate import check_examples, check_seed
@@ -388,6 +390,7 @@ def _copies(config: DepthConfig) -> bool:
 
 #: The pipeline, in order.
 STAGES: tuple[Stage, ...] = (
+    Stage("units", units_stage),  # imagemap/depth/units.py: depth scale, the query itself
     Stage("select", _select),
     Stage("pyramid", _pyramid),
     Stage("register", _register, lambda c: c.guides.registration),
