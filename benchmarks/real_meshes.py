@@ -590,8 +590,20 @@ def first_choice(name: str, folder: Path, view: str = "front") -> str:
     return database.names[select_examples(query.depth, database, m=1)[0]]
 
 
-def synthesize(name: str, folder: Path, out: Path, views: str, preset: str, seed: int = 0):
-    """Run the mesh route on ``name`` held out; write ``out/NAME.glb``; (mesh, results, s)."""
+#: ``run --path``: the mesh route's choice (auto), or one path forced (``uv_space``).
+PATHS = {"auto": None, "uv-space": True, "views": False}
+
+
+def synthesize(
+    name: str,
+    folder: Path,
+    out: Path,
+    views: str,
+    preset: str,
+    seed: int = 0,
+    uv_space: bool | None = None,
+):
+    """Run the mesh route on ``name`` held out; write ``out/NAME.glb``; (path, MeshResult, s)."""
     from imagemap.database import Database
     from imagemap.mesh import colorize_mesh
     from imagemap.mesh.files import export_textured, load_mesh
@@ -599,12 +611,13 @@ def synthesize(name: str, folder: Path, out: Path, views: str, preset: str, seed
     database = Database.from_directory(folder).without(name)
     start = time.perf_counter()
     result = colorize_mesh(
-        load_mesh(folder / f"{name}.glb"), database, views, preset=preset, seed=seed
-    )
+        load_mesh(folder / f"{name}.glb"), database, views, preset=preset, seed=seed,
+        uv_space=uv_space,
+    )  # fmt: skip
     seconds = time.perf_counter() - start
     path = out / f"{name}_ours.glb"
     export_textured(result.mesh, path)
-    return path, result.results, seconds
+    return path, result, seconds
 
 
 def evaluate(
@@ -615,6 +628,7 @@ def evaluate(
     only: list[str] | None = None,
     eval_views=EVAL_VIEWS,
     size: int = RENDER_SIZE,
+    uv_space: bool | None = None,
 ) -> dict:
     """Leave-one-out over the folder's meshes; per object-view and per object (UV) rows.
 
@@ -642,10 +656,12 @@ def evaluate(
         if only and name not in only:
             continue
         truth = meshes[name]
-        path, results, seconds = synthesize(name, folder, out, views, preset)
+        path, made, seconds = synthesize(name, folder, out, views, preset, uv_space=uv_space)
         ours = TexturedArrays.load(path)
-        chosen = [r.example_names for r in results]
+        chosen = [r.example_names for r in made.results]
         first = chosen[0][0]
+        # The paste of the before table: the front view's depth selection's first choice.
+        depth_first = first_choice(name, folder)
         centre, radius = truth.bounding_sphere()
         others = [n for n in names if n != name]
         picture_rows = []
@@ -667,13 +683,16 @@ def evaluate(
                 "mask_iou": float(both.sum() / max((mask | ours_mask).sum(), 1)),
                 "ours": image_errors(ours_image, truth_image, both),
                 "paste": paste_errors[first],
+                "depth_paste": paste_errors[depth_first],
                 "best_paste": paste_errors[best],
                 "first_choice": first,
+                "depth_first_choice": depth_first,
                 "best_choice": best,
             })  # fmt: skip
             picture_rows.append([truth_image, ours_image, pastes[first]])
         pictures[name] = picture_rows
-        uv_row = {"object": name, "seconds": seconds, "examples_per_view": chosen}
+        uv_row = {"object": name, "seconds": seconds, "examples_per_view": chosen,
+                  "path": made.path}  # fmt: skip
         if shared:
             uv_row["ours"] = uv_errors(ours.texture, truth.texture, truth.uv, truth.faces)
             uv_row["paste"] = uv_errors(meshes[first].texture, truth.texture, truth.uv,
@@ -695,7 +714,7 @@ def summary(report: dict) -> dict[str, float]:
     """Means over object-views of each measure, and how often ours beats the paste."""
     rows = report["rows"]
     out = {}
-    for who in ("ours", "paste", "best_paste"):
+    for who in ("ours", "paste", "depth_paste", "best_paste"):
         for key in ("rgb", "de00", "crisp"):
             out[f"{who}_{key}"] = float(np.mean([r[who][key] for r in rows]))
     wins = [r["ours"]["rgb"] < r["paste"]["rgb"] for r in rows]
@@ -706,6 +725,12 @@ def summary(report: dict) -> dict[str, float]:
     out["new_angle_views"] = len(new)
     crisp = [r["ours"]["crisp"] >= r["paste"]["crisp"] for r in rows]
     out["ours_as_crisp_as_paste"] = int(sum(crisp))
+    out["ours_beats_depth_paste"] = int(
+        sum(r["ours"]["rgb"] < r["depth_paste"]["rgb"] for r in rows)
+    )
+    out["ours_as_crisp_as_depth_paste"] = int(
+        sum(r["ours"]["crisp"] >= r["depth_paste"]["crisp"] for r in rows)
+    )
     return out
 
 
@@ -734,18 +759,22 @@ def table(report: dict) -> str:
     lines.append(
         f"ours beats the first-choice paste in {s['ours_beats_paste']} of {s['object_views']} "
         f"object-views ({s['ours_beats_paste_new_angles']} of {s['new_angle_views']} at new "
-        f"angles); at least as crisp as the paste in {s['ours_as_crisp_as_paste']}."
+        f"angles); at least as crisp as the paste in {s['ours_as_crisp_as_paste']}. Against "
+        f"the front view's depth selection's first choice (the before table's paste, mean RGB "
+        f"{s['depth_paste_rgb']:.2f}, crisp {s['depth_paste_crisp']:.2f}): better in "
+        f"{s['ours_beats_depth_paste']}, as crisp in {s['ours_as_crisp_as_depth_paste']}."
     )
     if report["shared_uv"]:
         lines += [
             "",
-            "| object | UV ours RGB | UV paste RGB | UV ours dE00 | UV paste dE00 | "
+            "| object | path | UV ours RGB | UV paste RGB | UV ours dE00 | UV paste dE00 | "
             "UV ours crisp | UV paste crisp | seconds |",
-            "|---|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in report["uv_rows"]:
             lines.append(
-                f"| {r['object']} | {r['ours']['rgb']:.2f} | {r['paste']['rgb']:.2f} | "
+                f"| {r['object']} | {r['path']} | {r['ours']['rgb']:.2f} | "
+                f"{r['paste']['rgb']:.2f} | "
                 f"{r['ours']['de00']:.2f} | {r['paste']['de00']:.2f} | "
                 f"{r['ours']['crisp']:.2f} | {r['paste']['crisp']:.2f} | {r['seconds']:.1f} |"
             )
@@ -783,6 +812,12 @@ def main(argv=None) -> int:
     run.add_argument("--preset", default="busts")
     run.add_argument("--out", type=Path, default=DEFAULT_OUT)
     run.add_argument("--only", default="", help="comma-separated object names")
+    run.add_argument(
+        "--path",
+        choices=tuple(PATHS),
+        default="auto",
+        help="the mesh route's own choice (auto), or the uv-space or views path forced",
+    )
     args = parser.parse_args(argv)
     if args.command == "prepare":
         for path in prepare(args.source, args.out):
@@ -793,7 +828,9 @@ def main(argv=None) -> int:
     only = [n for n in args.only.split(",") if n] or None
     try:
         args.out.mkdir(parents=True, exist_ok=True)
-        report = evaluate(args.folder, args.out, args.views, args.preset, only)
+        report = evaluate(
+            args.folder, args.out, args.views, args.preset, only, uv_space=PATHS[args.path]
+        )
     except InputError as exc:
         print(f"error: {exc}")
         return 2
@@ -807,6 +844,7 @@ def main(argv=None) -> int:
         "summary": summary(report),
         "views": args.views,
         "preset": args.preset,
+        "path": args.path,
         "eval_views": [list(v) for v in EVAL_VIEWS],
     }  # fmt: skip
     (args.out / "results.json").write_text(json.dumps(keep, indent=1))

@@ -78,6 +78,11 @@ def _mesh_preview(textured, database, first_name: str, size):
     return np.concatenate(row, axis=1)
 
 
+def how_made(made, views) -> str:
+    """The closing line's "3 view(s)", or "its UV atlas" on the uv-space path."""
+    return "its UV atlas" if made.path == "uv-space" else f"{len(views)} view(s)"
+
+
 def _with_view_maps(made, mesh, database, size):
     """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
     from imagemap.database import database_at_view
@@ -143,6 +148,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         is_mesh_path,
         load_mesh,
     )
+    from imagemap.mesh.colorize import uv_layout_examples
     from imagemap.mesh.coverage import choose_views
     from imagemap.mesh.files import unit_scale
     from imagemap.mesh.surface import keep_surface
@@ -190,14 +196,23 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     plan.check()
     _guard_memory(args, mesh, views)  # before any work: --size and --texture-size
     start = time.perf_counter()
-    if getattr(args, "views", None) == "auto":
+    # Examples in the query's UV layout: synthesized in the atlas, no view is rendered.
+    in_layout = uv_layout_examples(mesh, database, getattr(args, "uv_space", None), examples)
+    if in_layout is not None:
+        views = ()
+        if not quiet:
+            names = ", ".join(e.name for e in in_layout)
+            print(f"imagemap: uv-space path: examples in the mesh's UV layout: {names}",
+                  file=sys.stderr)  # fmt: skip
+    elif getattr(args, "views", None) == "auto":
         views = tuple(choose_views(mesh, views))
         if not quiet:
             print(
                 f"imagemap: views chosen by coverage: {'; '.join(str(v) for v in views)}",
                 file=sys.stderr,
             )
-    _render_mesh_examples(database, views, args.size, quiet)
+    if views:
+        _render_mesh_examples(database, views, args.size, quiet)
     sizing = {"texture_size": args.texture_size} if args.texture_size else {}
     made = colorize_mesh(
         mesh,
@@ -208,6 +223,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         seed=args.seed,
         examples=examples,
         quiet=quiet or not sys.stderr.isatty(),
+        uv_space=in_layout if in_layout is not None else False,
         **sizing,
     )
     textured = keep_surface(_with_view_maps(made, mesh, database, args.size), mesh)
@@ -226,6 +242,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         report = {
             "query": str(source),
             "output": str(output),
+            "path": made.path,
             "views": [str(v) for v in views],
             "examples": [r.example_names for r in made.results],
             "seconds": seconds,
@@ -251,7 +268,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         size_text = " x ".join(f"{v:.3g}" for v in extent)
         how = "source units kept, read as metres" if scale == 1.0 else f"scaled by {scale:g}"
         print(
-            f"wrote {output} from {len(views)} view(s) of {source.name} in {seconds:.2f} s; "
+            f"wrote {output} from {how_made(made, views)} of {source.name} in {seconds:.2f} s; "
             f"size {size_text} m ({how})",
             file=sys.stderr,
         )

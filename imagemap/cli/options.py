@@ -101,10 +101,28 @@ def _positive_float(text: str) -> float:
 UNIT_NAMES = ("m", "cm", "mm", "in", "ft")
 
 
-def add_mesh_options(parser: argparse.ArgumentParser) -> None:
+def add_mesh_options(parser: argparse.ArgumentParser, uv_space: bool = False) -> None:
     """--view, --views, --size, --texture-size, --units, --scale: how meshes are seen,
-    textured and written."""
+    textured and written; with ``uv_space``, --uv-space and --no-uv-space too."""
     group = parser.add_argument_group("meshes (input .glb .obj .ply ...; output .glb or .obj)")
+    if uv_space:
+        group.add_argument(
+            "--uv-space",
+            dest="uv_space",
+            action="store_const",
+            const=True,
+            default=None,
+            help="synthesize in the mesh's UV atlas: the database's textured meshes are in "
+            "the query's UV layout (a registered template). Default: when they are found to "
+            "be (same UVs, or the same surface point at each texel), else by views",
+        )
+        group.add_argument(
+            "--no-uv-space",
+            dest="uv_space",
+            action="store_const",
+            const=False,
+            help="synthesize by views even when the examples share the query's UV layout",
+        )
     group.add_argument(
         "--view",
         action=_OneView,

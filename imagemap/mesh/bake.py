@@ -9,14 +9,17 @@ faces at the silhouette whose projection falls between pixel centres find the
 texture's background filled with the nearest foreground colour, never black.
 
 **Several views** (:func:`bake_views`): the mesh's own UVs, or an atlas made with
-``xatlas`` when it has none. Each texel is a surface point; every view that sees
-it (its depth within two pixels of the rendered surface) contributes its colour
-with weight ``cos^2`` of the angle between the surface normal and the view
-direction, times a feather that falls to zero within four pixels of the view's
-silhouette and depth discontinuities, so views blend smoothly where they overlap.
-Texels no view sees take the colour of the nearest seen texel in 3-D. Texels
-outside every chart are filled with the nearest chart texel, so bilinear
-filtering at chart seams never samples black.
+``xatlas`` when it has none. Each texel is a surface point, and takes its colour
+from the single view that sees it best (:func:`view_scores`: the largest cosine
+between its normal and the view direction, with a margin at the view's silhouette
+and depth jumps; seen = its depth within two pixels of the rendered surface). Two
+views' syntheses of one part differ in detail, so an average of them ghosts: views
+are blended only in a band two view pixels wide on each side of a boundary between
+texels of different views (:func:`blend_chosen_views`); everywhere else a texel is
+exactly one view's colour. Texels no view sees take the colour of the nearest seen
+texel in 3-D. Texels outside every chart are filled with the nearest chart texel, so
+bilinear filtering at chart seams never samples black. The texture's size is the
+mesh's own texture's, else chosen from its texel density (:func:`texture_size_for`).
 """
 
 from __future__ import annotations
@@ -28,7 +31,17 @@ from imagemap.io import InputError
 from imagemap.mesh.files import textured_mesh
 from imagemap.mesh.views import MeshRender, fill_from_nearest, sample_pixels
 
-__all__ = ["bake_views", "project_texture", "rasterize_uv", "uv_atlas"]
+__all__ = [
+    "bake_views",
+    "blend_chosen_views",
+    "covered_texels",
+    "project_texture",
+    "rasterize_uv",
+    "texture_size_for",
+    "uv_atlas",
+    "view_scores",
+    "world_per_uv",
+]
 
 
 def project_texture(mesh, render: MeshRender, image: np.ndarray):
@@ -72,16 +85,19 @@ def uv_atlas(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return vertices[vmapping], indices.astype(np.int64), uvs.astype(np.float64), vmapping
 
 
-def rasterize_uv(
-    uv: np.ndarray, faces: np.ndarray, texture_size: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Texels of a square texture covered by UV triangles.
+#: Texel candidates (a face's UV bounding box) examined at once by :func:`rasterize_uv`:
+#: bounds its temporaries (about 100 bytes a candidate: 13 MB) whatever the atlas size. A
+#: 1024^2 head atlas (3.4 M candidates) rasterizes as fast as in one piece (0.5 s).
+RASTER_CHUNK = 1 << 17
 
-    Returns (texel flat indices (N,), face (N,), barycentrics (N, 3)); a texel
-    (row i, column j) is covered when its centre ((j + 0.5) / T, 1 - (i + 0.5) / T)
-    lies in the triangle; where triangles overlap, the lowest face index wins.
+
+def _raster_chunks(uv: np.ndarray, faces: np.ndarray, size: int):
+    """(texel, face, barycentrics) of the texel centres inside UV triangles, chunk by chunk.
+
+    Faces are taken in order, in chunks of about :data:`RASTER_CHUNK` candidate texels
+    (a face's UV bounding box); within a chunk each texel once, by its lowest face.
     """
-    size = int(texture_size)
+    faces = np.asarray(faces, dtype=np.int64)
     corners = np.asarray(uv, dtype=np.float64)[faces]  # (F, 3, 2)
     px = corners[..., 0] * size - 0.5  # continuous column (centre of j at j)
     py = (1.0 - corners[..., 1]) * size - 0.5
@@ -92,37 +108,101 @@ def rasterize_uv(
     n_cols = np.maximum(col_hi - col_lo + 1, 0)
     n_rows = np.maximum(row_hi - row_lo + 1, 0)
     counts = n_cols * n_rows
-    face = np.repeat(np.arange(len(faces)), counts)
-    start = np.cumsum(counts) - counts
-    within = np.arange(counts.sum()) - np.repeat(start, counts)
-    rows = row_lo[face] + within // np.maximum(n_cols[face], 1)
-    cols = col_lo[face] + within % np.maximum(n_cols[face], 1)
-    # Barycentrics of the texel centre in the face's UV triangle.
-    ax, ay = px[face, 0], py[face, 0]
-    v0x, v0y = px[face, 1] - ax, py[face, 1] - ay
-    v1x, v1y = px[face, 2] - ax, py[face, 2] - ay
-    qx, qy = cols - ax, rows - ay
-    det = v0x * v1y - v1x * v0y
-    ok = np.abs(det) > 1e-12
-    safe = np.where(ok, det, 1.0)
-    b1 = (qx * v1y - v1x * qy) / safe
-    b2 = (v0x * qy - qx * v0y) / safe
-    b0 = 1.0 - b1 - b2
-    eps = 1e-9
-    inside = ok & (b0 >= -eps) & (b1 >= -eps) & (b2 >= -eps)
-    texel = rows[inside] * size + cols[inside]
-    face, bary = face[inside], np.stack([b0, b1, b2], axis=1)[inside]
-    order = np.lexsort((face, texel))
-    first = order[np.r_[True, np.diff(texel[order]) != 0]] if order.size else order
-    return texel[first], face[first], np.clip(bary[first], 0.0, 1.0)
+    bounds = np.searchsorted(np.cumsum(counts), np.arange(1, counts.sum() // RASTER_CHUNK + 1)
+                             * RASTER_CHUNK)  # fmt: skip
+    starts = np.unique(np.r_[0, bounds, len(faces)])
+    for first_face, end_face in zip(starts[:-1], starts[1:], strict=True):
+        chunk = np.arange(first_face, end_face)
+        chunk_counts = counts[chunk]
+        face = np.repeat(chunk, chunk_counts)
+        start = np.cumsum(chunk_counts) - chunk_counts
+        within = np.arange(chunk_counts.sum()) - np.repeat(start, chunk_counts)
+        rows = row_lo[face] + within // np.maximum(n_cols[face], 1)
+        cols = col_lo[face] + within % np.maximum(n_cols[face], 1)
+        # Barycentrics of the texel centre in the face's UV triangle.
+        ax, ay = px[face, 0], py[face, 0]
+        v0x, v0y = px[face, 1] - ax, py[face, 1] - ay
+        v1x, v1y = px[face, 2] - ax, py[face, 2] - ay
+        qx, qy = cols - ax, rows - ay
+        det = v0x * v1y - v1x * v0y
+        ok = np.abs(det) > 1e-12
+        safe = np.where(ok, det, 1.0)
+        b1 = (qx * v1y - v1x * qy) / safe
+        b2 = (v0x * qy - qx * v0y) / safe
+        b0 = 1.0 - b1 - b2
+        eps = 1e-9
+        inside = ok & (b0 >= -eps) & (b1 >= -eps) & (b2 >= -eps)
+        texel = rows[inside] * size + cols[inside]
+        face, bary = face[inside], np.stack([b0, b1, b2], axis=1)[inside]
+        order = np.lexsort((face, texel))
+        keep = order[np.r_[True, np.diff(texel[order]) != 0]] if order.size else order
+        yield texel[keep], face[keep], bary[keep]
+
+
+def rasterize_uv(
+    uv: np.ndarray, faces: np.ndarray, texture_size: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Texels of a square texture covered by UV triangles.
+
+    Returns (texel flat indices (N,), face (N,), barycentrics (N, 3)), by texel; a
+    texel (row i, column j) is covered when its centre ((j + 0.5) / T, 1 - (i + 0.5) / T)
+    lies in the triangle; where triangles overlap, the lowest face index wins.
+
+    Examples
+    --------
+    >>> texel, face, bary = rasterize_uv(np.array([[0, 0], [1, 0], [0, 1.0]]),
+    ...                                  np.array([[0, 1, 2]]), 4)
+    >>> texel.tolist()  # the lower-left half of a 4 x 4 texture, diagonal included
+    [0, 4, 5, 8, 9, 10, 12, 13, 14, 15]
+    """
+    size = int(texture_size)
+    owned = np.zeros(size * size, dtype=bool)
+    found = []
+    # A chunk's faces all come after the previous chunk's: a texel keeps the first chunk's.
+    for texel, face, bary in _raster_chunks(uv, faces, size):
+        new = ~owned[texel]
+        owned[texel[new]] = True
+        found.append((texel[new], face[new], bary[new]))
+    texel = np.concatenate([f[0] for f in found])
+    face = np.concatenate([f[1] for f in found])
+    bary = np.concatenate([f[2] for f in found])
+    order = np.argsort(texel, kind="stable")
+    return texel[order], face[order], np.clip(bary[order], 0.0, 1.0)
+
+
+def covered_texels(uv: np.ndarray, faces: np.ndarray, texture_size: int) -> np.ndarray:
+    """(T, T) bool: the texels :func:`rasterize_uv` covers, without its per-texel arrays.
+
+    Examples
+    --------
+    >>> int(covered_texels(np.array([[0, 0], [1, 0], [0, 1.0]]), np.array([[0, 1, 2]]), 4).sum())
+    10
+    """
+    size = int(texture_size)
+    mask = np.zeros(size * size, dtype=bool)
+    for texel, _, _ in _raster_chunks(uv, faces, size):
+        mask[texel] = True
+    return mask.reshape(size, size)
 
 
 #: A texel is seen by a view when it lies within this many pixels behind the
 #: rendered surface.
 VISIBILITY_PIXELS = 2.0
-#: Weights fall to zero within this many pixels of a view's silhouette and
-#: depth discontinuities.
+#: A view's claim on a texel falls to zero within this many pixels of its silhouette
+#: and depth discontinuities (a margin: colours there mix object and background, and
+#: the depth test is least sure).
 FEATHER_PIXELS = 4.0
+#: Half-width, in pixels of the views, of the band around a boundary between two
+#: views' texels in which their colours are blended; elsewhere every texel is one
+#: view's colour. Two pixels hide the step between two views' syntheses of the same
+#: part and blur nothing else (at 4 px the fish's stripes doubled along the seams).
+SEAM_BAND_PIXELS = 2.0
+#: Texels per view pixel (along each axis) of an atlas sized from the texel density: the
+#: bilinear lookups of the views' maps then lose nothing to the atlas.
+TEXELS_PER_PIXEL = 2.0
+#: Bounds of an atlas sized from the texel density (a power of two in between).
+MIN_TEXTURE_SIZE = 64
+MAX_TEXTURE_SIZE = 4096
 
 
 def _view_edges(render: MeshRender) -> np.ndarray:
@@ -141,11 +221,164 @@ def _view_edges(render: MeshRender) -> np.ndarray:
     return ndimage.distance_transform_edt(~edge)
 
 
+def world_per_uv(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> float:
+    """Surface area per unit of UV area (world units^2): the atlas' mean texel density.
+
+    Examples
+    --------
+    >>> square = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0.0]])
+    >>> world_per_uv(square, np.array([[0, 1, 2], [0, 2, 3]]), square[:, :2] / 4)
+    16.0
+    """
+    corners = np.asarray(vertices, dtype=np.float64)[faces]
+    area = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    flat = np.asarray(uv, dtype=np.float64)[faces]
+    e1, e2 = flat[:, 1] - flat[:, 0], flat[:, 2] - flat[:, 0]
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    total_uv = float(uv_area.sum())
+    if total_uv <= 0:
+        raise InputError("the mesh's UV triangles have no area")
+    return float(area.sum()) / total_uv
+
+
+def texture_size_for(mesh, pixel_size: float | None = None) -> int:
+    """The side of the mesh's texture: its own texture's, else one from the texel density.
+
+    A mesh with a texture keeps its size (the larger side; a texture smaller than
+    :data:`MIN_TEXTURE_SIZE` does not count). Otherwise the atlas gets
+    :data:`TEXELS_PER_PIXEL` texels per ``pixel_size`` (the views' world units per
+    pixel) along each axis, rounded up to a power of two within
+    [:data:`MIN_TEXTURE_SIZE`, :data:`MAX_TEXTURE_SIZE`]; 512 without a pixel size.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> plane = trimesh.creation.box(extents=(2.0, 2.0, 0.01))  # UVs over 2 x 2 units
+    >>> plane.visual = trimesh.visual.TextureVisuals(uv=plane.vertices[:, :2] / 2 + 0.5)
+    >>> texture_size_for(plane, pixel_size=0.01)  # 2 / 0.01 * 2 = 400 texels -> 512
+    512
+    """
+    from imagemap.mesh.views import texture_image
+
+    own = texture_image(mesh) if getattr(mesh.visual, "uv", None) is not None else None
+    # A texture smaller than an atlas can be is a placeholder (trimesh gives a mesh with
+    # UVs and no image a 2 x 2 one) or a swatch of flat colours: sized from the density.
+    if own is not None and max(own.shape[:2]) >= MIN_TEXTURE_SIZE:
+        return int(max(own.shape[:2]))
+    if pixel_size is None or pixel_size <= 0:
+        return 512
+    vertices, faces, uv, _ = uv_atlas(mesh)
+    wanted = TEXELS_PER_PIXEL * np.sqrt(world_per_uv(vertices, faces, uv)) / pixel_size
+    size = 2 ** int(np.ceil(np.log2(max(wanted, 1.0))))
+    return int(np.clip(size, MIN_TEXTURE_SIZE, MAX_TEXTURE_SIZE))
+
+
+def view_scores(
+    render: MeshRender, position: np.ndarray, normal: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How well a view sees surface points: (score (N,), column (N,), row (N,)).
+
+    The score is the cosine between the normal and the view direction, times a margin
+    that falls from 1 to 0 within :data:`FEATHER_PIXELS` of the view's silhouette and
+    depth jumps; 0 where the view does not see the point (outside the picture, on the
+    background, or more than :data:`VISIBILITY_PIXELS` behind the rendered surface).
+    """
+    col, row, z = render.to_pixels(position)
+    height, width = render.depth.shape
+    ci = np.clip(np.round(col).astype(np.int64), 0, width - 1)
+    ri = np.clip(np.round(row).astype(np.int64), 0, height - 1)
+    inside = (col > -0.5) & (col < width - 0.5) & (row > -0.5) & (row < height - 0.5)
+    surface = render.z[ri, ci]
+    seen = inside & render.mask[ri, ci] & (z >= surface - VISIBILITY_PIXELS * render.pixel_size)
+    facing = np.clip(normal @ render.view.direction, 0.0, 1.0)
+    margin = np.clip(_view_edges(render)[ri, ci] / FEATHER_PIXELS, 1e-3, 1.0)
+    return np.where(seen & (facing > 0), facing * margin, 0.0), col, row
+
+
+def _tent(values: np.ndarray, radius: int) -> np.ndarray:
+    """Two box filters of width ``2 radius + 1``: a tent of support ``2 radius`` texels
+    each way (exactly 0 beyond it, exactly the input's constant inside a constant area
+    but for rounding)."""
+    size = 2 * int(radius) + 1
+    out = ndimage.uniform_filter(values, size=size, mode="constant")
+    return ndimage.uniform_filter(out, size=size, mode="constant")
+
+
+def blend_chosen_views(
+    colours: np.ndarray,
+    scores: np.ndarray,
+    texel: np.ndarray,
+    texture_size: int,
+    band: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each texel the colour of its best view, blended only near boundaries between views.
+
+    Parameters
+    ----------
+    colours : (V, N, C) array
+        Each view's colour at each texel.
+    scores : (V, N) array
+        Each view's :func:`view_scores` at each texel (0: not seen).
+    texel : (N,) int array
+        The texels' flat indices in the ``texture_size``^2 atlas.
+    texture_size : int
+    band : float
+        Half-width of the blending band, in texels (0: no blending).
+
+    Returns
+    -------
+    (colour (N, C), chosen view (N,); -1 where no view sees the texel)
+
+    Examples
+    --------
+    Two views that disagree (0 and 1) over a strip of 12 texels, each best on its half:
+
+    >>> scores = np.array([[1.0] * 6 + [0.5] * 6, [0.5] * 6 + [1.0] * 6])
+    >>> colours = np.stack([np.zeros((12, 1)), np.ones((12, 1))])
+    >>> colour, view = blend_chosen_views(colours, scores, np.arange(12), 12, band=2)
+    >>> view.tolist()
+    [0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1]
+    >>> colour[:, 0].round(2).tolist()  # one view's colour but within 2 texels of the seam
+    [0.0, 0.0, 0.0, 0.0, 0.11, 0.33, 0.67, 0.89, 1.0, 1.0, 1.0, 1.0]
+    """
+    n_views, n = scores.shape
+    best = np.argmax(scores, axis=0)
+    seen = scores.max(axis=0) > 0
+    chosen = np.where(seen, best, -1)
+    colour = colours[np.maximum(best, 0), np.arange(n)].astype(np.float64)
+    radius = int(np.ceil(band / 2.0))
+    if radius < 1 or n_views < 2 or not seen.any():
+        return colour, chosen
+    covered = np.zeros(texture_size * texture_size)
+    covered[texel[seen]] = 1.0
+    support = _tent(covered.reshape(texture_size, texture_size), radius).reshape(-1)[texel]
+    weights = np.zeros((n_views, n))
+    for view in range(n_views):
+        indicator = np.zeros(texture_size * texture_size)
+        indicator[texel[chosen == view]] = 1.0
+        spread = _tent(indicator.reshape(texture_size, texture_size), radius).reshape(-1)
+        # Only a view that sees the texel may lend it colour.
+        weights[view] = np.where(scores[view] > 0, spread[texel] / np.maximum(support, 1e-12), 0)
+    # Rounding in the box filters: a weight within 1e-6 of 0 is 0 (beyond the band).
+    weights[weights < 1e-6] = 0.0
+    total = weights.sum(axis=0)
+    mixed = seen & (total > 0) & (weights.max(axis=0) < total * (1.0 - 1e-6))
+    if mixed.any():
+        blend = np.einsum("vn,vnc->nc", weights[:, mixed], colours[:, mixed]) / total[mixed, None]
+        colour[mixed] = blend
+    return colour, chosen
+
+
 def bake_views(
     mesh,
     renders: list[MeshRender],
     images: list[np.ndarray],
-    texture_size: int = 512,
+    texture_size: int | None = None,
+    *,
+    seam_band: float = SEAM_BAND_PIXELS,
+    return_views: bool = False,
 ):
     """Bake several views' maps into one UV atlas (see the module notes).
 
@@ -157,17 +390,26 @@ def bake_views(
         One per view (from :func:`render_mesh` of this mesh).
     images : list of (H, W, 3) arrays
         The map synthesized for each view.
-    texture_size : int
-        Width and height of the texture.
+    texture_size : int, optional
+        Width and height of the texture; default :func:`texture_size_for` the mesh at
+        the views' pixel size.
+    seam_band : float
+        Half-width (view pixels) of the band in which two views' colours are blended.
+    return_views : bool
+        Also return the view chosen for each texel ((T, T) int, -1 where no view sees
+        the texel or outside the charts).
 
     Returns
     -------
-    trimesh.Trimesh with the atlas UVs and the baked texture.
+    trimesh.Trimesh with the atlas UVs and the baked texture (and the chosen views).
     """
     from scipy.spatial import cKDTree
 
     if len(renders) != len(images) or not renders:
         raise InputError("bake_views: one image per view is needed")
+    pixel_size = min(render.pixel_size for render in renders)
+    if texture_size is None:
+        texture_size = texture_size_for(mesh, pixel_size)
     vertices, faces, uv, source = uv_atlas(mesh)
     normals = np.asarray(mesh.vertex_normals, dtype=np.float64)[source]
     texel, face, bary = rasterize_uv(uv, faces, texture_size)
@@ -177,33 +419,28 @@ def bake_views(
     position = np.einsum("nk,nkc->nc", bary, vertices[corners])
     normal = np.einsum("nk,nkc->nc", bary, normals[corners])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    total = np.zeros((texel.size, 3), dtype=np.float64)
-    weight = np.zeros(texel.size, dtype=np.float64)
-    for render, image in zip(renders, images, strict=True):
-        col, row, z = render.to_pixels(position)
-        height, width = render.depth.shape
-        ci = np.clip(np.round(col).astype(np.int64), 0, width - 1)
-        ri = np.clip(np.round(row).astype(np.int64), 0, height - 1)
-        inside = (col > -0.5) & (col < width - 0.5) & (row > -0.5) & (row < height - 0.5)
-        surface = render.z[ri, ci]
-        seen = inside & render.mask[ri, ci] & (z >= surface - VISIBILITY_PIXELS * render.pixel_size)
-        facing = np.clip(normal @ render.view.direction, 0.0, 1.0) ** 2
-        feather = np.clip(_view_edges(render)[ri, ci] / FEATHER_PIXELS, 1e-3, 1.0)
-        w = np.where(seen, facing * feather, 0.0)
+    scores = np.zeros((len(renders), texel.size))
+    colours = np.zeros((len(renders), texel.size, 3), dtype=np.float32)
+    for k, (render, image) in enumerate(zip(renders, images, strict=True)):
+        scores[k], col, row = view_scores(render, position, normal)
         filled = fill_from_nearest(np.asarray(image, dtype=np.float32)[..., :3], render.mask)
-        colour = sample_pixels(filled, col, row)
-        total += w[:, None] * colour
-        weight += w
-    seen = weight > 0
-    colours = np.zeros((texel.size, 3), dtype=np.float64)
-    colours[seen] = total[seen] / weight[seen, None]
+        colours[k] = sample_pixels(filled, col, row)
+    texel_world = np.sqrt(world_per_uv(vertices, faces, uv)) / texture_size
+    band = seam_band * pixel_size / texel_world
+    colours_out, chosen = blend_chosen_views(colours, scores, texel, texture_size, band)
+    seen = chosen >= 0
     if seen.any() and not seen.all():
         # The documented fallback: the colour of the nearest seen texel in 3-D.
         _, nearest = cKDTree(position[seen]).query(position[~seen])
-        colours[~seen] = colours[seen][nearest]
+        colours_out[~seen] = colours_out[seen][nearest]
     texture = np.zeros((texture_size, texture_size, 3), dtype=np.float32)
-    texture.reshape(-1, 3)[texel] = colours
+    texture.reshape(-1, 3)[texel] = colours_out
     covered = np.zeros((texture_size, texture_size), dtype=bool)
     covered.flat[texel] = True
     texture = fill_from_nearest(texture, covered)
-    return textured_mesh(vertices, faces, uv, texture)
+    textured = textured_mesh(vertices, faces, uv, texture)
+    if not return_views:
+        return textured
+    views = np.full((texture_size, texture_size), -1, dtype=np.int64)
+    views.flat[texel] = chosen
+    return textured, views

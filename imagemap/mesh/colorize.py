@@ -1,7 +1,21 @@
-"""Colorizing a mesh: one synthesis per view, textured by projection or baked into an atlas."""
+"""Colorizing a mesh: in its UV atlas when it shares the examples' layout, else by views.
+
+Two paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
+
+- **uv-space** (:mod:`imagemap.mesh.uvspace`): when the query mesh and textured mesh
+  examples of the database share one UV layout (a registered template, as scanned
+  faces), the texture is synthesised in the atlas itself, with surface guides and the
+  examples' own textures. No view: nothing hidden, nothing mirrored. The layout is
+  detected (:func:`imagemap.mesh.uvspace.shares_layout`) or declared (``uv_space=True``,
+  ``--uv-space``).
+- **views**: one synthesis per view, all from the same examples (chosen once for the
+  object, :func:`shared_examples`), textured by projection (one view) or baked into a
+  UV atlas, each texel from the view that sees it best (:func:`imagemap.mesh.bake.bake_views`).
+"""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,86 +32,310 @@ from imagemap.mesh.views import (
     parse_view,
     parse_views,
     render_mesh,
+    texture_image,
 )
 
-__all__ = ["MeshResult", "colorize_mesh"]
+__all__ = [
+    "PATHS",
+    "MeshResult",
+    "colorize_mesh",
+    "selection_distances",
+    "shared_examples",
+    "uv_layout_examples",
+]
+
+log = logging.getLogger("imagemap")
+
+#: The mesh route's two ways of making a texture.
+PATHS = ("uv-space", "views")
 
 
 @dataclass
 class MeshResult:
-    """A textured mesh made from one or several views, and what made it."""
+    """A textured mesh, and what made it.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        With UVs and the texture.
+    renders : list of MeshRender
+        One per view (none on the uv-space path).
+    results : list of ColorizeResult
+        One per view; on the uv-space path one, whose image is the texture.
+    path : str
+        ``"uv-space"`` or ``"views"`` (:data:`PATHS`).
+    """
 
     mesh: object  # trimesh.Trimesh with UVs and texture
     renders: list[MeshRender]
-    results: list  # one ColorizeResult per view
+    results: list  # one ColorizeResult per view (uv-space: one, the atlas)
+    path: str = "views"
 
     @property
     def image(self) -> np.ndarray:
-        """The first view's synthesized map (H, W, 3)."""
+        """The first view's synthesized map (H, W, 3); on the uv-space path, the texture."""
         return self.results[0].image
+
+    @property
+    def example_names(self) -> list[str]:
+        """The examples used (the same for every view)."""
+        return list(self.results[0].example_names)
+
+
+def selection_distances(depth: np.ndarray, database: Database) -> np.ndarray:
+    """Each example's selection distance to ``depth`` (as :func:`select_examples` ranks them).
+
+    The sum of squared depth differences once the example's foreground centroid is on
+    the query's, the example's depth outside the query's frame counted in full
+    (paper, Sec. 2.3). One value per example, in the database's order.
+    """
+    from imagemap.align import centroid
+
+    depth = np.asarray(depth, dtype=np.float32)
+    query_centroid = centroid(depth > 0)
+    query_norm = float(np.square(depth, dtype=np.float64).sum())
+    height, width = depth.shape
+    distances = np.empty(len(database))
+    for k, example in enumerate(database):
+        other = example.depth
+        example_centroid, other_norm = example.selection_stats
+        dy, dx = (int(round(s)) for s in query_centroid - example_centroid)
+        y0, x0 = max(0, dy), max(0, dx)
+        y1, x1 = min(height, other.shape[0] + dy), min(width, other.shape[1] + dx)
+        cross = 0.0
+        if y1 > y0 and x1 > x0:
+            here = depth[y0:y1, x0:x1]
+            there = other[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
+            cross = float(np.multiply(here, there, dtype=np.float64).sum())
+        distances[k] = query_norm + other_norm - 2.0 * cross
+    return distances
+
+
+def shared_examples(renders: list[MeshRender], databases: list[Database], m: int) -> list[str]:
+    """The ``m`` examples nearest the object over all its views: one choice for every view.
+
+    Each view's selection distances (:func:`selection_distances`, the query's depth
+    against the examples seen from the same view) are summed, so a view that shows more
+    of the object weighs more; ties keep the database's order.
+    """
+    names = databases[0].names
+    total = np.zeros(len(names))
+    for render, database in zip(renders, databases, strict=True):
+        if database.names != names:
+            raise InputError("the views' databases hold different examples")
+        total += selection_distances(render.depth, database)
+    order = np.argsort(total, kind="stable")[: min(m, len(names))]
+    return [names[i] for i in order]
+
+
+def _by_use(results: list, names: list[str]) -> list[str]:
+    """``names`` ordered by the share of the object the views made so far copied from each
+    (ties keep the order): the next views prefer what the object already shows, so that
+    one part is not one example's in one view and another's in the next."""
+    used = np.zeros(len(names))
+    for result in results:
+        index = result.source[..., 0][result.mask]
+        for k, name in enumerate(result.example_names):
+            if name in names:
+                used[names.index(name)] += np.count_nonzero(index == k)
+    order = np.argsort(-used, kind="stable")
+    return [names[i] for i in order]
+
+
+def uv_layout_examples(
+    mesh, database, uv_space: bool | None = None, names: list[str] | None = None
+) -> list | None:
+    """The database's mesh examples in the query's UV layout, or None: the views path.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The query.
+    database : Database (or a dict of prepared views: always None)
+    uv_space : bool, optional
+        As :func:`colorize_mesh`: True declares every textured mesh example to be in the
+        query's layout, False never takes the uv-space path, None detects the layout
+        (:func:`imagemap.mesh.uvspace.shares_layout`).
+    names : list of str, optional
+        The examples asked for: the uv-space path is taken only when all of them are in
+        the layout.
+
+    Returns
+    -------
+    list of UVExample, or None
+
+    Raises
+    ------
+    InputError
+        With ``uv_space=True``, when the path cannot run (no UVs, no textured mesh
+        example, an example named that is not one).
+    """
+    from imagemap.mesh.examples import MeshExample
+    from imagemap.mesh.uvspace import (
+        LAYOUT_TEST_SIZE,
+        UVExample,
+        mesh_uv_arrays,
+        shares_layout,
+        surface_maps,
+    )
+
+    if uv_space is False:
+        return None
+    if not isinstance(database, Database):
+        if uv_space:
+            raise InputError("--uv-space: needs the database's mesh files (not prepared views)")
+        return None
+    if getattr(mesh.visual, "uv", None) is None:
+        if uv_space:
+            raise InputError("--uv-space: the query mesh has no UV coordinates")
+        return None
+    meshes = [e for e in database if isinstance(e, MeshExample)]
+    if names:
+        meshes = [e for e in meshes if e.name in names]
+    if not meshes:
+        if uv_space:
+            raise InputError("--uv-space: the database has no textured mesh examples")
+        return None
+    query_maps = surface_maps(*mesh_uv_arrays(mesh), LAYOUT_TEST_SIZE)
+    shared, others = [], []
+    for example in meshes:
+        example_mesh = load_mesh(example.mesh_path)
+        has_uv = getattr(example_mesh.visual, "uv", None) is not None
+        texture = texture_image(example_mesh) if has_uv else None
+        if texture is None:
+            if uv_space:
+                raise InputError(f"--uv-space: {example.mesh_path} has no UVs and texture")
+            others.append(example.name)
+            continue
+        if uv_space or shares_layout(mesh, example_mesh, query_maps):
+            # Kept as bytes (as read): a quarter of float32's memory at 1024^2 and more.
+            texture = np.round(texture * 255.0).astype(np.uint8)
+            shared.append(UVExample(example.name, example_mesh, texture))
+        else:
+            others.append(example.name)
+    if not shared:
+        return None
+    missing = sorted(set(names or ()) - {e.name for e in shared})
+    if missing:
+        if uv_space:
+            raise InputError(f"--uv-space: {', '.join(missing)} not a textured mesh example")
+        log.info("uv-space path not taken: %s not in the query's UV layout", ", ".join(missing))
+        return None
+    if others:
+        log.info("not in the query's UV layout (left out): %s", ", ".join(others))
+    return shared
 
 
 def colorize_mesh(
     mesh,
-    database: Database | dict[str, Database],
+    database: Database,
     views: list[View] | str | None = None,
     *,
     size: tuple[int, int] = DEFAULT_SIZE,
-    texture_size: int = 512,
+    texture_size: int | None = None,
+    uv_space: bool | list | None = None,
     preset="busts",
     seed: int = 0,
+    examples: list[str] | None = None,
+    quiet: bool = True,
     **colorize_options,
 ) -> MeshResult:
-    """Synthesize image-maps for a mesh from one or several views and texture it.
-
-    Each view is synthesized from the database's examples seen from the same view
-    (mesh examples are rendered at that view; picture examples are used as they
-    are). One view: projection UVs; several: baked into a UV atlas.
+    """Synthesize a texture for a mesh: in its UV atlas, or from views (see the module notes).
 
     Parameters
     ----------
     mesh : trimesh.Trimesh or path
     database : Database or dict
         The examples; or, prepared for each view (:func:`prepare_database`), a dict
-        from ``str(view)`` (``"az,el"``) to Database.
+        from ``str(view)`` (``"az,el"``) to Database (views path only).
     views : list of View or str, optional
-        The front by default; e.g. ``"front,back,left,right"``.
+        The front by default; e.g. ``"front,back,left,right"`` (views path).
     size : (int, int)
         (width, height) of each view's depth map.
-    texture_size : int
-        Atlas size when several views are baked.
-    preset, seed, **colorize_options
-        As :func:`imagemap.colorize`.
+    texture_size : int, optional
+        The texture's width and height; default: the query's own texture's, else the
+        examples' (uv-space) or one from the mesh's texel density (views).
+    uv_space : bool or list, optional
+        True: synthesize in the UV atlas, the database's mesh examples declared to be in
+        the query's layout; False: never; None (default): when some mesh examples are
+        found in the query's layout; or the examples :func:`uv_layout_examples` found.
+    preset, seed, examples, quiet, **colorize_options
+        As :func:`imagemap.colorize`. Without ``examples``, the examples are chosen once
+        for the object and every view uses them.
+
+    Returns
+    -------
+    MeshResult
     """
+    from imagemap.depth.config import resolve_config
     from imagemap.depth.pipeline import colorize
 
     if not hasattr(mesh, "faces"):
         mesh = load_mesh(mesh)
+    config = resolve_config(preset, **colorize_options)
+    names = list(examples) if examples else None
     if views is None:
         views = [FRONT]
     elif isinstance(views, str):
         views = parse_views(views)
     views = [parse_view(v) for v in views]
-    renders, results = [], []
+    if isinstance(database, Database):
+        for name in names or ():
+            database[name]  # an unknown name is an InputError listing the known ones
+    if texture_size is not None and int(texture_size) < 8:
+        raise InputError(f"texture_size {texture_size} is too small (at least 8)")
+    if isinstance(uv_space, list):
+        uv_examples = uv_space  # found already (uv_layout_examples)
+    else:
+        uv_examples = uv_layout_examples(mesh, database, uv_space, names)
+    if uv_examples is not None:
+        from imagemap.mesh.files import textured_mesh
+        from imagemap.mesh.uvspace import colorize_uv, mesh_uv_arrays
+
+        if texture_size is None:
+            own = texture_image(mesh)
+            sizes = [max(e.texture.shape[:2]) for e in uv_examples]
+            texture_size = int(max(own.shape[:2])) if own is not None else int(max(sizes))
+        log.info(
+            "mesh route: uv-space path (%d examples in the query's UV layout: %s), %d^2 texture",
+            len(uv_examples),
+            ", ".join(e.name for e in uv_examples),
+            texture_size,
+        )
+        result = colorize_uv(
+            mesh, uv_examples, config, size=int(texture_size), names=names, seed=seed, quiet=quiet
+        )
+        vertices, faces, uv = mesh_uv_arrays(mesh)
+        textured = textured_mesh(vertices, faces, uv, result.image)
+        return MeshResult(mesh=textured, renders=[], results=[result], path="uv-space")
+
+    renders, databases = [], []
     for view in views:
         render = render_mesh(mesh, view, size)
         if not render.mask.any():
             raise InputError(f"nothing of the mesh is visible from view {view}")
-        if isinstance(database, dict):
-            examples = database[str(view)]
-        else:
-            examples = database_at_view(database, view, size)
-        result = colorize(
-            render.depth,
-            examples,
-            preset=preset,
-            seed=seed,
-            **colorize_options,
-        )
         renders.append(render)
+        if isinstance(database, dict):
+            databases.append(database[str(view)])
+        else:
+            databases.append(database_at_view(database, view, size))
+    if names is None and len(views) > 1:
+        names = shared_examples(renders, databases, config.selection.m)
+    log.info(
+        "mesh route: views path (%s), examples %s",
+        ", ".join(str(v) for v in views),
+        ", ".join(names) if names else "chosen by the view",
+    )
+    results = []
+    for render, examples_at_view in zip(renders, databases, strict=True):
+        result = colorize(
+            render.depth, examples_at_view, preset=config, seed=seed, quiet=quiet, examples=names
+        )
         results.append(result)
+        if names is not None and len(views) > 1:
+            names = _by_use(results, names)
     if len(views) == 1:
         textured = project_texture(mesh, renders[0], results[0].image)
     else:
         textured = bake_views(mesh, renders, [r.image for r in results], texture_size)
-    return MeshResult(mesh=textured, renders=renders, results=results)
+    return MeshResult(mesh=textured, renders=renders, results=results, path="views")

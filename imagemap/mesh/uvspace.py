@@ -1,0 +1,695 @@
+"""Synthesis in a shared UV atlas: no view, nothing hidden, nothing mirrored.
+
+When the query mesh and the example meshes share one UV layout (a registered
+template, as scanned faces are), texel (u, v) is the same point of the object on
+every mesh, and the examples' own textures are already aligned with the query's.
+The synthesis then runs in the atlas itself: one :class:`~imagemap.core.mapping.Mapping`
+per mesh whose guide bands are surface properties at every texel, and whose
+appearance bands (for the examples) are their own textures.
+
+Guide bands (:func:`surface_maps`), per texel of the atlas' used texels:
+
+- **position**: the 3-D surface point, relative to the object (minus the mean over the
+  used texels, over their RMS radius), so heads of other sizes and placements compare;
+- **normal**: the unit surface normal (three bands);
+- **curvature**: the mean curvature of the surface (the umbrella operator's normal
+  component over the squared edge length, times the RMS radius: scale-free, positive
+  where convex).
+
+Outside the charts every band is continued from the nearest used texel (padding), so
+windows at a chart's border see surface-like values. The mask is the used texels.
+
+The engine (:func:`imagemap.core.engine.synthesize`) runs at a working size of at
+most :data:`WORKING_SIZE` texels; the depth front end's finish then copies each texel
+from the example texel its windows agree on and places and blends the seams
+(:func:`imagemap.core.blend.place_seams`, :func:`~imagemap.core.blend.seamless_copy`).
+The texture is made at the output size by copying every output texel from its
+example's full-resolution texture through the working source map (a source texel is
+refined into the output texel's sub-position), plus the blend's smooth correction: so
+the result is as crisp as the examples' textures.
+
+Examples
+--------
+>>> import trimesh
+>>> grid = trimesh.creation.box(extents=(2.0, 1.0, 0.5)).subdivide()
+>>> uv = np.c_[grid.vertices[:, 0] / 4 + 0.5, grid.vertices[:, 1] / 2 + 0.5]
+>>> maps = surface_maps(grid.vertices, grid.faces, uv, 32)
+>>> maps.mask.shape, maps.guides().shape[2]
+((32, 32), 7)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import sparse
+
+from imagemap.core.blend import copy_through, fill_background
+from imagemap.errors import InputError
+
+__all__ = [
+    "LAYOUT_TEST_SIZE",
+    "WORKING_SIZE",
+    "SurfaceMaps",
+    "UVExample",
+    "colorize_uv",
+    "layout_agreement",
+    "same_uv_layout",
+    "select_uv_examples",
+    "surface_maps",
+]
+
+log = logging.getLogger("imagemap")
+
+#: The engine runs at most at this atlas size; larger textures are copied through its
+#: source map (see the module notes). The heads' layout uses 62k texels of 256^2, about
+#: the pixels of three 200x150 views' objects; at 512^2 the engine took 5x as long (115
+#: against 20 s on a loaded machine) for no better UV error (ffhq_teaser1: 10.95 against
+#: 10.76 of 255).
+WORKING_SIZE = 256
+#: UV coordinates are the same when they differ by less than this (texture units):
+#: a tenth of a texel of a 1024^2 texture.
+UV_TOLERANCE = 1e-4
+#: Atlas size of the topology-free layout test (:func:`layout_agreement`).
+LAYOUT_TEST_SIZE = 64
+#: Two meshes share a layout when their used texels overlap at least this much
+#: (intersection over union; the FLAME head and the HiFi3D++ heads of FFHQ-UV, one
+#: layout: 0.967; generated fish in their own xatlas atlases: 0.46-0.64) ...
+LAYOUT_MIN_IOU = 0.85
+#: ... and the median distance between their normalised surface points at the common
+#: texels is below this, in RMS radii (FLAME against HiFi3D++: 0.08; a HiFi3D++ head
+#: against its layout mirrored, IoU 1.0: 0.78; fish: 0.55-0.79).
+LAYOUT_MAX_DISTANCE = 0.3
+#: The depth front end's stages (:data:`imagemap.depth.pipeline.STAGES`) that the uv-space
+#: synthesis runs as they are, around its own ``select``, ``bands`` and ``synthesize``:
+#: they work on the source map and the colours only. Left out: those that read depth
+#: (the query's depth scale and the query-in-database check, registration, and the
+#: completion of small features, which registers depth relief).
+FINISH_STAGES = (
+    "pyramid",
+    "collapse",
+    "copy",
+    "seams",
+    "merge_regions",
+    "outside",
+    "even_palettes",
+    "blend",
+    "rgb",
+)
+#: Guide weights (per band standard deviation): the surface point places a texel on the
+#: object; the normal and curvature say what the surface does there.
+POSITION_WEIGHT = 1.0
+NORMAL_WEIGHT = 1.0
+CURVATURE_WEIGHT = 0.5
+
+
+@dataclass
+class SurfaceMaps:
+    """Surface properties at every texel of a square atlas.
+
+    Attributes
+    ----------
+    mask : (T, T) bool
+        The used texels (covered by some UV triangle).
+    position : (T, T, 3) float32
+        The normalised surface point (see the module notes); padded outside ``mask``.
+    normal : (T, T, 3) float32
+        Unit normals; padded.
+    curvature : (T, T) float32
+        Scale-free mean curvature; padded.
+    """
+
+    mask: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    curvature: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return self.mask.shape[0]
+
+    def guides(
+        self,
+        position_weight: float = POSITION_WEIGHT,
+        normal_weight: float = NORMAL_WEIGHT,
+        curvature_weight: float = CURVATURE_WEIGHT,
+    ) -> np.ndarray:
+        """The guide bands (T, T, B): position, normal, curvature (bands weighted 0 left out)."""
+        bands = []
+        if position_weight:
+            bands.append(self.position)
+        if normal_weight:
+            bands.append(self.normal)
+        if curvature_weight:
+            bands.append(self.curvature[..., None])
+        if not bands:
+            raise InputError("uv-space synthesis: every guide weight is 0")
+        return np.concatenate(bands, axis=2).astype(np.float32)
+
+
+def guide_weights(
+    position_weight: float = POSITION_WEIGHT,
+    normal_weight: float = NORMAL_WEIGHT,
+    curvature_weight: float = CURVATURE_WEIGHT,
+) -> tuple[float, ...]:
+    """One weight per band of :meth:`SurfaceMaps.guides`."""
+    return tuple(
+        [position_weight] * 3 * bool(position_weight)
+        + [normal_weight] * 3 * bool(normal_weight)
+        + [curvature_weight] * bool(curvature_weight)
+    )
+
+
+def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(welded vertices, welded faces, index of each input vertex's welded vertex).
+
+    A mesh split along its UV seams (one vertex per position and UV) is joined again,
+    so that normals and curvature do not see the seams as borders.
+    """
+    # Rows sorted by their coordinates (np.unique(axis=0) sorts structured rows: 1 s for
+    # a 20k-vertex head); equal neighbours after sorting are one vertex.
+    order = np.lexsort(vertices.T[::-1])
+    ordered = vertices[order]
+    first = np.r_[True, np.any(ordered[1:] != ordered[:-1], axis=1)]
+    group = np.cumsum(first) - 1
+    inverse = np.empty(len(vertices), dtype=np.int64)
+    inverse[order] = group
+    return ordered[first], inverse[faces], inverse
+
+
+def vertex_curvature(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Mean curvature per vertex (1 / length): the umbrella operator along the normal.
+
+    ``-(mean of the neighbours - vertex) . normal`` over the squared mean edge length:
+    positive where the surface is convex; a vertex without neighbours gets 0.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> sphere = trimesh.creation.icosphere(subdivisions=3, radius=2.0)
+    >>> k = vertex_curvature(sphere.vertices, sphere.faces, sphere.vertex_normals)
+    >>> bool(np.all(k > 0)), round(float(np.median(k) * 2.0), 1)
+    (True, 0.5)
+    """
+    n = len(vertices)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    keys = np.unique(edges[:, 0] * n + edges[:, 1])  # each undirected edge once
+    edges = np.stack([keys // n, keys % n], axis=1)
+    i, j = np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]
+    lengths = np.linalg.norm(vertices[i] - vertices[j], axis=1)
+    adjacency = sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    safe = np.maximum(degree, 1.0)
+    mean_neighbour = (adjacency @ vertices) / safe[:, None]
+    mean_length = (
+        np.asarray(sparse.csr_matrix((lengths, (i, j)), shape=(n, n)).sum(axis=1)).ravel() / safe
+    )
+    along = -np.einsum("nc,nc->n", mean_neighbour - vertices, normals)
+    curvature = along / np.maximum(mean_length, 1e-12) ** 2
+    return np.where(degree > 0, curvature, 0.0)
+
+
+def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (unit; 0 for a vertex of no face)."""
+    corners = vertices[faces]
+    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], face_normals)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    return normals / np.maximum(length, 1e-12)
+
+
+def surface_maps(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: int) -> SurfaceMaps:
+    """The surface's position, normal and curvature at every texel of a ``size``^2 atlas.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array
+    faces : (F, 3) int array
+    uv : (V, 2) array
+        Per-vertex texture coordinates (GL style: v up). Triangles outside [0, 1]^2
+        cover no texel.
+    size : int
+        Width and height of the atlas.
+
+    Returns
+    -------
+    SurfaceMaps
+
+    Raises
+    ------
+    InputError
+        When the UVs cover no texel.
+    """
+    from imagemap.mesh.bake import rasterize_uv
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    texel, face, bary = rasterize_uv(np.asarray(uv, dtype=np.float64), faces, size)
+    if texel.size == 0:
+        raise InputError("the mesh's UV layout covers no texel")
+    welded, welded_faces, _ = _weld(vertices, faces)
+    normals = _vertex_normals(welded, welded_faces)
+    curvature = vertex_curvature(welded, welded_faces, normals)
+    corners = welded_faces[face]
+    position = np.einsum("nk,nkc->nc", bary, welded[corners])
+    normal = np.einsum("nk,nkc->nc", bary, normals[corners])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    centre = position.mean(axis=0)
+    radius = float(np.sqrt(np.mean(np.sum((position - centre) ** 2, axis=1))))
+    radius = radius if radius > 0 else 1.0
+    # A heavy-tailed band (creases, the rims of holes) would set its own standard
+    # deviation: clipped at a robust spread so that the face's own relief counts.
+    texel_curvature = np.einsum("nk,nk->n", bary, curvature[corners]) * radius
+    spread = float(np.percentile(np.abs(texel_curvature), 95)) or 1.0
+    texel_curvature = spread * np.tanh(texel_curvature / spread)
+    mask = np.zeros((size, size), dtype=bool)
+    mask.flat[texel] = True
+    stack = np.zeros((size * size, 7), dtype=np.float32)
+    stack[texel, :3] = (position - centre) / radius
+    stack[texel, 3:6] = normal
+    stack[texel, 6] = texel_curvature
+    stack = fill_background(stack.reshape(size, size, 7), mask)
+    return SurfaceMaps(
+        mask=mask,
+        position=stack[..., :3].copy(),
+        normal=stack[..., 3:6].copy(),
+        curvature=stack[..., 6].copy(),
+    )
+
+
+def mesh_uv_arrays(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, faces, per-vertex UVs) of a textured trimesh, or InputError without UVs."""
+    uv = getattr(mesh.visual, "uv", None)
+    if uv is None or len(uv) != len(mesh.vertices):
+        raise InputError("the mesh has no per-vertex UV coordinates")
+    return (
+        np.asarray(mesh.vertices, dtype=np.float64),
+        np.asarray(mesh.faces, dtype=np.int64),
+        np.asarray(uv, dtype=np.float64),
+    )
+
+
+def same_uv_layout(first, second, tolerance: float = UV_TOLERANCE) -> bool:
+    """Whether two meshes have the same UV layout exactly: the same UV faces and UVs.
+
+    The same number of UV vertices and faces, the same faces, and UV coordinates
+    within ``tolerance``. Meshes of one registered template pass; meshes of other
+    topologies in one layout need :func:`layout_agreement`.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> a = trimesh.creation.box(); uv = a.vertices[:, :2] / 2 + 0.5
+    >>> a.visual = trimesh.visual.TextureVisuals(uv=uv)
+    >>> b = a.copy(); b.vertices = b.vertices * 2.0  # another shape, the same layout
+    >>> same_uv_layout(a, b)
+    True
+    """
+    uv_a = getattr(first.visual, "uv", None)
+    uv_b = getattr(second.visual, "uv", None)
+    if uv_a is None or uv_b is None or len(uv_a) != len(uv_b):
+        return False
+    if first.faces.shape != second.faces.shape or not np.array_equal(first.faces, second.faces):
+        return False
+    return bool(np.allclose(uv_a, uv_b, rtol=0.0, atol=tolerance))
+
+
+def layout_agreement(first: SurfaceMaps, second: SurfaceMaps) -> tuple[float, float]:
+    """(IoU of the used texels, median distance of the surface points there) of two atlases.
+
+    Topology-free: two meshes in one layout cover nearly the same texels, and the same
+    texel is nearly the same normalised point of both objects. A layout that only
+    overlaps another (a mirrored one: the HiFi3D++ layout covers 95 % of the atlas)
+    puts other points of the object at the same texels.
+    """
+    if first.size != second.size:
+        raise ValueError("atlases of different sizes")
+    both = first.mask & second.mask
+    union = first.mask | second.mask
+    iou = float(both.sum() / max(union.sum(), 1))
+    if not both.any():
+        return iou, float("inf")
+    distance = np.linalg.norm(first.position[both] - second.position[both], axis=1)
+    return iou, float(np.median(distance))
+
+
+def shares_layout(query_mesh, example_mesh, query_maps: SurfaceMaps | None = None) -> bool:
+    """Whether ``example_mesh`` is in ``query_mesh``'s UV layout (exactly, or by
+    :func:`layout_agreement` within :data:`LAYOUT_MIN_IOU` and
+    :data:`LAYOUT_MAX_DISTANCE`)."""
+    if same_uv_layout(query_mesh, example_mesh):
+        return True
+    try:
+        if query_maps is None:
+            query_maps = surface_maps(*mesh_uv_arrays(query_mesh), LAYOUT_TEST_SIZE)
+        example_maps = surface_maps(*mesh_uv_arrays(example_mesh), LAYOUT_TEST_SIZE)
+    except InputError:
+        return False
+    iou, distance = layout_agreement(query_maps, example_maps)
+    return iou >= LAYOUT_MIN_IOU and distance <= LAYOUT_MAX_DISTANCE
+
+
+@dataclass
+class UVExample:
+    """An example for the UV-space synthesis: a name, its mesh (with UVs) and texture."""
+
+    name: str
+    mesh: object
+    texture: np.ndarray  # (H, W, 3) uint8, or float in [0, 1]
+    _maps: dict = field(default_factory=dict, repr=False)
+
+    def maps(self, size: int) -> SurfaceMaps:
+        """Its :class:`SurfaceMaps` at ``size`` (made once per size)."""
+        if size not in self._maps:
+            self._maps[size] = surface_maps(*mesh_uv_arrays(self.mesh), size)
+        return self._maps[size]
+
+
+def resize_texture(texture: np.ndarray, size: int) -> np.ndarray:
+    """A texture resampled to ``size`` x ``size`` (area-averaged when shrinking).
+
+    Examples
+    --------
+    >>> resize_texture(np.ones((8, 8, 3), np.float32), 4).shape
+    (4, 4, 3)
+    """
+    from skimage.transform import resize
+
+    texture = _unit(np.asarray(texture)[..., :3])
+    if texture.shape[:2] == (size, size):
+        return texture
+    shrinking = size < max(texture.shape[:2])
+    out = resize(texture, (size, size), order=1, anti_aliasing=shrinking, preserve_range=True)
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def select_uv_examples(query: SurfaceMaps, examples: list[SurfaceMaps], m: int) -> list[int]:
+    """Indices of the ``m`` examples whose normalised surface is nearest the query's.
+
+    The distance is the mean squared difference of the surface points over the texels
+    both use (the UV layout is the correspondence: no alignment needed), plus one for
+    the share of the query's used texels an example leaves uncovered.
+
+    Examples
+    --------
+    >>> mask = np.ones((4, 4), bool); flat = np.zeros((4, 4)); up = np.zeros((4, 4, 3))
+    >>> def maps(z):
+    ...     return SurfaceMaps(mask, np.dstack([flat, flat, flat + z]), up, flat)
+    >>> select_uv_examples(maps(0.0), [maps(0.5), maps(0.1), maps(-0.3)], 2)
+    [1, 2]
+    """
+    distances = []
+    for example in examples:
+        both = query.mask & example.mask
+        if not both.any():
+            distances.append(np.inf)
+            continue
+        squared = np.sum((query.position[both] - example.position[both]) ** 2, axis=1)
+        uncovered = 1.0 - both.sum() / query.mask.sum()
+        distances.append(float(squared.mean()) + uncovered)
+    order = np.argsort(distances, kind="stable")
+    return [int(i) for i in order[:m]]
+
+
+def _uv_mappings(
+    guides: np.ndarray, mask: np.ndarray, levels: int, appearance=None, kind="gaussian"
+):
+    """A pyramid (finest first) of Mappings of guide bands (and appearance) over a mask."""
+    from imagemap.core.mapping import Mapping
+    from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
+
+    masks = mask_pyramid(mask, levels)
+    guide_levels = gaussian_pyramid(guides, levels)
+    if appearance is None:
+        appearance_levels = [None] * levels
+    elif kind == "laplacian":
+        appearance_levels = laplacian_pyramid(appearance, levels)
+    else:
+        appearance_levels = gaussian_pyramid(appearance, levels)
+    return [
+        Mapping(guide=g, appearance=a, mask=m if m.any() else None)
+        for g, a, m in zip(guide_levels, appearance_levels, masks, strict=True)
+    ]
+
+
+#: Rows of the output texture made at once (bounds the temporaries of the final copy).
+_BLOCK_ROWS = 128
+
+
+def _unit(values: np.ndarray) -> np.ndarray:
+    """Texture values as float32 in [0, 1] (uint8 divided by 255)."""
+    if values.dtype == np.uint8:
+        return values.astype(np.float32) / 255.0
+    return values.astype(np.float32)
+
+
+def fine_texture(
+    textures: list[np.ndarray],
+    source: np.ndarray,
+    correction: np.ndarray,
+    size: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The texture at ``size`` copied through a coarser source map from full-size textures.
+
+    Each output texel lies in one texel of the working atlas (``source``'s grid, W x W);
+    it copies the texel of its source example's own texture (any size) at the same
+    sub-position within the source texel, plus ``correction`` (W, W, C) of its working
+    texel. Detail is then the examples' own, at their resolution.
+
+    Parameters
+    ----------
+    textures : list of (H_k, W_k, C) arrays
+        Each example's full texture (uint8 or float in [0, 1]).
+    source : (W, W, 3) int array
+        Example, y, x in the working atlas (example < 0: none; taken as example 0).
+    correction : (W, W, C) array
+        Added to every output texel of a working texel.
+    size : int
+
+    Returns
+    -------
+    (texture (size, size, C) float32 clipped to [0, 1], source (size, size, 3) int32 into
+    the examples' own textures)
+
+    Examples
+    --------
+    Working texel (0, 1) copies the texel (1, 0) of a 2 x 2 atlas; at 4 x 4, its four
+    texels copy the four under that one:
+
+    >>> texture = np.arange(16, dtype=np.float32).reshape(4, 4, 1) / 16
+    >>> src = np.zeros((2, 2, 3), np.int32); src[0, 1] = (0, 1, 0)
+    >>> image, fine = fine_texture([texture], src, np.zeros((2, 2, 1), np.float32), 4)
+    >>> fine[0:2, 2:4, 1:].tolist()
+    [[[2, 0], [2, 1]], [[3, 0], [3, 1]]]
+    >>> (image[0:2, 2:4, 0] * 16).tolist()
+    [[8.0, 9.0], [12.0, 13.0]]
+    """
+    working = source.shape[0]
+    centres = (np.arange(size) + 0.5) * working / size
+    cell = np.minimum(centres.astype(np.int64), working - 1)
+    within = centres - cell  # sub-position in the working texel, [0, 1)
+    heights = np.array([t.shape[0] for t in textures], dtype=np.float64)
+    widths = np.array([t.shape[1] for t in textures], dtype=np.float64)
+    channels = correction.shape[2]
+    image = np.empty((size, size, channels), dtype=np.float32)
+    fine = np.empty((size, size, 3), dtype=np.int32)
+    for y0 in range(0, size, _BLOCK_ROWS):
+        rows = slice(y0, y0 + _BLOCK_ROWS)
+        coarse = source[cell[rows]][:, cell]
+        index = np.clip(coarse[..., 0], 0, len(textures) - 1)
+        sy = np.floor((coarse[..., 1] + within[rows, None]) * heights[index] / working)
+        sx = np.floor((coarse[..., 2] + within[None, :]) * widths[index] / working)
+        sy = np.clip(sy, 0, heights[index] - 1).astype(np.int32)
+        sx = np.clip(sx, 0, widths[index] - 1).astype(np.int32)
+        block = correction[cell[rows]][:, cell].astype(np.float32)
+        for k, texture in enumerate(textures):
+            here = index == k
+            block[here] += _unit(texture[sy[here], sx[here]][..., :channels])
+        image[rows] = np.clip(block, 0.0, 1.0)
+        fine[rows] = np.stack([index, sy, sx], axis=-1)
+    return image, fine
+
+
+def colorize_uv(
+    mesh,
+    examples: list[UVExample],
+    config,
+    *,
+    size: int,
+    names: list[str] | None = None,
+    seed: int = 0,
+    quiet: bool = True,
+    working_size: int = WORKING_SIZE,
+    weights: tuple[float, float, float] = (POSITION_WEIGHT, NORMAL_WEIGHT, CURVATURE_WEIGHT),
+):
+    """Synthesise a texture in the query's UV atlas from examples in the same layout.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The query, with per-vertex UVs (its own texture, if any, is not read).
+    examples : list of UVExample
+        The examples, all in the query's layout.
+    config : DepthConfig
+        The depth front end's configuration (the selection's ``m``, the pyramid, the
+        matching and the finish are used; the depth's guide bands are not).
+    size : int
+        The texture's width and height.
+    names : list of str, optional
+        The examples to use; default: the ``m`` nearest in surface
+        (:func:`select_uv_examples`).
+    seed, quiet
+        As :func:`imagemap.colorize`.
+    working_size : int
+        The atlas size the engine runs at (at most ``size``).
+    weights : (float, float, float)
+        Weights of the position, normal and curvature bands (0 leaves a band out).
+
+    Returns
+    -------
+    ColorizeResult
+        ``image`` is the texture (``size`` x ``size``, padded outside the charts),
+        ``mask`` the used texels, ``source`` every texel's example, y, x in that
+        example's own texture.
+    """
+    from imagemap.core.engine import synthesize
+    from imagemap.database import Database
+    from imagemap.depth.guides import level_plans, to_ycbcr
+    from imagemap.depth.pipeline import (
+        STAGES,
+        ColorizeResult,
+        Stage,
+        State,
+        engine_params,
+        run_pipeline,
+    )
+    from imagemap.example import Example
+    from imagemap.mesh.bake import covered_texels
+
+    working = int(min(working_size, size))
+    vertices, faces, uv = mesh_uv_arrays(mesh)
+    query = surface_maps(vertices, faces, uv, working)
+    by_name = {e.name: e for e in examples}
+    if names:
+        missing = [n for n in names if n not in by_name]
+        if missing:
+            raise InputError(
+                f"examples: {', '.join(missing)} not in the query's UV layout "
+                f"(in it: {', '.join(by_name) or 'none'})"
+            )
+        chosen = [by_name[n] for n in names]
+    else:
+        m = min(config.selection.m, len(examples))
+        order = select_uv_examples(query, [e.maps(working) for e in examples], m)
+        chosen = [examples[i] for i in order]
+    textures = [resize_texture(e.texture, working) for e in chosen]
+    pictures = [
+        Example.from_arrays(
+            e.name, np.where(e.maps(working).mask, 0.5, 0.0).astype(np.float32), texture
+        )
+        for e, texture in zip(chosen, textures, strict=True)
+    ]
+    band_weights = guide_weights(*weights)
+
+    def select(state: State, config) -> State:
+        state.chosen = pictures
+        state.changed = ", ".join(e.name for e in pictures)
+        return state
+
+    def bands(state: State, config) -> State:
+        from imagemap.core.engine import ReleasableLevels
+
+        levels, kind = config.pyramid.levels, config.matching.appearance_pyramid
+        state.query_levels = ReleasableLevels(
+            _uv_mappings(query.guides(*weights), query.mask, levels)
+        )
+        state.exemplar_levels = [
+            ReleasableLevels(
+                _uv_mappings(
+                    e.maps(working).guides(*weights),
+                    e.maps(working).mask,
+                    levels,
+                    to_ycbcr(fill_background(texture, e.maps(working).mask)),
+                    kind,
+                )
+            )
+            for e, texture in zip(chosen, textures, strict=True)
+        ]
+        state.changed = f"{len(chosen)} examples' surface guides and textures"
+        return state
+
+    def engine(state: State, config) -> State:
+        params = replace(
+            engine_params(config, state.mask, len(pictures)),
+            guide_weights=band_weights,
+            guide_padding="edge",
+            levels=level_plans(config, state.mask, len(pictures)),
+        )
+        query_levels, exemplar_levels = state.query_levels, state.exemplar_levels
+        state.query_levels = state.exemplar_levels = None
+        state.engine = synthesize(query_levels, exemplar_levels, params, seed=state.seed,
+                                  quiet=state.quiet)  # fmt: skip
+        state.changed = "iterations per level (fine to coarse): " + ", ".join(
+            str(len(values)) for values in state.engine.objective
+        )
+        return state
+
+    own = {"select": select, "bands": bands, "synthesize": engine}
+    stages = tuple(
+        Stage(s.name, own[s.name], s.wanted) if s.name in own else s
+        for s in STAGES
+        if s.name in own or s.name in FINISH_STAGES
+    )
+    missing = (set(own) | set(FINISH_STAGES)) - {s.name for s in stages}
+    if missing:  # the depth front end renamed a stage: say so, do not skip it silently
+        raise RuntimeError(f"uv-space synthesis: no pipeline stage {sorted(missing)}")
+    start = time.perf_counter()
+    state = State(
+        depth=np.where(query.mask, 0.5, 0.0).astype(np.float32),
+        database=Database(pictures),
+        seed=seed,
+        quiet=quiet,
+        names=[e.name for e in chosen],
+    )
+    state.mask = query.mask
+    state, ran, records = run_pipeline(state, config, stages)
+    working_image, source = state.image, state.source
+    # The texture at its own size: every texel copied from its example's full-resolution
+    # texture, plus the finish's smooth correction (blend minus plain copy) of its texel.
+    final_mask = covered_texels(uv, faces, size) if size != working else query.mask
+    full = [np.asarray(e.texture)[..., :3] for e in chosen]
+    if size == working and all(t.shape[:2] == (working, working) for t in full):
+        image, fine_source = working_image, source
+    else:
+        plain = copy_through(textures, source).astype(np.float32)
+        # Outside the working mask the finish left 0: continued from the nearest texel,
+        # for the output texels at the charts' borders that fall there.
+        correction = fill_background(working_image - plain, query.mask)
+        del plain
+        image, fine_source = fine_texture(full, source, correction, size)
+    texture = fill_background(np.where(final_mask[..., None], image, 0.0), final_mask)
+    seconds = time.perf_counter() - start
+    log.info(
+        "uv-space synthesis: %d^2 atlas (engine at %d^2) from %s in %.1f s",
+        size,
+        working,
+        ", ".join(e.name for e in chosen),
+        seconds,
+    )
+    cost = state.engine.cost
+    return ColorizeResult(
+        image=texture.astype(np.float32),
+        mask=final_mask,
+        source=fine_source,
+        cost=cost,
+        example_names=[e.name for e in chosen],
+        objective=state.engine.objective,
+        timings={"uv_space": seconds},
+        config=ran,
+        stages=records,
+    )
