@@ -80,7 +80,7 @@ def _cgroup_room() -> int | None:
 def _address_space_room() -> int | None:
     """RLIMIT_AS's soft limit minus this process's mapped address space (VmSize)."""
     try:
-        import resource
+        import resource  # deferred: not on every platform (Windows)
     except ImportError:  # not on this platform
         return None
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)

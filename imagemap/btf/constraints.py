@@ -186,8 +186,8 @@ def lightness(linear: np.ndarray) -> np.ndarray:
     skimage's ``rgb2lab`` expects gamma-encoded sRGB; our images are linear, so
     they go through the sRGB->XYZ matrix and ``xyz2lab`` directly.
     """
-    from skimage.color import xyz2lab
-    from skimage.color.colorconv import xyz_from_rgb
+    from skimage.color import xyz2lab  # deferred: skimage, lightness only
+    from skimage.color.colorconv import xyz_from_rgb  # deferred: skimage, lightness only
 
     linear = _image(linear, "image")
     xyz = np.clip(linear, 0.0, None) @ xyz_from_rgb.T.astype(np.float32)

@@ -457,7 +457,7 @@ def compress(
         for start in range(0, matrix.shape[1], chunk):
             flat[start : start + chunk] = matrix[:, start : start + chunk].T @ u32
     elif method == "randomized":
-        from sklearn.utils.extmath import randomized_svd
+        from sklearn.utils.extmath import randomized_svd  # deferred: scikit-learn
 
         u, sigma, vt = randomized_svd(matrix, k, n_iter=4, random_state=seed)
         flat = (vt.T * sigma).astype(np.float32)

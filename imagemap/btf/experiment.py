@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from imagemap.btf.constraints import scanner_response
-from imagemap.btf.core import BTF, compress, relative_error
+from imagemap.btf.core import BTF, compress, directions_to_vectors, relative_error
 from imagemap.btf.extrapolate import (
     _OLD_SEARCH_NAMES,
     CONSTRAINT_AZIMUTHS,
@@ -60,6 +60,7 @@ from imagemap.btf.extrapolate import (
 )
 from imagemap.btf.materials import MATERIALS, ground_truth
 from imagemap.io import InputError, atomic_path, write_image
+from imagemap.outputs import check_output_directory
 
 __all__ = [
     "PIXELWISE_MEAN_SETTINGS",
@@ -216,7 +217,7 @@ class ExperimentParams:
 
 def default_extra_methods() -> dict[str, ExtraMethod]:
     """The methods beyond the paper's: ``moving_average`` (the parametric model)."""
-    from imagemap.btf.moving_average import experiment_method
+    from imagemap.btf.moving_average import experiment_method  # deferred: MA model, its row
 
     return {"moving_average": experiment_method}
 
@@ -245,8 +246,6 @@ def _scan_rows(
     matrix: np.ndarray, light_dirs: np.ndarray, view_dirs: np.ndarray, shape
 ) -> list[np.ndarray]:
     """The full sample's own images at the top view, light theta 22, four azimuths."""
-    from imagemap.btf.core import directions_to_vectors
-
     lights = directions_to_vectors(light_dirs)
     view = int(np.argmax(directions_to_vectors(view_dirs)[:, 2]))
     images = []
@@ -260,7 +259,7 @@ def _scan_rows(
 
 def _display(image: np.ndarray) -> np.ndarray:
     """Linear radiance to a viewable image (gamma 2.2)."""
-    from imagemap.render import display_gamma
+    from imagemap.render import display_gamma  # deferred: render, pictures only
 
     return display_gamma(image)
 
@@ -481,7 +480,7 @@ def _detail_crop(params: ExperimentParams) -> tuple[int, int, int]:
 
 def _label(canvas: np.ndarray, names: Sequence[tuple[str, int]]) -> np.ndarray:
     try:
-        from PIL import Image, ImageDraw
+        from PIL import Image, ImageDraw  # deferred: Pillow, optional (labels)
     except ImportError:  # labels are a nicety
         return canvas
     image = Image.fromarray((np.clip(canvas, 0, 1) * 255).astype(np.uint8))
@@ -515,8 +514,6 @@ def run_experiment(
     -------
     rows : list of dict
     """
-    from imagemap.outputs import check_output_directory
-
     out = Path(out)
     for name in materials:
         _source(name, sources)  # fail before any work
@@ -570,7 +567,7 @@ def run_experiment(
 
 def _warm_up_pynndescent(seed: int) -> None:
     """Compile pynndescent's numba code once, so that no method's time includes it."""
-    from imagemap.core.search import PynndescentIndex
+    from imagemap.core.search import PynndescentIndex  # deferred: numba
 
     rng = np.random.default_rng(seed)
     for dims in (14, 126):

@@ -301,7 +301,7 @@ def prepare_scans(
 def _search(sample: np.ndarray, target: np.ndarray, params: PixelwiseParams) -> np.ndarray:
     """Index of the nearest sample row for every target row (Eq. 6): (n,), or (n, K)
     for ``params.neighbours`` = K > 1."""
-    from imagemap.core.search import make_index
+    from imagemap.core.search import make_index  # deferred: search backends
 
     # Bands with weight 0 are 0 everywhere: they cost time and change nothing.
     used = np.any(sample != 0, axis=0) | np.any(target != 0, axis=0)
@@ -401,8 +401,8 @@ def texture_optimization(
     result : imagemap.core.engine.EngineResult
         Source map, costs and timings of the engine.
     """
-    from imagemap.core.engine import EngineParams, Mapping, synthesize
-    from imagemap.core.pyramid import gaussian_pyramid
+    from imagemap.core.engine import EngineParams, Mapping, synthesize  # deferred: engine
+    from imagemap.core.pyramid import gaussian_pyramid  # deferred: engine
 
     kwargs = {"ws": params.ws, "wc": params.wc}
     sample_guide = constraint_bands(sample_images, **kwargs)

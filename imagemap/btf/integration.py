@@ -174,8 +174,8 @@ def poisson_integration(
     >>> np.round(height[1:5, 2], 3).tolist(), bool(np.isnan(height[0, 0]))
     ([-1.5, -0.5, 0.5, 1.5], True)
     """
-    from scipy import ndimage, sparse
-    from scipy.sparse.linalg import spsolve
+    from scipy import ndimage, sparse  # deferred: scipy.sparse, the masked solve only
+    from scipy.sparse.linalg import spsolve  # deferred: scipy.sparse, the masked solve only
 
     d_col, d_row = slopes(normals, min_nz=min_nz)
     mask = _mask(mask, d_col.shape)

@@ -258,7 +258,7 @@ def synthesize_band(
 
 # ------------------------------------------------------------------------ subspaces (K-means)
 def _lab_features(image: np.ndarray, scale: float) -> np.ndarray:
-    from skimage.color import rgb2lab
+    from skimage.color import rgb2lab  # deferred: skimage.color, the features only
 
     lab = rgb2lab(np.clip(image / scale, 0.0, 1.0)).reshape(-1, 3)
     return np.concatenate([lab.mean(axis=0), lab.std(axis=0)])
@@ -290,7 +290,7 @@ def segment_subspaces(
     >>> segment_subspaces(f, 2)[0].tolist()
     [0, 0, 1, 1]
     """
-    from scipy.cluster.vq import kmeans2
+    from scipy.cluster.vq import kmeans2  # deferred: scipy.cluster, segmentation only
 
     features = np.asarray(features, dtype=np.float64)
     n = features.shape[0]

@@ -35,6 +35,8 @@ segmentation) live in :mod:`imagemap.btf.ma_signal`; this module fits and uses t
 
 from __future__ import annotations
 
+import ast
+import hashlib
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,6 +53,13 @@ from imagemap.btf.ma_signal import (  # noqa: F401 - re-exported, and _expand_wr
     random_decrement_signature,
     segment_subspaces,
     synthesize_band,
+)
+from imagemap.btf.photometric import (
+    btf_direction_vectors,
+    crossfade_tile,
+    enlarge_range_map,
+    frankot_chellappa,
+    photometric_stereo,
 )
 from imagemap.core.pyramid import laplacian_pyramid, level_shapes
 from imagemap.io import InputError, read_npz, write_npz
@@ -169,8 +178,6 @@ def sample_fingerprint(btf) -> str:
     >>> len(sample_fingerprint(btf))
     16
     """
-    import hashlib
-
     digest = hashlib.sha256()
     for array in (btf.eigen_abrdfs, btf.light_dirs, btf.view_dirs):
         digest.update(np.ascontiguousarray(array, dtype=np.float32).tobytes())
@@ -246,8 +253,6 @@ class MovingAverageModel:
     @classmethod
     def load(cls, path: str | os.PathLike) -> MovingAverageModel:
         """Read a model written by :meth:`save`."""
-        import ast
-
         path = Path(path)
         fields = read_npz(path)
         if str(fields.get("format", "")) != MODEL_FORMAT:
@@ -343,8 +348,6 @@ def fit_moving_average(
     --------
     >>> model = fit_moving_average(stack, lights, views)  # doctest: +SKIP
     """
-    from imagemap.btf.photometric import crossfade_tile, frankot_chellappa, photometric_stereo
-
     params = params or MAParams()
     lights = np.asarray(light_vectors, np.float64)
     views = np.asarray(view_vectors, np.float64)
@@ -420,8 +423,6 @@ def fit_moving_average_btf(
     --------
     >>> model = fit_moving_average_btf(BTF.load("sample.npz"))  # doctest: +SKIP
     """
-    from imagemap.btf.photometric import btf_direction_vectors
-
     model = fit_moving_average(
         None,
         btf_direction_vectors(btf.light_dirs),
@@ -479,8 +480,6 @@ def synthesize_smooth_textures(
 
 
 def _enlarged_normals(model: MovingAverageModel, shape, seed: int) -> np.ndarray:
-    from imagemap.btf.photometric import enlarge_range_map
-
     # One extra texel of the tiling on each side: central differences everywhere, and no
     # false wrap-around slope when the size is not a multiple of the tile.
     padded = (int(shape[0]) + 2, int(shape[1]) + 2)

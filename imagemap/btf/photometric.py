@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from imagemap.btf.core import directions_to_vectors
 from imagemap.btf.integration import frankot_chellappa  # re-exported: its former home
 from imagemap.io import InputError
 
@@ -406,8 +407,6 @@ def btf_direction_vectors(directions: np.ndarray) -> np.ndarray:
     >>> btf_direction_vectors(np.array([[90.0, 90.0]])).round(6).tolist()
     [[0.0, -1.0, 0.0]]
     """
-    from imagemap.btf.core import directions_to_vectors
-
     vectors = directions_to_vectors(directions)
     vectors[:, 1] *= -1.0
     return vectors + 0.0

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imagemap.io import InputError
+from imagemap.io import InputError, _load_raw, _to_unit_float
 
 __all__ = ["LIGHTS_FORMAT", "read_image_stack", "read_lights", "read_mask"]
 
@@ -126,8 +126,6 @@ def read_lights(path: str | os.PathLike) -> np.ndarray:
 
 
 def _read_array(path: Path) -> np.ndarray:
-    from imagemap.io import _load_raw, _to_unit_float
-
     image = _to_unit_float(_load_raw(path), path)
     if image.ndim == 2:
         image = image[..., None]

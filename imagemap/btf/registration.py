@@ -50,6 +50,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imagemap.btf.constraints import (
+    color_correct,
+    constraint_bands,
+    lightness,
+    stack_neighbourhood,
+)
 from imagemap.io import InputError
 
 __all__ = [
@@ -180,7 +186,7 @@ def scan_descriptor(
     ``sigma``) is removed. Scans of a material without colour variation fall back
     to CIELAB L* minus its blur (see :func:`register_scans`).
     """
-    from scipy.ndimage import gaussian_filter
+    from scipy.ndimage import gaussian_filter  # deferred: scipy.ndimage, when registering
 
     logs = np.log(np.clip(np.asarray(scan, dtype=np.float64), 1e-4, None))
     chroma = np.stack([logs[..., 0] - logs[..., 1], logs[..., 2] - logs[..., 1]], axis=-1)
@@ -197,9 +203,7 @@ def _chroma_basis(chroma: np.ndarray) -> np.ndarray:
 
 
 def _lightness_descriptor(scan: np.ndarray, sigma: float = 6.0) -> np.ndarray:
-    from scipy.ndimage import gaussian_filter
-
-    from imagemap.btf.constraints import lightness
+    from scipy.ndimage import gaussian_filter  # deferred: scipy.ndimage, when registering
 
     lum = lightness(np.clip(scan, 0.0, None)).astype(np.float64)
     return lum - gaussian_filter(lum, sigma, mode="reflect")
@@ -237,7 +241,7 @@ def _warp(image: np.ndarray, angle: float, shift=(0.0, 0.0), order: int = 1) -> 
 
     Output pixel o samples the input at c + R^-1 (o - shift - c).
     """
-    from scipy.ndimage import affine_transform
+    from scipy.ndimage import affine_transform  # deferred: scipy.ndimage, when registering
 
     matrix = _rotation(angle).T  # the inverse of a rotation
     centre = (np.array(image.shape[:2]) - 1) / 2.0
@@ -254,7 +258,7 @@ def _warp(image: np.ndarray, angle: float, shift=(0.0, 0.0), order: int = 1) -> 
 
 
 def _correlate(reference, moving, window, upsample: int, normalization: str | None = "phase"):
-    from skimage.registration import phase_cross_correlation
+    from skimage.registration import phase_cross_correlation  # deferred: skimage, when registering
 
     shift, error, _ = phase_cross_correlation(
         reference * window, moving * window, upsample_factor=upsample, normalization=normalization
@@ -385,14 +389,12 @@ def register_scans(
         raise InputError(f"turn_direction: 1 or -1, got {turn_direction!r}")
     if not 0 <= max_rotation <= 20 or not np.isfinite(max_rotation):
         raise InputError(f"max_rotation: between 0 and 20 degrees, got {max_rotation}")
-    from skimage.filters import window as make_window
+    from skimage.filters import window as make_window  # deferred: skimage, when registering
 
     # Two descriptors (colour pattern, lightness pattern) and two correlations (plain,
     # phase-only: whitened, which favours fine structure): each pair proposes a turn,
     # an angle and a shift; the proposal under which the descriptors agree best wins.
     if response is not None:
-        from imagemap.btf.constraints import color_correct
-
         linear = [color_correct(s, response=response) for s in scans]
     else:
         linear = scans
@@ -585,8 +587,7 @@ def orient_to_sample(
         90 * (start +/- i) in the turned frame
     costs : hypothesis -> mean nearest-neighbour distance
     """
-    from imagemap.btf.constraints import constraint_bands, stack_neighbourhood
-    from imagemap.core.search import make_index
+    from imagemap.core.search import make_index  # deferred: search backends, orient_to_sample only
 
     if len(target_images) != 4 or len(sample_images) != 4:
         raise InputError("target_images, sample_images: four images each")

@@ -134,7 +134,7 @@ def chart_patch_values(
 
 def _fit_channel(scan: np.ndarray, linear: np.ndarray) -> tuple[float, float, float, float]:
     """(o, m, gamma, rms) with linear = m * (scan - o) ** gamma, least squares in scan units."""
-    from scipy.optimize import least_squares
+    from scipy.optimize import least_squares  # deferred: scipy.optimize, the chart fit only
 
     log_l = np.log(linear)
     # Start: a grid over o; for each, log L = log m + gamma log(s - o) is linear.

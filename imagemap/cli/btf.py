@@ -11,6 +11,11 @@ from imagemap.cli import PIXELWISE_BACKEND_NAMES
 from imagemap.cli.paths import check_paths
 from imagemap.errors import InputError
 
+#: The parser loads no scientific module (``imagemap --help`` stays fast): each command
+#: imports what it needs when it runs, and register() imports imagemap.cli's helpers late
+#: because imagemap.cli imports this module.
+DEFERRED_IMPORTS = "command functions import their modules when run; the parser loads none"
+
 log = logging.getLogger("imagemap")
 
 METHODS = ("pixelwise", "texture_optimization")

@@ -9,6 +9,11 @@ from pathlib import Path
 
 from imagemap.errors import InputError
 
+#: The parser loads no scientific module (``imagemap --help`` stays fast): each command
+#: imports what it needs when it runs, and register() imports imagemap.cli's helpers late
+#: because imagemap.cli imports this module.
+DEFERRED_IMPORTS = "command functions import their modules when run; the parser loads none"
+
 #: --integration choices, as the API names them.
 INTEGRATION_NAMES = {"poisson": "poisson", "frankot-chellappa": "frankot_chellappa"}
 
