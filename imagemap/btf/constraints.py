@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -36,6 +37,10 @@ __all__ = [
     "stack_neighbourhood",
     "constraint_vectors",
 ]
+
+
+#: ``numpy.pad`` modes :func:`stack_neighbourhood` accepts for the borders.
+PadMode = Literal["constant", "edge", "reflect", "symmetric", "wrap"]
 
 
 @dataclass(frozen=True)
@@ -232,7 +237,9 @@ def constraint_bands(
     )
 
 
-def stack_neighbourhood(bands: np.ndarray, *, radius: int = 0, mode: str = "reflect") -> np.ndarray:
+def stack_neighbourhood(
+    bands: np.ndarray, *, radius: int = 0, mode: PadMode = "reflect"
+) -> np.ndarray:
     """Concatenate each texel's (2R+1)^2 neighbours' bands: (H, W, C * (2R+1)^2).
 
     Order: neighbour offsets row-major from (-R, -R) to (R, R), the C bands of

@@ -41,6 +41,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -101,7 +102,9 @@ PIXELWISE_MEAN_SETTINGS = {"pixelwise_R1_ws1_wc10_mean16": (1, 1.0, 10.0, 16)}
 
 #: Not in the paper: texture optimization with the settings that did best in our
 #: study (small windows, every window matched; README, BTF section).
-TUNED_TEXTURE = {"texture_optimization_R2_stride1": {"radius": 2, "stride": 1}}
+TUNED_TEXTURE: dict[str, dict[str, Any]] = {
+    "texture_optimization_R2_stride1": {"radius": 2, "stride": 1}
+}
 
 #: A method hook: (sample BTF, output shape (H, W), seed) -> BTF sharing the sample's U.
 ExtraMethod = Callable[[BTF, tuple[int, int], int], BTF]

@@ -103,7 +103,7 @@ def check_scans(scans: Sequence[np.ndarray], names: Sequence[str] | None = None)
             f"scans: expected four images (azimuths 0, 90, 180, 270), got {len(scans)}"
         )
     names = list(names) if names is not None else [f"scans[{i}]" for i in range(4)]
-    out = []
+    out: list[np.ndarray] = []
     for name, scan in zip(names, scans, strict=True):
         array = np.asarray(scan, dtype=np.float32)
         if array.ndim != 3 or array.shape[2] != 3:

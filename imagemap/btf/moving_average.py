@@ -269,7 +269,7 @@ class MovingAverageModel:
                 fields["light_vectors"],
                 fields["view_vectors"],
                 fields["range_map"],
-                tuple(int(s) for s in fields["sample_shape"]),
+                (int(fields["sample_shape"][0]), int(fields["sample_shape"][1])),
                 MAParams(**ast.literal_eval(str(fields["params"]))),
                 str(fields.get("sample_digest", "")),
             )
@@ -318,7 +318,7 @@ def _fit_representative(image: np.ndarray, params: MAParams):
 
 
 def fit_moving_average(
-    images: np.ndarray,
+    images: np.ndarray | None,
     light_vectors: np.ndarray,
     view_vectors: np.ndarray,
     *,

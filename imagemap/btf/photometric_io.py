@@ -156,7 +156,7 @@ def read_image_stack(paths) -> np.ndarray:
     (3, 2, 3, 1)
     """
     paths = [Path(p) for p in paths]
-    images = []
+    images: list[np.ndarray] = []
     for path in paths:
         image = _read_array(path)
         if images and image.shape != images[0].shape:

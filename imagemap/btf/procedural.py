@@ -238,8 +238,8 @@ def turbulence(
     return _octaves(points, octaves, persistence, lacunarity, seed, frequency, absolute=True)
 
 
-def _unit_vector(vector: Sequence[float], dims: int, name: str) -> np.ndarray:
-    vector = np.asarray(vector, dtype=np.float32)[:dims]
+def _unit_vector(components: Sequence[float], dims: int, name: str) -> np.ndarray:
+    vector = np.asarray(components, dtype=np.float32)[:dims]
     if vector.shape != (dims,):
         raise InputError(f"{name}: expected {dims} components, got {vector.shape}")
     norm = float(np.linalg.norm(vector))

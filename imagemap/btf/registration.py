@@ -102,11 +102,11 @@ class Registration:
     """
 
     images: list[np.ndarray]
-    order: tuple[int, int, int, int]
-    turns: tuple[int, int, int, int]
-    angles: tuple[float, float, float, float]
+    order: tuple[int, ...]
+    turns: tuple[int, ...]
+    angles: tuple[float, ...]
     shifts: tuple[tuple[float, float], ...]
-    errors: tuple[float, float, float, float]
+    errors: tuple[float, ...]
     crop: tuple[int, int, int, int]
     confidences: tuple[float, ...] = ()
 
@@ -117,7 +117,7 @@ class Registration:
         return tuple(i for i, c in enumerate(self.confidences) if c < MIN_CONFIDENCE)
 
     @property
-    def azimuths(self) -> tuple[float, float, float, float]:
+    def azimuths(self) -> tuple[float, ...]:
         """Light azimuth (degrees) of each input scan."""
         out = [0.0] * 4
         for azimuth_index, scan in enumerate(self.order):
@@ -488,8 +488,8 @@ def register_scans(
     # the border that a rotation or shift leaves uncovered.
     warped = []
     for scan, t, angle, shift in zip(scans, turns, angles, shifts, strict=True):
-        upright = _centre_crop(np.rot90(scan, -t), side)
-        warped.append(_warp(upright, angle, shift, order=3).astype(np.float32))
+        square = _centre_crop(np.rot90(scan, -t), side)
+        warped.append(_warp(square, angle, shift, order=3).astype(np.float32))
     reach = max(abs(a) for a in angles)
     margin = int(
         np.ceil(side * np.sin(np.deg2rad(reach)) + max(np.abs(s).max() for s in shifts) + 1)
@@ -507,12 +507,12 @@ def register_scans(
     judged = side >= MIN_JUDGED_SIDE
     if not judged:
         log.info("scans not judged for fit: %d px is under %d px", side, MIN_JUDGED_SIDE)
-    for azimuth_index, i in enumerate(order):
+    for position, i in enumerate(order):
         if i != 0:
             if not judged:
                 confidences[i] = np.nan
                 continue
-            confidences[i] = match_confidence(images[0], images[azimuth_index], sigma=sigma)
+            confidences[i] = match_confidence(images[0], images[position], sigma=sigma)
             if confidences[i] < MIN_CONFIDENCE:
                 log.warning(
                     "%s does not fit %s (match confidence %.1f, below %.0f; correct "
@@ -604,7 +604,7 @@ def orient_to_sample(
             bands = constraint_bands(_relabel(turned, start, mirrored), ws=ws, wc=wc)
             _, distances = index.query(_neighbourhoods_at(bands, ys, xs, radius))
             costs[(q, start, mirrored)] = float(np.mean(np.sqrt(distances)))
-    q, start, mirrored = min(costs, key=costs.get)
+    q, start, mirrored = min(costs, key=lambda hypothesis: costs[hypothesis])
     ranked = sorted(costs.values())
     log.info(
         "frame from the sample: turned %d quarter turns, input 0 lit from %d deg%s "

@@ -68,6 +68,12 @@ COLOR_MODEL_CODES = {
     12: "logRGB",
 }
 _SCALAR_TYPES = {2: np.float16, 4: np.float32, 8: np.float64}
+#: The largest finite value of each scalar type (float16: 65504).
+_SCALAR_LIMITS = {
+    2: 65504.0,
+    4: float(np.finfo(np.float32).max),
+    8: float(np.finfo(np.float64).max),
+}
 
 #: Meta-block versions the format description above covers (btflib writes 1 to 4).
 META_VERSIONS = (1, 2, 3, 4)
@@ -208,7 +214,7 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
         # Equal sizes (texels == pairs) are read in the normal layout, as btflib's
         # get_fmf_eigen_abrdfs does; write_ubo2014 never writes the other one then.
         if transposed:
-            u, sxv = sxv / np.where(sigma > 0, sigma, 1), u * sigma
+            u, sxv = (sxv / np.where(sigma > 0, sigma, 1)).astype(np.float32), u * sigma
         u_blocks.append(u)
         sigmas.append(sigma)
         eigentextures.append(sxv.reshape(height, width, k))
@@ -318,16 +324,12 @@ def write_ubo2014(
             f"{len(view_dirs)} views x {len(light_dirs)} lights = {n_pairs} direction pairs "
             "is ambiguous (every reader takes such a file as 'abrdfs'); write layout='abrdfs'"
         )
-    if layout == "images":
-        us, sxvs_flat = zip(
-            *(
-                (w.reshape(height * width, -1) / np.where(s > 0, s, 1), u * s)
-                for u, s, w in zip(us, sigmas, sxvs, strict=True)
-            ),
-            strict=True,
+    sxvs_flat = [w.reshape(height * width, -1) for w in sxvs]
+    if layout == "images":  # the transposed factorization: texels' factor first
+        us, sxvs_flat = (
+            [w / np.where(s > 0, s, 1) for w, s in zip(sxvs_flat, sigmas, strict=True)],
+            [u * s for u, s in zip(us, sigmas, strict=True)],
         )
-    else:
-        sxvs_flat = [w.reshape(height * width, -1) for w in sxvs]
     _check_range(us, sigmas, sxvs_flat, channels, scalar_size)
     mean = np.asarray(color_mean, dtype=np.float64)
     matrix = np.eye(3) if color_matrix is None else np.asarray(color_matrix, dtype=np.float64)
@@ -378,7 +380,7 @@ def _check_channel_names(channels) -> tuple[str, ...]:
 def _check_range(us, sigmas, sxvs, channels, scalar_size: int) -> None:
     """InputError naming the factor and channel whose values the scalar type cannot hold
     (float16 overflows to inf above 65504)."""
-    limit = float(np.finfo(_SCALAR_TYPES[scalar_size]).max)
+    limit = float(_SCALAR_LIMITS[scalar_size])
     for c, name in enumerate(channels):
         for label, values in (
             ("eigen_abrdfs", us[c]),
@@ -404,7 +406,9 @@ def _check_factors(eigen_abrdfs, singular_values, eigentextures, channels, n_pai
     }
     if len(set(counts.values())) != 1 or counts["channels"] < 1:
         raise InputError(f"one factor per channel needed; got {counts}")
-    us, sigmas, sxvs = [], [], []
+    us: list[np.ndarray] = []
+    sigmas: list[np.ndarray] = []
+    sxvs: list[np.ndarray] = []
     for c, name in enumerate(channels):
         u = np.asarray(eigen_abrdfs[c], dtype=np.float64)
         s = np.asarray(singular_values[c], dtype=np.float64)

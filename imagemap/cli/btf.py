@@ -186,6 +186,7 @@ def _extrapolate(args: argparse.Namespace) -> int:
             f"--ws {defaults.ws:g} --wc {defaults.wc:g}); give one > 0"
         )
     radius = defaults.radius if args.radius is None else args.radius
+    params: PixelwiseParams | TextureOptimizationParams
     if kind is PixelwiseParams:
         backend = backend or defaults.backend
         params = PixelwiseParams(radius=radius, ws=ws, wc=wc, backend=backend, seed=args.seed)
