@@ -17,7 +17,7 @@ from imagemap.database import Database, database_at_view
 from imagemap.depth.selection import select_examples
 from imagemap.io import InputError
 from imagemap.mesh import bake_views, load_mesh, render_mesh, textured_mesh
-from imagemap.mesh.bake import SEAM_BAND_PIXELS, texture_size_for, world_per_uv
+from imagemap.mesh.bake import SEAM_BAND_PIXELS, texture_size_for, view_shares, world_per_uv
 from imagemap.mesh.colorize import colorize_mesh, selection_distances, shared_examples
 from imagemap.mesh.uvspace import (
     LAYOUT_TEST_SIZE,
@@ -71,8 +71,12 @@ def test_views_of_one_object_use_the_same_examples(bump_database):
     alone = [at_view[k].names[select_examples(r.depth, at_view[k], m=1)[0]]
              for k, r in enumerate(renders)]  # fmt: skip
     assert alone[0] != alone[1]
-    # ... chosen once for the object, every view takes the one nearest over both.
-    total = sum(selection_distances(r.depth, db) for r, db in zip(renders, at_view, strict=True))
+    # ... chosen once for the object, every view takes the one nearest over both, each
+    # view's distances per object pixel weighted by the share of the surface it sees best.
+    shares = view_shares(query, renders)
+    assert shares.sum() == pytest.approx(1.0) and (shares > 0.3).all()
+    total = sum(w * selection_distances(r.depth, db) / r.mask.sum()
+                for w, r, db in zip(shares, renders, at_view, strict=True))  # fmt: skip
     nearest = database.names[int(np.argmin(total))]
     made = colorize_mesh(query, database, "front,back", size=size, preset="humans",
                          texture_size=32)  # fmt: skip
@@ -81,7 +85,9 @@ def test_views_of_one_object_use_the_same_examples(bump_database):
     two = colorize_mesh(query, database, "front,back", size=size, preset="humans", m=2,
                         texture_size=32)  # fmt: skip
     assert sorted(two.results[0].example_names) == sorted(two.results[1].example_names)
-    assert shared_examples(renders, at_view, 2) == two.results[0].example_names
+    assert shared_examples(renders, at_view, 2, shares) == two.results[0].example_names
+    # A view that gives the texture nothing does not choose: the front's own choice.
+    assert shared_examples(renders, at_view, 1, np.array([1.0, 0.0])) == [alone[0]]
 
 
 def test_selection_distances_rank_as_select_examples(bump_database):

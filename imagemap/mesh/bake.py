@@ -40,6 +40,7 @@ __all__ = [
     "texture_size_for",
     "uv_atlas",
     "view_scores",
+    "view_shares",
     "world_per_uv",
 ]
 
@@ -295,6 +296,33 @@ def view_scores(
     facing = np.clip(normal @ render.view.direction, 0.0, 1.0)
     margin = np.clip(_view_edges(render)[ri, ci] / FEATHER_PIXELS, 1e-3, 1.0)
     return np.where(seen & (facing > 0), facing * margin, 0.0), col, row
+
+
+def view_shares(mesh, renders: list[MeshRender]) -> np.ndarray:
+    """The share of the surface (by area) each view sees best (:func:`view_scores`).
+
+    What each view will give the baked texture; faces no view sees count for none.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> from imagemap.mesh.views import render_mesh
+    >>> sphere = trimesh.creation.icosphere(subdivisions=3)
+    >>> shares = view_shares(sphere, [render_mesh(sphere, v, (48, 48)) for v in ("front", "back")])
+    >>> [round(float(s), 1) for s in shares]
+    [0.5, 0.5]
+    """
+    triangles = np.asarray(mesh.triangles, dtype=np.float64)
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    normal = cross / np.maximum(2.0 * area[:, None], 1e-300)
+    centre = triangles.mean(axis=1)
+    scores = np.stack([view_scores(render, centre, normal)[0] for render in renders])
+    best = np.argmax(scores, axis=0)
+    seen = scores.max(axis=0) > 0
+    shares = np.bincount(best[seen], weights=area[seen], minlength=len(renders))
+    total = shares.sum()
+    return shares / total if total > 0 else np.full(len(renders), 1.0 / len(renders))
 
 
 def _tent(values: np.ndarray, radius: int) -> np.ndarray:

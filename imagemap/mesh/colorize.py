@@ -22,7 +22,7 @@ import numpy as np
 
 from imagemap.database import Database, database_at_view
 from imagemap.io import InputError
-from imagemap.mesh.bake import bake_views, project_texture
+from imagemap.mesh.bake import bake_views, project_texture, view_shares
 from imagemap.mesh.files import load_mesh
 from imagemap.mesh.views import (
     DEFAULT_SIZE,
@@ -111,19 +111,31 @@ def selection_distances(depth: np.ndarray, database: Database) -> np.ndarray:
     return distances
 
 
-def shared_examples(renders: list[MeshRender], databases: list[Database], m: int) -> list[str]:
+def shared_examples(
+    renders: list[MeshRender],
+    databases: list[Database],
+    m: int,
+    weights: np.ndarray | None = None,
+) -> list[str]:
     """The ``m`` examples nearest the object over all its views: one choice for every view.
 
     Each view's selection distances (:func:`selection_distances`, the query's depth
-    against the examples seen from the same view) are summed, so a view that shows more
-    of the object weighs more; ties keep the database's order.
+    against the examples seen from the same view), per pixel of the object, are summed
+    with ``weights``: by default each view's share of the surface it sees best
+    (:func:`imagemap.mesh.bake.view_shares` needs the mesh; without it, equal weights),
+    so a view that gives the texture little (a fish seen head-on: 2-4 % of its surface,
+    but ten times the flanks' distances) does not choose for it. Ties keep the
+    database's order.
     """
     names = databases[0].names
+    if weights is None:
+        weights = np.full(len(renders), 1.0 / len(renders))
     total = np.zeros(len(names))
-    for render, database in zip(renders, databases, strict=True):
+    for render, database, weight in zip(renders, databases, weights, strict=True):
         if database.names != names:
             raise InputError("the views' databases hold different examples")
-        total += selection_distances(render.depth, database)
+        pixels = max(int(render.mask.sum()), 1)
+        total += weight * selection_distances(render.depth, database) / pixels
     order = np.argsort(total, kind="stable")[: min(m, len(names))]
     return [names[i] for i in order]
 
@@ -320,7 +332,8 @@ def colorize_mesh(
         else:
             databases.append(database_at_view(database, view, size))
     if names is None and len(views) > 1:
-        names = shared_examples(renders, databases, config.selection.m)
+        shares = view_shares(mesh, renders)
+        names = shared_examples(renders, databases, config.selection.m, shares)
     log.info(
         "mesh route: views path (%s), examples %s",
         ", ".join(str(v) for v in views),

@@ -155,7 +155,13 @@ def guide_weights(
     normal_weight: float = NORMAL_WEIGHT,
     curvature_weight: float = CURVATURE_WEIGHT,
 ) -> tuple[float, ...]:
-    """One weight per band of :meth:`SurfaceMaps.guides`."""
+    """One weight per band of :meth:`SurfaceMaps.guides`.
+
+    Examples
+    --------
+    >>> guide_weights(1.0, 0.0, 0.5)  # no normal bands
+    (1.0, 1.0, 1.0, 0.5)
+    """
     return tuple(
         [position_weight] * 3 * bool(position_weight)
         + [normal_weight] * 3 * bool(normal_weight)
@@ -283,7 +289,16 @@ def surface_maps(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: 
 
 
 def mesh_uv_arrays(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices, faces, per-vertex UVs) of a textured trimesh, or InputError without UVs."""
+    """(vertices, faces, per-vertex UVs) of a textured trimesh, or InputError without UVs.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> mesh_uv_arrays(trimesh.creation.box())
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: the mesh has no per-vertex UV coordinates
+    """
     uv = getattr(mesh.visual, "uv", None)
     if uv is None or len(uv) != len(mesh.vertices):
         raise InputError("the mesh has no per-vertex UV coordinates")
@@ -326,6 +341,19 @@ def layout_agreement(first: SurfaceMaps, second: SurfaceMaps) -> tuple[float, fl
     texel is nearly the same normalised point of both objects. A layout that only
     overlaps another (a mirrored one: the HiFi3D++ layout covers 95 % of the atlas)
     puts other points of the object at the same texels.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> sheet = trimesh.creation.box(extents=(2.0, 1.0, 0.2)).subdivide().subdivide()
+    >>> uv = sheet.vertices[:, :2] / [2.0, 1.0] + 0.5
+    >>> maps = surface_maps(sheet.vertices, sheet.faces, uv, 32)
+    >>> mirrored = surface_maps(sheet.vertices, sheet.faces, uv * [-1, 1] + [1, 0], 32)
+    >>> [round(v, 2) for v in layout_agreement(maps, maps)]
+    [1.0, 0.0]
+    >>> iou, distance = layout_agreement(maps, mirrored)  # the same texels, other points
+    >>> round(iou, 2), distance > 0.5
+    (1.0, True)
     """
     if first.size != second.size:
         raise ValueError("atlases of different sizes")
@@ -341,7 +369,17 @@ def layout_agreement(first: SurfaceMaps, second: SurfaceMaps) -> tuple[float, fl
 def shares_layout(query_mesh, example_mesh, query_maps: SurfaceMaps | None = None) -> bool:
     """Whether ``example_mesh`` is in ``query_mesh``'s UV layout (exactly, or by
     :func:`layout_agreement` within :data:`LAYOUT_MIN_IOU` and
-    :data:`LAYOUT_MAX_DISTANCE`)."""
+    :data:`LAYOUT_MAX_DISTANCE`).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> sheet = trimesh.creation.box(extents=(2.0, 1.0, 0.2)).subdivide()
+    >>> sheet.visual = trimesh.visual.TextureVisuals(uv=sheet.vertices[:, :2] / [2, 1] + 0.5)
+    >>> finer = sheet.subdivide()  # another topology, the same layout
+    >>> same_uv_layout(sheet, finer), shares_layout(sheet, finer)
+    (False, True)
+    """
     if same_uv_layout(query_mesh, example_mesh):
         return True
     try:
@@ -556,6 +594,20 @@ def colorize_uv(
         ``image`` is the texture (``size`` x ``size``, padded outside the charts),
         ``mask`` the used texels, ``source`` every texel's example, y, x in that
         example's own texture.
+
+    Examples
+    --------
+    A sheet textured from its own texture gives that texture back:
+
+    >>> import trimesh
+    >>> from imagemap.depth.config import resolve_config
+    >>> sheet = trimesh.creation.box(extents=(2.0, 1.0, 0.2)).subdivide().subdivide()
+    >>> sheet.visual = trimesh.visual.TextureVisuals(uv=sheet.vertices[:, :2] / [2, 1] + 0.5)
+    >>> texture = np.random.default_rng(0).random((32, 32, 3)).astype(np.float32)
+    >>> result = colorize_uv(sheet, [UVExample("sheet", sheet, texture)],
+    ...                      resolve_config("busts"), size=32)
+    >>> result.example_names, bool(np.allclose(result.image, texture, atol=1e-6))
+    (['sheet'], True)
     """
     from imagemap.core.engine import synthesize
     from imagemap.database import Database
