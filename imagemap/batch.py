@@ -625,20 +625,22 @@ def run_batch(
     check_outputs(jobs, database, out_dir, database_dir)  # before any work
     workers = _usable_workers(workers, len(jobs))
     summary = BatchSummary()
-    with _locked(out_dir):
-        todo = []
-        for job in jobs:
-            if not force and is_complete(job, options):
-                summary.skipped += 1
-                summary.records.append({"status": "skipped", "name": job.name})
-            else:
-                todo.append(job)
+    todo = []
+    for job in jobs:  # read only: manifests and outputs
+        if not force and is_complete(job, options):
+            summary.skipped += 1
+            summary.records.append({"status": "skipped", "name": job.name})
+        else:
+            todo.append(job)
+    key = options.key()
+    todo = [dataclasses.replace(job, options_key=key) for job in todo]
+    # The scheduler answers (or not) before anything is written into the output folder.
+    client, own = _connect(scheduler) if scheduler is not None and todo else (None, False)
+    start = time.perf_counter()
+    try:
+        with _locked(out_dir):
+            for job in todo:
                 _remove_stale_temporaries(job)
-        key = options.key()
-        todo = [dataclasses.replace(job, options_key=key) for job in todo]
-        start = time.perf_counter()
-        try:
-            client, own = _connect(scheduler) if scheduler is not None and todo else (None, False)
             try:
                 databases = prepare_databases(database, options) if todo else {}
                 summary.prepare_seconds = time.perf_counter() - start
@@ -646,22 +648,22 @@ def run_batch(
                     log.info("database prepared in %.1f s", summary.prepare_seconds)
                 results = _run(todo, databases, options, workers, client)
                 _collect(results, len(todo), summary, quiet, on_result)
-            finally:
-                if own and client is not None:  # own: _connect opened client
-                    client.close()
-        except KeyboardInterrupt:
+            except KeyboardInterrupt:
+                summary.seconds = time.perf_counter() - start
+                _write_report(out_dir, summary, options, interrupted=True)
+                print(
+                    f"imagemap: batch interrupted: {summary.done} done, {summary.skipped} "
+                    f"skipped, {summary.failed} failed of {len(jobs)}; every finished object "
+                    "is kept and no partial file is left: run the same command again to "
+                    f"resume (finished objects are skipped; report in {out_dir / REPORT_NAME})",
+                    file=sys.stderr,
+                )
+                raise
             summary.seconds = time.perf_counter() - start
-            _write_report(out_dir, summary, options, interrupted=True)
-            print(
-                f"imagemap: batch interrupted: {summary.done} done, {summary.skipped} skipped, "
-                f"{summary.failed} failed of {len(jobs)}; every finished object is kept and "
-                "no partial file is left: run the same command again to resume "
-                f"(finished objects are skipped; report in {out_dir / REPORT_NAME})",
-                file=sys.stderr,
-            )
-            raise
-        summary.seconds = time.perf_counter() - start
-        _write_report(out_dir, summary, options)
+            _write_report(out_dir, summary, options)
+    finally:
+        if own and client is not None:  # own: _connect opened client
+            client.close()
     return summary
 
 

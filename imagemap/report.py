@@ -180,6 +180,11 @@ COHERENCE_COLUMNS = (
 #: The summary's intervals: how many resamples of a class's objects, and their level.
 BOOTSTRAP_RESAMPLES = 2000
 INTERVAL_LEVEL = 0.95
+#: Fewer objects of a class than this get no bootstrap intervals (n/a): n objects give at
+#: most C(2n - 1, n) distinct resampled means (2: 3, 3: 10, 4: 35), too few below 4 for a
+#: 95 % interval's tails; from 2 objects intervals and "supported" differences were
+#: printed (issue #35).
+MIN_BOOTSTRAP_OBJECTS = 4
 #: Interval table columns: (key of :func:`summarize`'s rows, title, format).
 INTERVAL_COLUMNS = (
     ("ciede2000", "ΔE00", "{:.2f}"),
@@ -240,6 +245,12 @@ def bootstrap_intervals(
     intervals: dict[str, dict[str, dict[str, tuple[float, float]]]] = {}
     for class_name in dict.fromkeys(obj.class_name for obj in evaluation.objects):
         members = [obj for obj in evaluation.objects if obj.class_name == class_name]
+        if len(members) < MIN_BOOTSTRAP_OBJECTS:  # no interval says anything: not given
+            intervals[class_name] = {
+                method: {key: (math.nan, math.nan) for key, _, _ in INTERVAL_COLUMNS}
+                for method in evaluation.methods
+            }
+            continue
         draws = rng.integers(0, len(members), (resamples, len(members)))
         intervals[class_name] = {}
         base = {key: 0.0 for key, _, _ in INTERVAL_COLUMNS}
@@ -444,7 +455,7 @@ def _strip_captions(methods: tuple[str, ...], has_provenance: bool) -> list[str]
 
 def _captioned_sheet(evaluation: Evaluation, gap: int = 4, caption_height: int = 16) -> np.ndarray:
     """All objects' strips stacked under one caption row (an overview picture)."""
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw  # deferred: the overview picture only
 
     if not evaluation.objects:  # every object failed: a blank picture keeps the link valid
         return np.ones((caption_height, 200, 3), np.float32)

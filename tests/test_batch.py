@@ -240,3 +240,27 @@ def test_data_gen_meshes_look_like_their_image_maps(tmp_path):
     assert data_gen_main([*args, "--out", str(again), "-q"]) == 0
     first = (out / "meshes" / "fish_000.glb").read_bytes()
     assert first == (again / "meshes" / "fish_000.glb").read_bytes()
+
+
+def test_resume_checks_content_not_size(fish, tmp_path):
+    """An output changed at the same size (a flipped byte) is made again on resume; the
+    manifest holds each output's SHA-256 and the options that made it."""
+    queries = tmp_path / "queries"
+    queries.mkdir()
+    shutil.copy(fish / "queries" / "fish_006_depth.png", queries)
+    out = tmp_path / "out"
+    assert run_batch(queries, fish / "db", out, OPTIONS).done == 1
+    manifest = json.loads((out / ".imagemap-done" / "fish_006_depth.png.json").read_text())
+    assert set(manifest["outputs"]) == {"fish_006_image.png"}
+    assert len(manifest["outputs"]["fish_006_image.png"]) == 64  # SHA-256, not a size
+    assert manifest["settings"]["preset"] == "fish"
+    output = out / "fish_006_image.png"
+    good = output.read_bytes()
+    damaged = bytearray(good)
+    damaged[len(damaged) // 2] ^= 0xFF
+    output.write_bytes(bytes(damaged))
+    assert output.stat().st_size == len(good)
+    summary = run_batch(queries, fish / "db", out, OPTIONS)
+    assert (summary.done, summary.skipped) == (1, 0)
+    assert output.read_bytes() == good
+    assert run_batch(queries, fish / "db", out, OPTIONS).skipped == 1

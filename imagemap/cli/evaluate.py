@@ -92,6 +92,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"--methods: unknown method(s) {', '.join(unknown) or '(none given)'}; "
             f"use some of {', '.join(METHODS)}"
         )
+    twice = sorted({m for m in methods if methods.count(m) > 1})
+    if twice:
+        raise InputError(f"--methods: {', '.join(twice)} given twice (one row per method)")
     if resolve(args.out) == resolve(args.db):
         raise InputError(f"{args.out}: --out is the database {args.db}; give another directory")
     check_output_directory(args.out, "--out report directory")
