@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import math
 import numbers
+import os
 import sys
 
 # Nothing heavy at import: the command line builds its parser with these types
@@ -28,6 +29,8 @@ __all__ = [
     "check_examples",
     "check_float",
     "check_int",
+    "check_mesh",
+    "check_size",
     "check_seed",
     "finite_float",
     "non_negative_float",
@@ -77,6 +80,61 @@ def check_float(
         raise InputError(f"{name}: must be at least {minimum:g}, got {value:g}")
     if maximum is not None and value > maximum:
         raise InputError(f"{name}: must be at most {maximum:g}, got {value:g}")
+    return value
+
+
+#: The smallest side of a rendered view (``--size``): the pyramid's coarsest level still
+#: holds a window (the same bound as the command line's).
+MIN_VIEW_SIDE = 16
+
+
+def check_size(value, name: str = "size", minimum: int = MIN_VIEW_SIDE) -> tuple[int, int]:
+    """A (width, height) pair of integers >= ``minimum``, or :class:`InputError`.
+
+    Examples
+    --------
+    >>> check_size((200, 150))
+    (200, 150)
+    >>> check_size("200x150")
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: size: expected (width, height), got '200x150'
+    """
+    if isinstance(value, str | bytes) or not hasattr(value, "__len__") or len(value) != 2:
+        raise InputError(f"{name}: expected (width, height), got {value!r}")
+    width, height = (check_int(name, v, minimum=minimum) for v in value)
+    return width, height
+
+
+def check_mesh(value, name: str = "mesh", paths: bool = True):
+    """A triangle mesh (``trimesh.Trimesh``: vertices and faces), or with ``paths`` a path
+    to read one from; anything else (None, a Scene, a PointCloud) is an
+    :class:`InputError` naming ``name``.
+
+    Examples
+    --------
+    >>> check_mesh("head.glb")
+    'head.glb'
+    >>> check_mesh(None)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: mesh: expected a triangle mesh (trimesh.Trimesh) ... NoneType
+    """
+    if paths and isinstance(value, str | os.PathLike):
+        return value
+    faces = getattr(value, "faces", None)
+    if faces is None or getattr(value, "vertices", None) is None:
+        hint = (
+            " (a Scene: trimesh.load(path, force='mesh') joins its geometries)"
+            if type(value).__name__ == "Scene"
+            else ""
+        )
+        raise InputError(
+            f"{name}: expected a triangle mesh (trimesh.Trimesh)"
+            f"{' or its path' if paths else ''}, got {type(value).__name__}{hint}"
+        )
+    if len(faces) == 0:
+        raise InputError(f"{name}: the mesh has no triangles")
     return value
 
 

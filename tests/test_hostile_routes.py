@@ -588,6 +588,36 @@ def test_batch_options_are_checked_when_built(kwargs, words):
 
 
 @pytest.mark.parametrize(
+    "mesh, kwargs, words",
+    [
+        (None, {}, "got NoneType"),
+        ("scene", {}, "got Scene"),
+        ("points", {}, "got PointCloud"),
+        ("ball", {"views": [1]}, "views"),
+        ("ball", {"views": "sideways"}, "sideways"),
+        ("ball", {"size": (5, 5)}, "size"),
+        ("ball", {"size": "200x150"}, "size"),
+        ("ball", {"texture_size": -1}, "texture_size"),
+    ],
+)
+def test_colorize_mesh_arguments_name_the_problem(blob_database, mesh, kwargs, words):
+    shapes = {
+        "ball": ball(),
+        "scene": trimesh.Scene([ball()]),
+        "points": trimesh.PointCloud(ball().vertices),
+    }
+    with pytest.raises(InputError, match=words):
+        imagemap.mesh.colorize.colorize_mesh(shapes.get(mesh), blob_database, **kwargs)
+
+
+@pytest.mark.parametrize("mesh", [None, "a.glb", trimesh.Scene()])
+def test_export_textured_of_no_mesh_is_an_input_error(tmp_path, mesh):
+    with pytest.raises(InputError, match="export_textured: mesh"):
+        export_textured(mesh, tmp_path / "x.glb")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
     "kwargs, words",
     [
         ({"workers": "2"}, "workers"),

@@ -34,6 +34,7 @@ from imagemap.mesh.views import (
     render_mesh,
     texture_image,
 )
+from imagemap.validate import check_mesh, check_size
 
 __all__ = [
     "PATHS",
@@ -283,13 +284,19 @@ def colorize_mesh(
     from imagemap.depth.pipeline import colorize
 
     if not hasattr(mesh, "faces"):
-        mesh = load_mesh(mesh)
+        mesh = load_mesh(check_mesh(mesh))  # a path; None, a Scene, a PointCloud: InputError
+    check_mesh(mesh)
+    size = check_size(size, minimum=8)  # render_mesh's own smallest picture
     config = resolve_config(preset, **colorize_options)
     names = list(examples) if examples else None
     if views is None:
         views = [FRONT]
     elif isinstance(views, str):
         views = parse_views(views)
+    elif isinstance(views, View):
+        views = [views]
+    if not all(isinstance(v, str | View) for v in views):
+        raise InputError(f"views: expected View objects or 'AZ,EL' / names, got {views!r}")
     views = [parse_view(v) for v in views]
     if isinstance(database, Database):
         for name in names or ():

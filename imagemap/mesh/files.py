@@ -30,6 +30,7 @@ import numpy as np
 
 from imagemap.io import InputError, atomic_path
 from imagemap.mesh.views import texture_image
+from imagemap.validate import check_mesh
 
 __all__ = [
     "CREASE_DEGREES",
@@ -424,6 +425,7 @@ def export_textured(mesh, path: str | os.PathLike, *, scale: float = 1.0) -> lis
     see :func:`unit_scale`) and is recorded in the GLB's ``asset.extras``.
     Returns the paths written.
     """
+    check_mesh(mesh, "export_textured: mesh", paths=False)  # None or a Scene: InputError
     path = Path(path)
     suffix = path.suffix.lower()
     scale = float(scale)
