@@ -315,8 +315,8 @@ def _detail_metrics(
 
 def _example_labels(examples: list[Example]) -> list[np.ndarray] | None:
     """The examples' part labels, or None unless every example has them."""
-    labels = [e.labels for e in examples]
-    return None if any(item is None for item in labels) else labels
+    labels = [e.labels for e in examples if e.labels is not None]
+    return labels if len(labels) == len(examples) else None
 
 
 def evaluate_object(
@@ -396,7 +396,7 @@ def evaluate_object(
 
 def _init_worker(threads: int) -> None:
     # Each worker gets its share of the cores for numba's parallel kernels.
-    import numba
+    import numba  # deferred: only pool workers set their thread count
 
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))  # type: ignore[attr-defined]
 

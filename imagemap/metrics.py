@@ -631,7 +631,6 @@ def features_drawn(
     components = feature_components(labels, mask, max_fraction=max_fraction)
     if not components:
         return 0, 0
-    with_source = source is not None and example_labels is not None
     inside = np.asarray(mask, dtype=bool)
     lum_image, lum_truth = _lightness(image), _lightness(truth)  # once per object
     distances: dict[int, list] = {}  # per part, once per object
@@ -641,7 +640,7 @@ def features_drawn(
             lum_image, lum_truth, component, inside, FEATURE_SHIFT, FEATURE_MARGIN
         )
         copied = False
-        if with_source:
+        if source is not None and example_labels is not None:
             if part not in distances:
                 distances[part] = _part_distances(example_labels, part)
             copied = _transfer(component, source, distances[part], FEATURE_TOLERANCE) >= 0.5
@@ -696,7 +695,7 @@ def fine_energy(image: np.ndarray, mask: np.ndarray) -> float:
 
     The object is eroded by two pixels so that the silhouette is not counted.
     """
-    from imagemap.core.pyramid import laplacian_pyramid
+    from imagemap.core.pyramid import laplacian_pyramid  # deferred: only the blur ratio
 
     luma = color.rgb2gray(np.clip(image, 0, 1)).astype(np.float32)
     band = laplacian_pyramid(luma, 2)[0]
@@ -819,8 +818,8 @@ def fragment_labels(
     >>> fragment_labels(source, np.ones((2, 4), bool)).tolist()
     [[1, 1, 2, 2], [1, 1, 2, 2]]
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse import coo_matrix  # deferred: scipy.sparse, the fragments only
+    from scipy.sparse.csgraph import connected_components  # deferred: as above
 
     source, mask = _check_source(source, mask)
     right, down, covered = _source_links(source, mask, drift)
@@ -1118,15 +1117,22 @@ def structure_continuity(
     if not mask.any():
         raise InputError("the mask is empty: no object pixels to measure")
     side = _object_side(mask)
-    scales = {
-        "derivative_sigma": max(grain * side, GRAIN_MIN_SIGMA),
-        "integration_sigma": max(integration * side, CONTINUITY_MIN_SIGMA),
-        "channel_axis": channel_axis,
-    }
-    reference = structure_coherence(truth, mask, **scales)
+    derivative_sigma = max(grain * side, GRAIN_MIN_SIGMA)
+    integration_sigma = max(integration * side, CONTINUITY_MIN_SIGMA)
+
+    def coherence(picture: np.ndarray) -> float:
+        return structure_coherence(
+            picture,
+            mask,
+            derivative_sigma=derivative_sigma,
+            integration_sigma=integration_sigma,
+            channel_axis=channel_axis,
+        )
+
+    reference = coherence(truth)
     if not reference > 0:
         return math.nan
-    return structure_coherence(image, mask, **scales) / reference
+    return coherence(image) / reference
 
 
 #: Window of the local tones of :func:`midtone_share`, as a share of the object's size

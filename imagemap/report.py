@@ -253,7 +253,7 @@ def bootstrap_intervals(
             continue
         draws = rng.integers(0, len(members), (resamples, len(members)))
         intervals[class_name] = {}
-        base = {key: 0.0 for key, _, _ in INTERVAL_COLUMNS}
+        base: dict[str, float | np.ndarray] = {key: 0.0 for key, _, _ in INTERVAL_COLUMNS}
         if relative_to is not None:
             reference = [obj.results[relative_to] for obj in members]
             base = {key: _object_values(reference, key) for key, _, _ in INTERVAL_COLUMNS}
