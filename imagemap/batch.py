@@ -82,6 +82,7 @@ from typing import Any
 
 import imagemap
 from imagemap.database import Database, database_at_view, prepare_database
+from imagemap.depth.budget import guard_mesh
 from imagemap.depth.config import DepthConfig, resolve_config
 from imagemap.io import InputError, atomic_path, image_writer, is_temporary_of, read_depth
 from imagemap.mesh import (
@@ -462,6 +463,8 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
         examples = result.example_names
     else:
         mesh = load_mesh(job.source)
+        # This mesh's texture (chosen from its own when not given): refused here, reported.
+        guard_mesh(options.size, len(options.views), _texture_size(mesh, options), job.name)
         made = colorize_mesh(
             mesh,
             databases,
@@ -495,6 +498,22 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
         tmp.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
     _started(job).unlink(missing_ok=True)
     return {"status": "done", **record}
+
+
+def _texture_size(mesh, options: BatchOptions) -> int:
+    """The texture side the bake will choose for ``mesh`` (``options.texture_size`` if set)."""
+    import numpy as np  # deferred: start-up (the parent of a pool never needs it here)
+
+    from imagemap.mesh.bake import texture_size_for  # deferred: start-up (workers only)
+    from imagemap.mesh.views import DEFAULT_MARGIN  # deferred: start-up (workers only)
+
+    if options.texture_size:
+        return int(options.texture_size)
+    extent = float(np.ptp(np.asarray(mesh.vertices), axis=0).max())
+    try:
+        return texture_size_for(mesh, extent / (min(options.size) * (1 - 2 * DEFAULT_MARGIN)))
+    except InputError:  # no usable UVs: the bake says so itself
+        return 512
 
 
 def _safe_process(job: Job, databases, options: BatchOptions) -> dict:
@@ -623,6 +642,8 @@ def run_batch(
         database_dir = database
         database = Database.from_directory(database, view=options.views[0], size=options.size)
     check_outputs(jobs, database, out_dir, database_dir)  # before any work
+    if any(job.kind == "mesh" for job in jobs):  # the views and texture every mesh will have
+        guard_mesh(options.size, len(options.views), options.texture_size or 512, "each mesh")
     workers = _usable_workers(workers, len(jobs))
     summary = BatchSummary()
     todo = []

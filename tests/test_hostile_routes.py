@@ -942,3 +942,26 @@ def test_no_bootstrap_interval_from_two_objects():
     assert len(enough.objects) == MIN_BOOTSTRAP_OBJECTS
     low, high = bootstrap_intervals(enough)["fish"]["full"]["ssim"]
     assert 0.4 <= low < high <= 0.9
+
+
+def test_ulimit_v_is_a_refusal_not_a_memory_error(world):
+    """Under ``ulimit -v`` the guard counts the address space the engine will map: a
+    2000x1500 query at 900 MB was let through and died with a MemoryError traceback."""
+    import resource
+
+    depth = np.zeros((1500, 2000), np.float32)
+    yy, xx = np.mgrid[:1500, :2000]
+    depth[((yy - 750) / 600.0) ** 2 + ((xx - 1000) / 800.0) ** 2 < 1] = 0.6
+    np.save(world["root"] / "big_depth.npy", depth)
+    limit = 900 * 2**20
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_AS, (limit, resource.getrlimit(resource.RLIMIT_AS)[1]))
+
+    command = [sys.executable, "-m", "imagemap", "synthesize", str(world["root"] / "big_depth.npy")]
+    command += ["--db", str(world["db"]), "-o", str(world["root"] / "big.png"), "-q"]
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    done = subprocess.run(command, env=env, preexec_fn=cap, capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert "big_depth.npy" in done.stderr and "memory" in done.stderr
+    assert "Traceback" not in done.stderr and not (world["root"] / "big.png").exists()
