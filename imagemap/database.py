@@ -109,13 +109,11 @@ class Database:
             )
         if isinstance(key, bool) or not isinstance(key, numbers.Integral):
             raise InputError(
-                f"{self.source or 'database'}: examples are found by name or position, "
-                f"got {key!r}"
+                f"{self.source or 'database'}: examples are found by name or position, got {key!r}"
             )
         if not -len(self) <= key < len(self):
             raise InputError(
-                f"{self.source or 'database'}: no example at position {key} "
-                f"(it has {len(self)})"
+                f"{self.source or 'database'}: no example at position {key} (it has {len(self)})"
             )
         return self.examples[key]
 
