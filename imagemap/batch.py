@@ -852,9 +852,9 @@ def _connect(scheduler: Any) -> tuple[Any, bool]:
             f"{CONNECT_SECONDS:g} s (is it a Dask scheduler's address, tcp://HOST:8786?)"
         )
     if "error" in outcome:
-        exc = outcome["error"]
+        error = outcome["error"]  # not 'exc': that name is the except clause's above
         raise InputError(
-            f"--scheduler {scheduler}: cannot connect ({type(exc).__name__}: {exc})"
+            f"--scheduler {scheduler}: cannot connect ({type(error).__name__}: {error})"
         ) from None
     return outcome["client"], True
 

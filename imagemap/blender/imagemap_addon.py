@@ -51,7 +51,9 @@ POLL_SECONDS = 0.25
 class ImagemapPreferences(bpy.types.AddonPreferences):
     bl_idname = __package__ or __name__
 
-    command: StringProperty(
+    # Blender declares properties as annotations that are calls (bpy's idiom, read at
+    # registration); mypy takes a call for an invalid type, hence [valid-type] ignores.
+    command: StringProperty(  # type: ignore[valid-type]
         name="imagemap command",
         default="imagemap",
         description="How to start imagemap, e.g. 'imagemap' or '/path/venv/bin/python -m imagemap'",
@@ -122,6 +124,7 @@ class _Job:
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
+        assert self.process.stderr is not None  # Popen(stderr=PIPE) gives a pipe
         for line in self.process.stderr:
             self.lines.put(line.rstrip())
 
@@ -151,23 +154,25 @@ class IMAGEMAP_OT_texture_from_examples(bpy.types.Operator):
     bl_label = "Texture from Examples"
     bl_options = {"REGISTER", "UNDO"}
 
-    database: StringProperty(
+    # Blender declares properties as annotations that are calls (bpy's idiom, read at
+    # registration); mypy takes a call for an invalid type, hence [valid-type] ignores.
+    database: StringProperty(  # type: ignore[valid-type]
         name="Database", subtype="DIR_PATH", description="folder of examples (imagemap database)"
     )
-    preset: EnumProperty(name="Preset", items=PRESETS, default="busts")
-    views: StringProperty(
+    preset: EnumProperty(name="Preset", items=PRESETS, default="busts")  # type: ignore[valid-type]
+    views: StringProperty(  # type: ignore[valid-type]
         name="Views", default="auto", description="'auto' (by coverage) or e.g. 'front,back'"
     )
-    seed: IntProperty(name="Seed", default=0, min=0)
-    options: StringProperty(
+    seed: IntProperty(name="Seed", default=0, min=0)  # type: ignore[valid-type]
+    options: StringProperty(  # type: ignore[valid-type]
         name="Options",
         default="",
         description="more imagemap synthesize options, e.g. '--texture-size 2048 --size 400x300'",
     )
-    command: StringProperty(
+    command: StringProperty(  # type: ignore[valid-type]
         name="Command", default="", description="imagemap command (empty: the preferences')"
     )
-    wait: BoolProperty(
+    wait: BoolProperty(  # type: ignore[valid-type]
         name="Wait", default=False, description="run to the end before returning (scripts)"
     )
 
@@ -186,7 +191,7 @@ class IMAGEMAP_OT_texture_from_examples(bpy.types.Operator):
         arguments += ["--views", self.views or "auto", *shlex.split(self.options)]
         return arguments
 
-    def execute(self, context):
+    def execute(self, context) -> set[str]:
         database = bpy.path.abspath(self.database)
         if not database or not os.path.isdir(database):
             self.report({"ERROR"}, f"imagemap: database folder not found: {database!r}")
@@ -225,7 +230,7 @@ class IMAGEMAP_OT_texture_from_examples(bpy.types.Operator):
             self.report({"ERROR"}, f"imagemap: {job.name}: {tail}")
         self._done += 1
 
-    def _summary(self):
+    def _summary(self) -> set[str]:
         shutil.rmtree(self._folder, ignore_errors=True)
         good = self._done - len(self._failed)
         self.report({"INFO"}, f"imagemap: {good} of {len(self._todo)} object(s) textured")

@@ -180,7 +180,9 @@ def _record_given(parser: argparse.ArgumentParser) -> None:
             continue
         base = type(action)
 
-        class Recorded(base):  # type: ignore[misc,valid-type]  (a subclass made per action)
+        # A subclass of each action's own class, made at run time: mypy cannot check a base
+        # held in a variable.
+        class Recorded(base):  # type: ignore[misc,valid-type]
             def __call__(self, parser, namespace, values, option_string=None):
                 namespace.__dict__.setdefault("_given", set()).add(self.dest)
                 return super().__call__(parser, namespace, values, option_string)

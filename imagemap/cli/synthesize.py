@@ -146,7 +146,7 @@ def check_applicable(args: argparse.Namespace, mesh: bool) -> None:
     ``args.given`` holds the options the command line gave (see ``imagemap.cli``); a
     Namespace built elsewhere, without it, is checked for conflicts only.
     """
-    given = getattr(args, "given", frozenset())
+    given: frozenset[str] = getattr(args, "given", frozenset())
     if not mesh:
         for dest, flags in MESH_FLAGS.items():
             if dest in given:
@@ -205,7 +205,7 @@ def check_cache() -> None:
 
 def check_views_given(args: argparse.Namespace) -> None:
     """--view beside --views (in either order) is a conflict; an empty one is an error."""
-    given = getattr(args, "given", frozenset())
+    given: frozenset[str] = getattr(args, "given", frozenset())
     if "view" in given and "views" in given:
         raise InputError("--view and --views: give one (--view AZ,EL is --views AZ,EL)")
     for dest, option in (("view", "--view"), ("views", "--views")):

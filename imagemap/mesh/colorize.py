@@ -241,7 +241,7 @@ def uv_layout_examples(
 
 def colorize_mesh(
     mesh,
-    database: Database,
+    database: Database | dict[str, Database],
     views: list[View] | str | None = None,
     *,
     size: tuple[int, int] = DEFAULT_SIZE,
@@ -303,6 +303,7 @@ def colorize_mesh(
             database[name]  # an unknown name is an InputError listing the known ones
     if texture_size is not None and int(texture_size) < 8:
         raise InputError(f"texture_size {texture_size} is too small (at least 8)")
+    uv_examples: list | None
     if isinstance(uv_space, list):
         uv_examples = uv_space  # found already (uv_layout_examples)
     else:

@@ -25,6 +25,7 @@ import hashlib
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,7 +98,8 @@ def load_mesh(path: str | os.PathLike):
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise InputError(f"{path}: holds no triangles")
     if normals is not None:
-        loaded.vertex_normals = normals
+        # trimesh's cache_decorator is a property with a setter, which mypy reads as a method
+        loaded.vertex_normals = normals  # type: ignore[method-assign]
     loaded.metadata["file_normals"] = normals is not None
     if not np.all(np.isfinite(loaded.vertices)):
         raise InputError(f"{path}: vertices have NaN or infinite coordinates")
@@ -119,6 +121,8 @@ def _file_normals(path: Path, loaded) -> np.ndarray | None:
     scene = trimesh.load(path)
     if isinstance(scene, trimesh.Trimesh):
         scene = trimesh.Scene(scene)
+    if not isinstance(scene, trimesh.Scene):
+        return None  # a point cloud: no normals (load_mesh finds it holds no triangles)
     parts = []
     for node in scene.graph.nodes_geometry:
         transform, name = scene.graph[node]
@@ -195,7 +199,7 @@ def material_of(mesh) -> SurfaceMaterial:
     settings = SurfaceMaterial()
     if material is None or not hasattr(material, "metallicFactor"):
         return settings  # no material, or an OBJ's (no metallic, no alpha mode)
-    changes = {}
+    changes: dict[str, Any] = {}  # SurfaceMaterial's fields: floats, a str and a bool
     if material.metallicFactor is not None:
         changes["metallic"] = float(np.clip(material.metallicFactor, 0.0, 1.0))
     if material.roughnessFactor is not None:
@@ -225,6 +229,15 @@ def texture_alpha(mesh) -> tuple[np.ndarray | None, float]:
     if image is None or "A" not in image.getbands():
         return None, factor
     return np.asarray(image.getchannel("A"), dtype=np.float32) / 255.0, factor
+
+
+def _base_colour_texture(mesh, what: str) -> np.ndarray:
+    """``mesh``'s base colour texture (:func:`texture_image`); InputError naming ``what``
+    when it has none (a mesh meant to be textured that is not)."""
+    image = texture_image(mesh)
+    if image is None:
+        raise InputError(f"{what}: the mesh has no base colour texture")
+    return image
 
 
 def _face_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -372,7 +385,8 @@ def textured_mesh(
         uv=np.asarray(uv, dtype=np.float64), material=PBRMaterial(**fields)
     )
     mesh = trimesh.Trimesh(vertices, faces, visual=visual, process=False)
-    mesh.vertex_normals = (
+    # trimesh's cache_decorator is a property with a setter, which mypy reads as a method
+    mesh.vertex_normals = (  # type: ignore[method-assign]
         _smooth_vertex_normals(vertices, faces) if normals is None else np.asarray(normals)
     )
     return mesh

@@ -13,6 +13,7 @@ import numpy as np
 from imagemap.mesh.bake import rasterize_uv
 from imagemap.mesh.files import (
     SurfaceMaterial,
+    _base_colour_texture,
     _material_maps,
     _split_by_normals,
     corner_normals,
@@ -20,7 +21,7 @@ from imagemap.mesh.files import (
     texture_alpha,
     textured_mesh,
 )
-from imagemap.mesh.views import fill_from_nearest, sample_image, texture_image
+from imagemap.mesh.views import fill_from_nearest, sample_image
 
 __all__ = ["keep_surface"]
 
@@ -67,7 +68,7 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
     new_faces, origin = _split_by_normals(faces, corners)
     normals = np.zeros((len(origin), 3))
     normals[new_faces.ravel()] = corners.reshape(-1, 3)
-    image = texture_image(textured)
+    image = _base_colour_texture(textured, "keep_surface: textured")
     alpha = _carried_alpha(textured, source, image.shape[:2]) if same else None
     if alpha is None:
         _, factor = texture_alpha(source)

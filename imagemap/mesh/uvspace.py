@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -463,6 +464,7 @@ def _uv_mappings(
 
     masks = mask_pyramid(mask, levels)
     guide_levels = gaussian_pyramid(guides, levels)
+    appearance_levels: Sequence[np.ndarray | None]
     if appearance is None:
         appearance_levels = [None] * levels
     elif kind == "laplacian":
@@ -683,6 +685,8 @@ def colorize_uv(
             levels=level_plans(config, state.mask, len(pictures)),
         )
         query_levels, exemplar_levels = state.query_levels, state.exemplar_levels
+        if query_levels is None or exemplar_levels is None:
+            raise RuntimeError("uv-space synthesis: no surface guides (the bands stage ran?)")
         state.query_levels = state.exemplar_levels = None
         state.engine = synthesize(query_levels, exemplar_levels, params, seed=state.seed,
                                   quiet=state.quiet)  # fmt: skip
@@ -697,9 +701,9 @@ def colorize_uv(
         for s in STAGES
         if s.name in own or s.name in FINISH_STAGES
     )
-    missing = (set(own) | set(FINISH_STAGES)) - {s.name for s in stages}
-    if missing:  # the depth front end renamed a stage: say so, do not skip it silently
-        raise RuntimeError(f"uv-space synthesis: no pipeline stage {sorted(missing)}")
+    missing_stages = (set(own) | set(FINISH_STAGES)) - {s.name for s in stages}
+    if missing_stages:  # the depth front end renamed a stage: say so, do not skip it silently
+        raise RuntimeError(f"uv-space synthesis: no pipeline stage {sorted(missing_stages)}")
     start = time.perf_counter()
     state = State(
         depth=np.where(query.mask, 0.5, 0.0).astype(np.float32),
@@ -710,7 +714,9 @@ def colorize_uv(
     )
     state.mask = query.mask
     state, ran, records = run_pipeline(state, config, stages)
-    working_image, source = state.image, state.source
+    working_image, source, engine_result = state.image, state.source, state.engine
+    if working_image is None or source is None or engine_result is None:
+        raise RuntimeError("uv-space synthesis: the pipeline made no texture (stage order)")
     # The texture at its own size: every texel copied from its example's full-resolution
     # texture, plus the finish's smooth correction (blend minus plain copy) of its texel.
     final_mask = covered_texels(uv, faces, size) if size != working else query.mask
@@ -733,14 +739,14 @@ def colorize_uv(
         ", ".join(e.name for e in chosen),
         seconds,
     )
-    cost = state.engine.cost
+    cost = engine_result.cost
     return ColorizeResult(
         image=texture.astype(np.float32),
         mask=final_mask,
         source=fine_source,
         cost=cost,
         example_names=[e.name for e in chosen],
-        objective=state.engine.objective,
+        objective=engine_result.objective,
         timings={"uv_space": seconds},
         config=ran,
         stages=records,
