@@ -238,13 +238,13 @@ def check_database(
     >>> import numpy as np
     >>> from imagemap.io import write_image
     >>> folder = Path(tempfile.mkdtemp())
-    >>> depth = np.zeros((8, 12), np.float32); depth[2:6, 3:9] = 0.5
+    >>> depth = np.zeros((16, 24), np.float32); depth[4:12, 6:18] = 0.5
     >>> np.save(folder / "fish_000_depth.npy", depth)
-    >>> _ = write_image(folder / "fish_000_image.png", np.ones((8, 12, 3)))
-    >>> _ = write_image(folder / "fish_001_image.png", np.ones((8, 12, 3)))
+    >>> _ = write_image(folder / "fish_000_image.png", np.ones((16, 24, 3)))
+    >>> _ = write_image(folder / "fish_001_image.png", np.ones((16, 24, 3)))
     >>> rows, problems = check_database(folder)
     >>> rows[0]["name"], rows[0]["source"], rows[0]["size"], rows[0]["foreground"]
-    ('fish_000', 'images', '12x8', 0.25)
+    ('fish_000', 'images', '24x16', 0.25)
     >>> [problem.replace(str(folder), "DB") for problem in problems]
     ['DB/fish_001_image.png: no depth map fish_001_depth.png beside it']
     >>> shutil.rmtree(folder)

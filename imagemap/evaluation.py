@@ -257,14 +257,14 @@ def method_params(method: str, config: DepthConfig) -> DepthConfig | None:
             patch_sizes=config.pyramid.patch_sizes[:1],
             max_iterations=0,
             position_weight=0.0,
+            registration=False,
             vote="mean",
-            even_palettes=False,
             grow=False,  # one level: Fig. 1 has no pyramid
         )
     if method == "mean_vote":
-        return config.replace_fields(vote="mean", even_palettes=False)
+        return config.replace_fields(vote="mean")
     if method == "no_position":
-        return config.replace_fields(position_weight=0.0)
+        return config.replace_fields(position_weight=0.0, registration=False)
     if method == "laplacian":
         return config.replace_fields(appearance_pyramid="laplacian")
     if method == "paper":
@@ -300,7 +300,7 @@ def _detail_metrics(
     filled = [fill_background(e.image, e.mask) for e in examples]
     copy = copy_through(filled, source).astype(np.float32)
     copy[~mask] = 0.0  # as the map's own background
-    blur = blur_ratio(image, copy, covered)
+    blur = blur_ratio(image, copy, covered, source)
     example_labels = _example_labels(examples)
     if labels is None or example_labels is None:
         return replace(metrics, blur_ratio=blur)

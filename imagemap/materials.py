@@ -38,13 +38,14 @@ from pathlib import Path
 
 import numpy as np
 
+from imagemap.core.blend import copy_through
 from imagemap.errors import InputError
+from imagemap.io import _load_raw
 
 __all__ = [
     "MAP_KINDS",
     "NEUTRAL",
     "atlas_normals_to_view",
-    "bake_maps",
     "companion_path",
     "database_map_kinds",
     "decode_normals",
@@ -55,7 +56,6 @@ __all__ = [
     "transfer_maps",
     "uv_frames",
     "view_normals_to_atlas",
-    "with_mesh_maps",
     "with_maps",
 ]
 
@@ -168,8 +168,6 @@ def example_maps(example) -> dict[str, np.ndarray]:
     if hasattr(example, "rendered_maps"):
         maps = example.rendered_maps()
     elif getattr(example, "image_path", None) is not None:
-        from imagemap.io import _load_raw
-
         maps = {}
         for kind, path in map_paths(example.image_path, example.name).items():
             try:
@@ -241,7 +239,6 @@ def transfer_maps(
     >>> [round(float(v), 2) for v in transfer_maps(result, [ex])["roughness"][0]]
     [0.12, 0.21]
     """
-    from imagemap.core.blend import copy_through
 
     by_name = {e.name: e for e in database}
     used = [by_name[name] for name in result.example_names]
@@ -402,128 +399,3 @@ def atlas_normals_to_view(encoded: np.ndarray, mesh, faces: np.ndarray, bary: np
         axis=1,
     )
     return encode_normals(out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12))
-
-
-def bake_maps(
-    mesh, renders: list, view_maps: list[dict], bake, textured, projection: bool = False
-) -> dict:
-    """The mesh route's maps: each view's maps baked into the colour's atlas.
-
-    Parameters
-    ----------
-    mesh : trimesh.Trimesh
-        The query mesh the views were rendered from.
-    renders : list of MeshRender
-        One per view.
-    view_maps : list of dict
-        Per view, :func:`transfer_maps` of its result (picture frame).
-    bake : callable (list of (H, W, 3) images) -> textured trimesh
-        The bake that made the colour's texture (same atlas for any images).
-    textured : trimesh.Trimesh
-        The colour's textured mesh (its UVs give the atlas' tangent frames).
-    projection : bool
-        ``bake`` projects one view (projection UVs): normals need no turning.
-
-    Returns
-    -------
-    dict of texture-sized maps, as :func:`imagemap.mesh.textured_mesh` takes them.
-    """
-    from imagemap.mesh.bake import rasterize_uv
-    from imagemap.mesh.views import fill_from_nearest, texture_image
-
-    kinds = [k for k in ("roughness", "metallic", "ao") if any(k in m for m in view_maps)]
-    out: dict[str, np.ndarray] = {}
-    for start in range(0, len(kinds), 3):  # three grey maps per bake
-        group = kinds[start : start + 3]
-        images = []
-        for maps, render in zip(view_maps, renders, strict=True):
-            packed = np.zeros(render.depth.shape + (3,), dtype=np.float32)
-            for channel, kind in enumerate(group):
-                packed[..., channel] = maps.get(kind, NEUTRAL[kind][0])
-            images.append(packed)
-        baked = texture_image(bake(images))
-        for channel, kind in enumerate(group):
-            out[kind] = baked[..., channel]
-    if any("normal" in m for m in view_maps) and projection:
-        # Projection UVs are the picture's own axes: its tangent frame is the atlas'.
-        flat = [m.get("normal", np.broadcast_to(NEUTRAL["normal"], r.depth.shape + (3,)))
-                for m, r in zip(view_maps, renders, strict=True)]  # fmt: skip
-        out["normal"] = texture_image(bake(flat))
-    elif any("normal" in m for m in view_maps):
-        images = []
-        for maps, render in zip(view_maps, renders, strict=True):
-            world = np.zeros(render.depth.shape + (3,), dtype=np.float32)
-            world[..., 2] = 1.0
-            pixels = np.flatnonzero(render.mask)
-            if "normal" in maps and pixels.size:
-                faces = render.face.flat[pixels]
-                bary = render.barycentric.reshape(-1, 3)[pixels].astype(np.float64)
-                normals = _surface_normals(mesh, faces, bary)
-                local = decode_normals(maps["normal"].reshape(-1, 3)[pixels]).astype(np.float64)
-                p_t, p_b = _picture_frame(render.view.rotation(), normals)
-                vectors = local[:, :1] * p_t + local[:, 1:2] * p_b + local[:, 2:] * normals
-                world.reshape(-1, 3)[pixels] = vectors
-            images.append(encode_normals(world))
-        baked = texture_image(bake(images))
-        size = baked.shape[0]
-        texel, face, bary = rasterize_uv(np.asarray(textured.visual.uv), textured.faces, size)
-        tangent, bitangent = uv_frames(textured.vertices, textured.faces, textured.visual.uv)
-        surface = _surface_normals(textured, face, bary)
-        world = decode_normals(baked.reshape(-1, 3)[texel]).astype(np.float64)
-        t = tangent[face] - np.einsum("ij,ij->i", tangent[face], surface)[:, None] * surface
-        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-        handed = np.sign(np.einsum("ij,ij->i", np.cross(surface, t), bitangent[face]))
-        b = np.cross(surface, t) * np.where(handed == 0, 1.0, handed)[:, None]
-        local = np.stack([np.einsum("ij,ij->i", world, v) for v in (t, b, surface)], axis=1)
-        local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-12)
-        # A texel whose baked normal leans too far from its surface came from another
-        # surface (a hidden fin back filled from its front): flat there.
-        local[local[:, 2] < MIN_NORMAL_Z] = (0.0, 0.0, 1.0)
-        texture = np.zeros((size, size, 3), dtype=np.float32)
-        texture[..., 2] = 1.0
-        texture.reshape(-1, 3)[texel] = local
-        covered = np.zeros((size, size), dtype=bool)
-        covered.flat[texel] = True
-        out["normal"] = encode_normals(fill_from_nearest(texture, covered))
-    return out
-
-
-def with_mesh_maps(
-    textured, mesh, renders: list, results: list, databases: list, bake, projection=False
-):
-    """The mesh route's textured mesh with the examples' maps baked beside its colour.
-
-    Each view's maps come through its result's source map (:func:`transfer_maps`),
-    then go through the same ``bake`` as the colour (:func:`bake_maps`). Returns
-    ``textured`` itself when no example used has a map.
-
-    Parameters
-    ----------
-    textured : trimesh.Trimesh
-        The colour's textured mesh.
-    mesh : trimesh.Trimesh
-        The query mesh.
-    renders, results, databases : lists, one entry per view
-        The views' renders, :class:`~imagemap.depth.pipeline.ColorizeResult` and the
-        databases they were made from.
-    bake : callable (list of images) -> textured trimesh
-        The colour's bake, e.g. ``lambda images: bake_views(mesh, renders, images, size)``.
-    projection : bool
-        One view projected (``project_texture``) rather than baked into an atlas.
-    """
-    from imagemap.mesh.files import material_of, textured_mesh
-    from imagemap.mesh.views import texture_image
-
-    view_maps = [transfer_maps(r, db) for r, db in zip(results, databases, strict=True)]
-    if not any(view_maps):
-        return textured
-    maps = bake_maps(mesh, renders, view_maps, bake, textured, projection)
-    return textured_mesh(
-        textured.vertices,
-        textured.faces,
-        textured.visual.uv,
-        texture_image(textured),
-        normals=np.asarray(textured.vertex_normals),
-        maps=maps,
-        material=material_of(textured),
-    )

@@ -145,18 +145,6 @@ def test_feature_completion_can_be_switched_off(
     assert len(calls) == expected
 
 
-@pytest.mark.parametrize("command", ["synthesize", "batch"])
-@pytest.mark.parametrize("argv, expected", [([], 0), (["--even-palettes"], 1)])
-def test_even_palettes_is_switched_on_by_its_option(
-    files, tmp_path, monkeypatch, command, argv, expected
-):
-    import imagemap.depth.palettes
-
-    calls = _count_calls(monkeypatch, imagemap.depth.palettes, "even_palettes")
-    assert _run_one(command, files, tmp_path, argv) == 0
-    assert len(calls) == expected
-
-
 def bad_cases(tmp_path, db, query):
     empty = tmp_path / "empty_depth.png"
     write_image(empty, np.zeros((40, 40), np.uint16))

@@ -66,7 +66,10 @@ def test_position_term_makes_synthesis_non_stationary():
     inner = ndimage.binary_erosion(depth > 0, iterations=12)
     accuracy = {}
     for weight in (1.0, 0.0):
-        params = DepthConfig().replace_fields(m=2, position_weight=weight, backend="exact")
+        # The paper's relative position (centroid frame), not the registered one.
+        params = DepthConfig().replace_fields(
+            m=2, position_weight=weight, backend="exact", registration=False
+        )
         image = colorize(depth, db, params).image
         red = image[..., 0] > image[..., 2]
         accuracy[weight] = float((red == left)[inner].mean())
@@ -158,12 +161,15 @@ def test_exemplar_costs_steer_the_source(blob_database, query_blob):
     free = colorize(depth, blob_database, "busts", m=2, example_preference=0.0)
     assert len(set(np.unique(free.source[..., 0][depth > 0]))) == 2
     everywhere = PRESETS["busts"].replace_fields(
-        example_preference=100.0, preference_at_finest=True
+        example_preference=100.0, preference_at_finest=True, free_final_reseed=False
     )
     steered = colorize(depth, blob_database, everywhere, m=2)
     assert set(np.unique(steered.source[..., 0][depth > 0])) == {0}
-    # By default the finest level is free: the coarse levels' choice, mostly kept.
-    coarse = colorize(depth, blob_database, "busts", m=2, example_preference=100.0)
+    # Free at the finest level, the coarse levels' choice is mostly kept.
+    coarse_only = PRESETS["busts"].replace_fields(
+        example_preference=100.0, preference_at_finest=False
+    )
+    coarse = colorize(depth, blob_database, coarse_only, m=2)
     share = np.mean(coarse.source[..., 0][depth > 0] == 0)
     assert share > np.mean(free.source[..., 0][depth > 0] == 0)
     with pytest.raises(ValueError, match="exemplar_costs"):

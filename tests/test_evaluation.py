@@ -195,7 +195,7 @@ def test_method_params_of_the_baselines():
     assert one.finish.vote == "mean" and not one.pyramid.grow  # Fig. 1: one level, mean vote
     paper = method_params("paper", fish)
     assert (paper.finish.vote, paper.matching.appearance_pyramid) == ("mean", "laplacian")
-    assert not (paper.finish.complete_features or paper.finish.even_palettes)
+    assert not paper.finish.complete_features and not paper.guides.registration
     assert set(METHODS) == {
         "full",
         "copy_nearest",

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import ndimage
 from skimage import color
 
 from imagemap.database import Example
@@ -14,6 +15,7 @@ from imagemap.io import InputError
 from imagemap.metrics import (
     FaultyRule,
     ImageMetrics,
+    blur_ratio,
     ciede2000,
     class_reference,
     image_metrics,
@@ -148,8 +150,9 @@ def test_class_reference_from_pastes():
     # The same map at another place: every paste is perfect, so the bar is perfection.
     rule, stats = class_reference([same, shifted])
     assert stats["pairs"] == 2
-    assert rule.ssim == pytest.approx(1.0) and rule.part_transfer == 1.0
-    assert math.isnan(rule.ciede2000)  # labels known: the palette is not judged
+    assert rule.part_transfer == 1.0 and stats["ssim_quartiles"][1] == pytest.approx(1.0)
+    # Labels known: neither the palette nor SSIM against the pastes is judged (#10, b).
+    assert math.isnan(rule.ciede2000) and math.isnan(rule.ssim)
     assert stats["ciede2000_quartiles"][1] == pytest.approx(0.0, abs=1e-9)
     # Another palette on the same parts: colour is far off, parts are all right.
     recoloured = Example.from_arrays("c", depth, image[..., ::-1].copy(), labels)
@@ -161,3 +164,42 @@ def test_class_reference_from_pastes():
     assert rule.ciede2000 > 20 and math.isnan(rule.part_transfer)
     with pytest.raises(InputError):
         class_reference([same])
+
+
+def test_blur_ratio_leaves_out_the_step_between_two_examples():
+    """Issue #10's decision (c): a palette step between two examples, smoothed by the
+    blend, is not lost detail; inside each example the ratio still sees blur."""
+    rng = np.random.default_rng(1)
+    texture = 0.05 * rng.standard_normal((40, 40))
+    copy = np.repeat((0.3 + texture)[..., None], 3, axis=2).astype(np.float32)
+    copy[:, 20:] += 0.5  # the second example's palette
+    source = np.zeros((40, 40, 3), np.int32)
+    source[:, 20:, 0] = 1
+    step = np.clip((np.arange(40) - 14) / 12, 0, 1)[None, :, None]  # a 12 px ramp
+    blended = (copy - 0.5 * (np.arange(40) >= 20)[None, :, None] + 0.5 * step).astype(np.float32)
+    mask = np.ones((40, 40), bool)
+    assert blur_ratio(blended, copy, mask) < 0.9  # the step's energy counted as detail
+    assert blur_ratio(blended, copy, mask, source) == pytest.approx(1.0, abs=0.05)
+    blurred = ndimage.uniform_filter(copy, (3, 3, 1))
+    assert blur_ratio(blurred, copy, mask, source) < 0.5
+
+
+def test_the_faulty_rule_of_a_labelled_class_has_no_ssim_limit():
+    """Issue #10's decision (b): faulty is a missing feature or part transfer below the
+    pastes' median; the SSIM half is dropped."""
+    from imagemap.database import Example
+
+    examples = []
+    for i in range(3):
+        depth = np.zeros((30, 40), np.float32)
+        depth[5 + i : 25, 8 : 30 + i] = 0.5
+        labels = (depth > 0).astype(np.int32)
+        labels[5 + i : 12, 8 : 30 + i] = 2
+        image = (
+            np.where(labels[..., None] == 2, [0.8, 0.2, 0.2], [0.2, 0.2, 0.8])
+            * (depth > 0)[..., None]
+        )
+        examples.append(Example.from_arrays(f"c_{i}", depth, image, labels=labels))
+    rule, _ = class_reference(examples)
+    assert np.isnan(rule.ssim) and not np.isnan(rule.part_transfer)
+    assert "SSIM" not in rule.describe()

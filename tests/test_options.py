@@ -41,7 +41,7 @@ def _other_value(option):
 
 #: Every option set away from its default at once (the named finish tried on its own).
 ALL = {o.name: _other_value(o) for o in OPTIONS if o.setting is not None}
-ALL["vote"] = "mode"  # even_palettes needs a copied map
+ALL["vote"] = "mode"  # the copied vote inside the EM: away from the default "copy"
 
 
 def _flags(options):
@@ -150,14 +150,14 @@ def test_the_api_takes_the_same_options(blob_database, query_blob, recorded):
     _assert_reached(recorded[-1], ALL)
     with pytest.raises(InputError, match="unknown option colour"):
         imagemap.colorize(depth, blob_database, "busts", colour="red")
-    with pytest.raises(InputError, match="even_palettes"):
-        imagemap.colorize(depth, blob_database, "busts", vote="mean", even_palettes=True)
+    with pytest.raises(InputError, match="edge_support"):
+        imagemap.colorize(depth, blob_database, "busts", edge_support=1.5)
 
 
-def test_conflicting_options_stop_the_cli_before_any_work(files, tmp_path, capsys, recorded):
-    code = _route("depth", files, tmp_path, ["--vote", "mean", "--even-palettes"])
+def test_a_bad_option_stops_the_cli_before_any_work(files, tmp_path, capsys, recorded):
+    code = _route("depth", files, tmp_path, ["--finish", "sketch"])
     assert code == 2 and not recorded
-    assert "even_palettes" in capsys.readouterr().err
+    assert "--finish" in capsys.readouterr().err
 
 
 def test_the_report_and_verbose_log_give_every_stage(files, tmp_path, caplog):
@@ -171,7 +171,7 @@ def test_the_report_and_verbose_log_give_every_stage(files, tmp_path, caplog):
     names = [stage["name"] for stage in stages]
     assert names == [stage.name for stage in imagemap.depth.pipeline.STAGES]
     by_name = {stage["name"]: stage for stage in stages}
-    assert by_name["even_palettes"]["changed"] == "off"  # off in the preset
+    assert by_name["register"]["changed"] != "off"  # on in the preset
     assert by_name["select"]["changed"] and by_name["synthesize"]["seconds"] > 0
     logged = [r.getMessage() for r in caplog.records if r.getMessage().startswith("stage ")]
     assert [line.split(":")[0] for line in logged] == [
@@ -191,7 +191,7 @@ def test_a_stage_left_out_changes_the_map_and_a_copy_of_the_stages_does_not(
 
     def run(stages):
         state = State(depth=depth, database=blob_database, seed=0, names=None)
-        state.mask = depth > 0
+
         return run_pipeline(state, config, stages)[0].image
 
     full = imagemap.colorize(depth, blob_database, "busts", seed=0).image

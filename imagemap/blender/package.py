@@ -47,7 +47,7 @@ def build_zip(path: str | Path) -> Path:
     >>> names
     ['imagemap_texture/__init__.py', 'imagemap_texture/blender_manifest.toml']
     """
-    from imagemap.io import atomic_path
+    from imagemap.io import atomic_path  # deferred: standalone script
 
     path = Path(path)
     source = ADDON_SOURCE.read_text()

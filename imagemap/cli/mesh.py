@@ -11,6 +11,8 @@ from imagemap.errors import InputError
 
 __all__ = ["is_mesh_request", "run_mesh_synthesize"]
 
+DEFERRED_IMPORTS = "start-up: building the parser loads no scientific module"
+
 
 def is_mesh_request(args: argparse.Namespace) -> bool:
     """Whether ``imagemap synthesize`` was given a mesh or asked for a textured mesh."""
@@ -67,7 +69,9 @@ def _mesh_preview(textured, database, first_name: str, size):
             render_textured(reference, parse_view(v), size, shaded=True) for v in PREVIEW_VIEWS
         ]
     else:
-        from skimage.transform import resize
+        from skimage.transform import (
+            resize,
+        )  # deferred: start-up: skimage.transform (0.4 s) only for a resized texture
 
         picture = np.where(example.mask[..., None], example.image, 1.0)
         tiles.append(resize(picture, (size[1], size[0]), order=1, anti_aliasing=True))
@@ -86,8 +90,8 @@ def how_made(made, views) -> str:
 def _with_view_maps(made, mesh, database, size):
     """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
     from imagemap.database import database_at_view
-    from imagemap.materials import with_mesh_maps
     from imagemap.mesh import bake_views, project_texture
+    from imagemap.mesh.maps import with_mesh_maps
 
     if getattr(made, "path", "views") != "views" or not made.renders:
         return made.mesh
@@ -149,7 +153,9 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         load_mesh,
     )
     from imagemap.mesh.colorize import uv_layout_examples
-    from imagemap.mesh.coverage import choose_views
+    from imagemap.mesh.coverage import (
+        choose_views,
+    )  # deferred: start-up: the parser loads no scientific module
     from imagemap.mesh.files import unit_scale
     from imagemap.mesh.surface import keep_surface
     from imagemap.outputs import OutputPlan, exported, write_all, written_companions

@@ -169,7 +169,9 @@ def views_of(args: argparse.Namespace) -> tuple:
     from imagemap.mesh import FRONT, parse_view, parse_views  # deferred: start-up (SciPy)
 
     if getattr(args, "views", None) == "auto":  # the candidates; the mesh route narrows them
-        from imagemap.mesh.coverage import CANDIDATES
+        from imagemap.mesh.coverage import (
+            CANDIDATES,
+        )  # deferred: start-up: the parser loads no scientific module
 
         return CANDIDATES
     if getattr(args, "views", None):

@@ -40,7 +40,6 @@ __all__ = [
     "coherent_edges",
     "copy_through",
     "fill_background",
-    "merge_regions",
     "place_seams",
     "seamless_copy",
 ]
@@ -136,7 +135,7 @@ def place_seams(
     -------
     ndarray of int32, (H, W, 3)
     """
-    from imagemap.core import kernels as _kernels
+    from imagemap.core import kernels as _kernels  # deferred: start-up (numba)
 
     packed, shapes = _packed(exemplars)
     yy, xx = np.ogrid[0 : source.shape[0], 0 : source.shape[1]]
@@ -167,130 +166,6 @@ def _packed(exemplars):
     return packed, np.array([heights, widths], dtype=np.int64).T.copy()
 
 
-def merge_regions(
-    exemplars: list[np.ndarray],
-    source: np.ndarray,
-    reference: np.ndarray,
-    *,
-    smoothness: float = 1.0,
-    masks: list[np.ndarray] | None = None,
-    keep_detail: float = 0.5,
-    palette_only: bool = True,
-    rounds: int = 8,
-) -> np.ndarray:
-    """A source map whose stray patches of another source are merged into their surroundings.
-
-    :func:`place_seams` moves a seam one pixel per sweep, so a large patch copied
-    from the other example (a piece of its differently coloured shirt, say)
-    stays; the gradient-domain blend then recolours it, but keeps the wrong
-    example's texture and, for a patch smaller than the blend scale, leaves a
-    soft blob of its colour. Here a whole *region* (a 4-connected set of pixels
-    with one exemplar and offset) may take the label of a region it touches,
-    when that lowers the same energy as :func:`place_seams` (squared distance of
-    the copied colours to ``reference`` plus ``smoothness`` times the seam costs
-    on its boundary) **and** keeps at least ``keep_detail`` of the region's
-    luminance detail (the sum of its source's squared gradients). The reference
-    is a voted map that has averaged small features away; without the detail
-    condition a region holding an eye would be merged into the surrounding skin.
-    Rounds of moves (each region at most once per round, by decreasing gain,
-    never into a region that moved in that round) until none lowers the energy.
-    Deterministic.
-
-    Parameters
-    ----------
-    exemplars : list of ndarray, (H_e, W_e, C)
-        Channel 0 is the luminance (e.g. YCbCr).
-    source : ndarray of int, (H, W, 3)
-        Exemplar index, y, x per pixel (index < 0: none, left alone).
-    reference : ndarray, (H, W, C)
-    smoothness : float
-        Weight of the seam costs against the data cost.
-    masks : list of ndarray of bool, optional
-        Each exemplar's object: a move may not take a source outside it (the
-        exemplars' backgrounds are filled with object colours, which the colour
-        cost alone would accept). Default: everywhere.
-    keep_detail : float
-        Share of a region's luminance detail a move must keep (0: any move that
-        lowers the energy; 1: only moves to at least as much detail).
-    palette_only : bool
-        Move only *palette patches*: regions whose copied colours' mean offset from
-        the reference exceeds their own spread around their mean (a patch the
-        blend would recolour as a whole). Regions that fit the reference as well
-        as their texture allows (a limb, an eye with its surroundings) stay.
-    rounds : int
-        At most this many rounds.
-
-    Returns
-    -------
-    ndarray of int32, (H, W, 3)
-
-    Examples
-    --------
-    A patch copied from a dark exemplar inside a region copied from a bright
-    one, over a bright reference: the patch takes the bright source.
-
-    >>> rng = np.random.default_rng(0)
-    >>> bright = 0.8 + 0.05 * rng.random((20, 20, 1)); dark = bright - 0.6
-    >>> source = np.zeros((20, 20, 3), np.int32)
-    >>> source[..., 1], source[..., 2] = np.mgrid[0:20, 0:20]
-    >>> source[5:15, 5:15, 0] = 1
-    >>> merged = merge_regions([bright, dark], source, np.full((20, 20, 1), 0.8))
-    >>> int(merged[..., 0].max())
-    0
-    """
-    from imagemap.core import kernels as _kernels
-
-    reference = np.ascontiguousarray(reference, dtype=np.float32)
-    if source.shape[:2] != reference.shape[:2] or source.shape[2] != 3:
-        raise ValueError(f"reference {reference.shape} and source {source.shape} do not fit")
-    packed, shapes = _packed(exemplars)
-    inside = np.zeros(packed.shape[:3], bool)
-    for k, exemplar in enumerate(exemplars):
-        inside[k, : exemplar.shape[0], : exemplar.shape[1]] = True if masks is None else masks[k]
-    yy, xx = np.ogrid[0 : source.shape[0], 0 : source.shape[1]]
-    label_e = source[..., 0].astype(np.int64)
-    label_y = (source[..., 1] - yy).astype(np.int64)
-    label_x = (source[..., 2] - xx).astype(np.int64)
-    for _ in range(rounds):
-        region, n_regions = _kernels.label_regions(label_e, label_y, label_x)
-        if n_regions < 2:
-            break
-        flat = region.ravel()
-        has = flat >= 0
-        order = np.flatnonzero(has)[np.argsort(flat[has], kind="stable")]
-        starts = np.searchsorted(flat[order], np.arange(n_regions + 1))
-        # Every pair of touching regions, both ways: (region, donor of a label).
-        pairs = np.concatenate(
-            [
-                np.stack([region[:, :-1].ravel(), region[:, 1:].ravel()], 1),
-                np.stack([region[:-1].ravel(), region[1:].ravel()], 1),
-            ]
-        )
-        pairs = pairs[(pairs[:, 0] != pairs[:, 1]) & (pairs >= 0).all(1)]
-        pairs = np.unique(np.concatenate([pairs, pairs[:, ::-1]]), axis=0)
-        moves = _kernels.region_moves(
-            packed,
-            inside,
-            shapes,
-            reference,
-            label_e,
-            label_y,
-            label_x,
-            region,
-            n_regions,
-            order,
-            starts,
-            np.ascontiguousarray(pairs[:, 0]),
-            np.ascontiguousarray(pairs[:, 1]),
-            float(smoothness),
-            float(keep_detail),
-            bool(palette_only),
-        )
-        if moves == 0:
-            break
-    return np.stack([label_e, label_y + yy, label_x + xx], axis=-1).astype(np.int32)
-
-
 def seamless_copy(
     exemplars: list[np.ndarray],
     source: np.ndarray,
@@ -299,7 +174,6 @@ def seamless_copy(
     scale: float = 8.0,
     edge_support: float = 0.0,
     mask: np.ndarray | None = None,
-    edge_reference: np.ndarray | None = None,
 ) -> np.ndarray:
     """Copy exemplar pixels through a source map, blending the seams in the gradient domain.
 
@@ -345,16 +219,14 @@ def seamless_copy(
         The object. Across its outline the target difference is the reference's
         own step: the outline is not a seam to blend across, so colours copied
         beside the object (its margin) do not bleed into it.
-    edge_reference : ndarray, (H, W, C), optional
-        The map the ``edge_support`` test reads instead of ``reference`` (when the
-        reference was recoloured, e.g. by :func:`imagemap.depth.palettes.even_palettes`,
-        an edge is still judged on the colours as voted). Default: ``reference``.
 
     Returns
     -------
     ndarray, (H, W, C) float32
     """
-    from imagemap.core.solver import trim_heap as _trim_heap
+    from imagemap.core.solver import (
+        trim_heap as _trim_heap,
+    )  # deferred: start-up: the solver loads the numba kernels
 
     _trim_heap()  # the caller's freed temporaries (seam placement): not kept resident
     reference = np.asarray(reference)
@@ -399,7 +271,7 @@ def seamless_copy(
             groups,
             has,
             source,
-            reference if edge_reference is None else edge_reference,
+            reference,
             edge_support,
             strongest,
         )
@@ -503,9 +375,7 @@ def _supported_edges(groups, has, source, reference, support, strongest):
 
 def _along(axis: int, part: slice) -> tuple[slice, slice]:
     """The index of ``part`` along ``axis`` (0 or 1) of a 2-D array, all of the other."""
-    index = [slice(None), slice(None)]
-    index[axis] = part
-    return tuple(index)
+    return (part, slice(None)) if axis == 0 else (slice(None), part)
 
 
 def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:

@@ -37,6 +37,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -196,7 +197,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
     log.info("search backend: %s", params.backend)
     appearance_levels: list[np.ndarray] = [None] * n_levels  # type: ignore[list-item]
     objective: list[list[float]] = [[] for _ in range(n_levels)]
-    coarse_source = None
+    coarse_source: np.ndarray | None = None
     solver = None
     matches = None
     plans = params.level_plans(n_levels)
@@ -204,13 +205,15 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
     # in the depth front end: one band of three). The colours are a running collapse from
     # the coarsest level, kept at every level but the finest when any level has context.
     with_context = [plan.context_weights for plan in plans[:-1] if plan.has_context]
-    context_bands = np.flatnonzero(np.any(with_context, axis=0)) if with_context else []
+    context_bands: Any = np.flatnonzero(np.any(with_context, axis=0)) if with_context else []
     kind = params.appearance_pyramid
-    query_colours = exemplar_colours = None
+    # Running collapses of the coarser levels' colours (None until the coarsest is done).
+    query_colours: Any = None
+    exemplar_colours: Any = None
     for level in progress(range(n_levels - 1, -1, -1), total=n_levels, desc="levels", quiet=quiet):
         exemplars = [levels[level] for levels in exemplar_levels]
         plan = plans[level]
-        level_colours = None
+        level_colours: Any = None
         if len(context_bands) and level > 0:  # this level's colours: the next finer's context
             level_colours = [
                 _coarse_colours(colours, ex.appearance[..., context_bands], kind)
@@ -260,8 +263,9 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             query_levels.release(level)
         # The coarser level's matches propagated from the packed lookups alone (no random
         # number drawn): before the features, so that its transients do not add to them.
-        propagated = None if coarse_source is None else solver.propagate(coarse_source)
-        coarse_source = solver.exemplar_valid = None  # what only propagate needed
+        propagated: Any = None if coarse_source is None else solver.propagate(coarse_source)
+        coarse_source = None
+        solver.exemplar_valid = None  # type: ignore[assignment]  # what only propagate needed
         trim_heap()
         solver.prepare(rng)
         trim_heap()  # the PCA's and the feature blocks' temporaries, before the E-steps
@@ -325,6 +329,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 rng,
                 worst=FINAL_RESEED_WORST,
                 keep_detail=True,
+                free=plan.final_reseed_any_exemplar,
             )
             if level > 0:  # the finer levels start from these matches and see their colours
                 appearance = solver.vote(matches, appearance)
@@ -348,9 +353,11 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         # appearance_levels, unless there is no padding): the mode vote may overwrite it.
         scratch = appearance if solver.r > 0 else appearance.copy()
         solver.vote(matches, scratch, kind="mode")
-        appearance = scratch = None  # freed before the dense map is made
+        appearance = scratch = None  # type: ignore[assignment]  # freed before the dense map
         copy_source = solver.dense_source(matches, copied=True)
     solver.chosen = None
+    if coarse_source is None:  # every level ends with its dense source map
+        raise RuntimeError("no level was synthesized")
     cost = np.full(solver.query_shape, np.nan, dtype=np.float32)
     cost[solver.query_y, solver.query_x] = final_cost
     return EngineResult(

@@ -67,6 +67,10 @@ class LevelPlan:
         follows, the appearance is voted again so that it starts from these matches.
     position_weight : float, optional
         The position term's weight at this level (None: ``EngineParams.position_weight``).
+    final_reseed_any_exemplar : bool
+        The final reseed matches without the exemplar costs: where the relief calls for
+        a feature, it may come from any exemplar, while the EM keeps each region's
+        exemplar.
     """
 
     patch_size: int
@@ -76,6 +80,7 @@ class LevelPlan:
     guide_reseed: float = 0.0
     final_reseed: float = 0.0
     position_weight: float | None = None
+    final_reseed_any_exemplar: bool = False
 
     def __post_init__(self) -> None:
         if self.position_weight is not None and not self.position_weight >= 0:

@@ -23,7 +23,7 @@ searches the exemplar image domain warm-started from the previous matches (see
 from __future__ import annotations
 
 import logging
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -121,7 +121,7 @@ class PynndescentIndex:
     name = "pynndescent"
 
     def __init__(self, data: np.ndarray, seed: int = 0, n_neighbors: int = 15) -> None:
-        from pynndescent import NNDescent
+        from pynndescent import NNDescent  # deferred: optional backend
 
         self.data = np.ascontiguousarray(data, dtype=np.float32)
         self.index = NNDescent(
@@ -152,23 +152,29 @@ class KDTreeIndex:
 
     def __init__(self, data: np.ndarray, seed: int = 0) -> None:
         self.data = np.ascontiguousarray(data, dtype=np.float32)
+        self.tree: Any = None
+        self.exact: ExactIndex | None = None
         if self.data.shape[1] > KDTREE_MAX_DIMS:
             self.tree, self.exact = None, ExactIndex(self.data)
         else:
-            from scipy.spatial import cKDTree
+            from scipy.spatial import (
+                cKDTree,
+            )  # deferred: start-up: scipy.spatial only where a k-d tree is built
 
             self.tree, self.exact = cKDTree(self.data), None
 
     def query(self, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         queries = np.ascontiguousarray(queries, dtype=np.float32)
-        if self.tree is None:
+        if self.exact is not None:  # too many dimensions for a k-d tree
             return self.exact.query(queries)
         distances, indices = self.tree.query(queries, k=1, workers=-1)
         return indices.astype(np.int64), (distances**2).astype(np.float32)
 
     def query_k(self, queries: np.ndarray, k: int) -> np.ndarray:
         """Indices (n, k) of the ``k`` nearest rows of every query, nearest first."""
-        from scipy.spatial import cKDTree
+        from scipy.spatial import (
+            cKDTree,
+        )  # deferred: start-up: scipy.spatial only where a k-d tree is built
 
         tree = self.tree if self.tree is not None else cKDTree(self.data)
         queries = np.ascontiguousarray(queries, dtype=np.float32)
@@ -223,7 +229,7 @@ class PCAKDTreeIndex:
 #: The index names :func:`make_index` knows.
 INDEX_BACKENDS = ("exact", "kdtree", "pca_kdtree", "pynndescent")
 
-_BACKENDS = {
+_BACKENDS: dict[str, Any] = {
     "exact": ExactIndex,
     "kdtree": KDTreeIndex,
     "pca_kdtree": PCAKDTreeIndex,

@@ -12,6 +12,7 @@ import logging
 import sys
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -20,7 +21,7 @@ from scipy import ndimage
 from imagemap.core import kernels as _kernels
 from imagemap.core.mapping import Mapping
 from imagemap.core.params import EngineParams
-from imagemap.core.search import make_index
+from imagemap.core.search import NearestNeighborIndex, make_index
 
 __all__ = ["FINAL_RESEED_WORST", "RESEED_WORST", "LevelSolver", "Timer", "trim_heap"]
 
@@ -63,7 +64,7 @@ def trim_heap() -> None:
         _MALLOC_TRIM(0)
 
 
-_MALLOC_TRIM = None
+_MALLOC_TRIM: Any = None  # glibc's malloc_trim once looked up, False where there is none
 
 
 class Timer:
@@ -111,7 +112,7 @@ def _pad_into(out: np.ndarray, array: np.ndarray, r: int, mode: str, scale=None)
     if r == 0:
         return
     if mode == "reflect" and (r >= h or r >= w):  # reflected more than once: numpy's rule
-        out[...] = np.pad(inner, ((r, r), (r, r), (0, 0)), mode=mode)
+        out[...] = np.pad(inner, ((r, r), (r, r), (0, 0)), mode=mode)  # type: ignore[call-overload]  # mode: a numpy name, checked by EngineParams
         return
     for axis, n in ((0, h), (1, w)):
         lead = out if axis == 0 else out.swapaxes(0, 1)  # pad rows, then columns (all rows)
@@ -132,7 +133,7 @@ def _pad_index(n: int, r: int, mode: str) -> np.ndarray:
     index = np.arange(n, dtype=np.int64)
     if mode == "constant":
         return np.pad(index, r, mode="constant", constant_values=-1)
-    return np.pad(index, r, mode=mode)
+    return np.pad(index, r, mode=mode)  # type: ignore[call-overload]  # mode: a numpy name, checked by EngineParams
 
 
 def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) -> None:
@@ -293,13 +294,16 @@ class _Projection:
         # One buffer for the windows and one for their product, reused by every block (not
         # a fresh large array per block: each would be mapped and faulted in anew).
         rows = min(_CHUNK, n)
+        matrix, offset = self.matrix, self.offset
+        if matrix is None or offset is None:
+            raise RuntimeError("the projection is projected before it is fitted")
         gathered = np.empty((rows, windows.width), dtype=np.float32)
         product = np.empty((rows, self.n_components), dtype=np.float32)
         for start in range(0, n, _CHUNK):
             sub = tuple(i[start : start + _CHUNK] for i in index)
             m = sub[0].shape[0]
-            values = np.matmul(windows(sub, gathered), self.matrix, out=product[:m])
-            np.subtract(values, self.offset, out=values)
+            values = np.matmul(windows(sub, gathered), matrix, out=product[:m])
+            np.subtract(values, offset, out=values)
             _store(out[start : start + m], values, inverse_unit)
         return out
 
@@ -348,14 +352,20 @@ class LevelSolver:
         self.window = _gaussian_window(k, params.window_sigma)
         self.timer = timer
         self.chosen: np.ndarray | None = None  # sources the mode vote copied
-        n_appearance = exemplars[0].appearance.shape[2]
+        first = exemplars[0].appearance
+        if first is None:  # the engine checks every exemplar level has appearance
+            raise ValueError("an exemplar has no appearance")
+        n_appearance = first.shape[2]
         guide_w = np.asarray(params.guide_weights, dtype=np.float32)
         appearance_w = np.asarray(params.appearance_weights, dtype=np.float32)
         self.guide_active = np.flatnonzero(guide_w != 0)
         self.appearance_active = np.flatnonzero(appearance_w != 0)
         n_ga, n_aa = len(self.guide_active), len(self.appearance_active)
         self.n_guide_active = n_ga
-        query_context, exemplar_context = context or (None, [None] * len(exemplars))
+        query_context: np.ndarray | None = None
+        exemplar_context: list[Any] = [None] * len(exemplars)
+        if context is not None:
+            query_context, exemplar_context = context
         n_own = query.guide.shape[2]  # the mappings' own guide bands; context ones after
 
         # Band scales: weight per standard deviation over the exemplars' masks.
@@ -423,7 +433,7 @@ class LevelSolver:
                 positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
             del ex
             if release is not None:  # packed: the caller's mapping may go now
-                exemplars[e] = None
+                exemplars[e] = None  # type: ignore[index]  # a list handed over with release
                 release(e)
         self.cand_e = np.concatenate(cand_e)
         self.cand_y = np.concatenate(cand_y)
@@ -549,7 +559,7 @@ class LevelSolver:
         row_edges = np.linspace(0, h, n_bands + 1).astype(np.int64)
         self.band_starts = np.searchsorted(ys, row_edges, side="left").astype(np.int64)
         timer.add("features", start)
-        self.indexes: dict[str, object] = {}
+        self.indexes: dict[str, NearestNeighborIndex] = {}
 
     def _pad_guide(self, out, guide, context, r, scale, rows, cols) -> None:
         """The active guide channels, of the mapping's own bands then of the context
@@ -702,9 +712,16 @@ class LevelSolver:
         self.timer.add("vote", start)
         return appearance_padded
 
-    def search(self, matches: np.ndarray | None, init: bool, seed: int, rng) -> np.ndarray:
-        """E-step search: new candidate matches (PCA space) for every query centre."""
+    def search(
+        self, matches: np.ndarray | None, init: bool, seed: int, rng, free: bool = False
+    ) -> np.ndarray:
+        """E-step search: new candidate matches (PCA space) for every query centre.
+
+        ``init``: on guide and position only (and the exemplar cost, unless ``free``: the
+        cost is the last of those dimensions)."""
         ndims = self.n_init_dims if init else self.candidate_features.shape[1]
+        if init and free:
+            ndims -= 1
         backend = self.params.backend
         if backend == "patchmatch":
             start = time.perf_counter()
@@ -746,7 +763,7 @@ class LevelSolver:
             )
             self.timer.add("search", start)
             return new
-        key = "init" if init else "full"
+        key = ("init" if init else "full") + ("-free" if init and free else "")
         if key not in self.indexes:
             start = time.perf_counter()
             data = np.ascontiguousarray(self.candidate_features[:, :ndims], dtype=np.float32)
@@ -783,6 +800,7 @@ class LevelSolver:
         rng,
         worst: float = RESEED_WORST,
         keep_detail: bool = False,
+        free: bool = False,
     ) -> np.ndarray:
         """Propagated matches, some replaced by matches on guide and position only.
 
@@ -794,10 +812,11 @@ class LevelSolver:
         also carry at least the appearance detail of the match it replaces (the
         energy of its window's appearance features): relief the depth marks only
         vaguely (a brow ridge) keeps the brow the EM drew rather than a plain patch
-        that fits the ridge a little better.
+        that fits the ridge a little better. With ``free`` the exemplar costs do not
+        count: the relief may take its match from any exemplar.
         """
-        guided = self.search(matches, init=True, seed=seed, rng=rng)
-        n = self.n_init_dims
+        guided = self.search(matches, init=True, seed=seed, rng=rng, free=free)
+        n = self.n_init_dims - (1 if free else 0)
         matches = np.ascontiguousarray(matches, dtype=np.int64)
         fit = _kernels.feature_distances(self.query_features, self.candidate_features, matches, n)
         fit_guided = _kernels.feature_distances(
@@ -852,7 +871,7 @@ class LevelSolver:
         )
         if copied is None:
             copied = self.params.vote == "mode"
-        copied_by_mode = copied and self.chosen is not None
+        chosen_all = self.chosen if copied else None  # the mode vote's copied sources
         r = self.r
         out = np.empty((h, w, 3), dtype=np.int32)
         xx = np.arange(w)[None, :]
@@ -863,14 +882,14 @@ class LevelSolver:
             e = self.cand_e[c]
             sy = self.cand_y[c] + (np.arange(y0, y1)[:, None] - block_ny)
             sx = self.cand_x[c] + (xx - block_nx)
-            if copied_by_mode:
-                chosen = self.chosen[r + y0 : r + y1, r : r + w]
-                copied = chosen[..., 0] >= 0
-                e = np.where(copied, chosen[..., 0], e)
+            if chosen_all is not None:
+                chosen = chosen_all[r + y0 : r + y1, r : r + w]
+                here = chosen[..., 0] >= 0
+                e = np.where(here, chosen[..., 0], e)
                 # The mode vote records padded coordinates in the packed bands.
                 origin = self.band_origin[e] - r
-                sy = np.where(copied, chosen[..., 1] + origin[..., 0], sy)
-                sx = np.where(copied, chosen[..., 2] + origin[..., 1], sx)
+                sy = np.where(here, chosen[..., 1] + origin[..., 0], sy)
+                sx = np.where(here, chosen[..., 2] + origin[..., 1], sx)
             out[y0:y1, :, 0] = e
             out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
             out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)

@@ -210,7 +210,7 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
             means[compact], r=FEATURE_CONTRAST * (1 - 1e-6), return_length=True
         )
         keep[compact] = repeats <= MAX_REPEATS
-    for i in np.flatnonzero(keep):
+    for i in map(int, np.flatnonzero(keep)):
         box = boxes[i - 1]
         keep[i] = _stands_alone(
             colours, mask, labels, i, box, _span(box), grounds=1 + (i >= first_piece)
@@ -541,7 +541,7 @@ def _undouble(source, instances, features, object_mask, exemplar_masks) -> int:
             np.unique(source[ys[part], xs[part], 1] * columns + source[ys[part], xs[part], 2])
             for part in (~far, far)
         ]
-        doubled = np.intersect1d(*covers, assume_unique=True).size
+        doubled = np.intersect1d(covers[0], covers[1], assume_unique=True).size
         if not DOUBLE_MAIN * item.size <= len(covers[0]) < COMPLETE_SHARE * item.size:
             continue
         if doubled < PARTIAL_SHARE * item.size:

@@ -132,16 +132,33 @@ class Guides:
     position_weight: float = 1.0
     #: Register each example onto the query (a smooth non-rigid warp of the whole object,
     #: :mod:`imagemap.depth.register`) and compare positions where the warp puts the
-    #: example's pixels, instead of positions relative to each object's centroid.
-    registration: bool = False
-    #: The position weight when registered (the warp's positions are far more precise
-    #: than the centroid's, so they may weigh more).
-    registered_position_weight: float = 1.0
+    #: example's pixels, instead of positions relative to each object's centroid: the
+    #: copy then follows whole example regions, bent with the object (12 fish at 1x:
+    #: 70 fragments for 90 % of the object -> 20, 6 at 4x: 1,488 -> about 50; parts in
+    #: one palette 46 % -> 97 %; docs/presets.md). False: the paper's relative position.
+    registration: bool = True
+    #: The position weight when registered: strong, so that a window leaves the place the
+    #: warp gives it only where its relief and colours call for it (4: 26-29 fragments
+    #: on 1x fish, 16: 8-12; 12 fish, 12 busts measured).
+    registered_position_weight: float = 16.0
     #: The object size (square root of its area, pixels of a level) at which
     #: ``registered_position_weight`` holds; at a level where the object is larger the
     #: weight grows with its size, so that a pixel of drift from the warp costs the same
-    #: at any resolution (window-sized fragments otherwise return at 4x).
+    #: at any resolution (4x fish: 1,488 fragments without, about 50 with).
     registered_reference_size: float = 100.0
+    #: Factor on the registered position weight at the feature level, where the final
+    #: reseed draws the small features by their relief: the warp places an eye or lips
+    #: within a few pixels only (12 busts' eyes 0.69 -> 0.79, lips 0.48 -> 0.61 of their
+    #: pixels from the same part at 0.25; humans, with no small feature, keep 1).
+    registered_feature_factor: float = 0.25
+    #: Weight of the relief's detail in the registration's guide image
+    #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges
+    #: pull the warp into place (12 busts' macro part transfer 0.779 -> 0.789 at 0.5).
+    registration_relief: float = 0.5
+    #: The final reseed may take a feature from any example (the example preference does
+    #: not apply to it), while the EM keeps each region's example (12 busts: brows 0.50
+    #: -> 0.53 of their pixels from brows).
+    free_final_reseed: bool = True
     #: Weight of the coarser levels' luminance as an extra guide band (times the Y
     #: weight) at levels finer than ``Pyramid.context_fraction``: a large map's fine
     #: levels keep the eyes, lips and palette the coarser levels chose (Cb and Cr too gave
@@ -164,6 +181,8 @@ class Guides:
             "position_weight",
             "registered_position_weight",
             "registered_reference_size",
+            "registered_feature_factor",
+            "registration_relief",
             "context_weight",
             "wide_context_weight",
         ):
@@ -193,13 +212,15 @@ class Matching:
     #: pixel keeps the colour the coarser levels chose (busts' macro part transfer 0.71 ->
     #: 0.81); "laplacian": the paper's bands, collapsed at the end.
     appearance_pyramid: str = "gaussian"
-    #: Extra window cost per rank of a selected example at the levels coarser than the
-    #: feature level: each region from one example where it fits nearly as well, instead
-    #: of patches of two palettes (0: the paper's method).
-    example_preference: float = 0.3
-    #: Apply the preference at the feature level and finer too: fewer, smaller seams,
-    #: fewer small features.
-    preference_at_finest: bool = False
+    #: Extra window cost per rank of a selected example (the nearest costs nothing): each
+    #: region of the object from one example where it fits at all, so that one palette
+    #: holds per part (with registration, 30 at every level: 12 fish and 12 busts in one
+    #: palette per part in 97 % and 96 % of parts; 3 left 33 % of fish with two palettes
+    #: in a part). 0 is the paper's method.
+    example_preference: float = 30.0
+    #: Apply the preference at the feature level and finer too (the final reseed may
+    #: still take a feature from another example, see ``Guides.free_final_reseed``).
+    preference_at_finest: bool = True
     #: Per level, where the propagated matches fit the depth worst, matches on depth and
     #: position alone replace them when they fit in less than this fraction of the
     #: distance (0: off): features only the finer levels resolve are drawn.
@@ -239,17 +260,9 @@ class Finish:
     #: Weight of the seam costs when the copy's sources are rearranged so that seams fall
     #: where the sources agree (Kwatra et al. 2003; 0: off).
     seam_smoothness: float = 1.0
-    #: Let whole stray patches of another source take a touching region's source. Off:
-    #: blur ratio fish 0.87 -> 0.89 but busts with every feature 75 -> 67 %.
-    merge_regions: bool = False
-    #: The share of a region's luminance detail a merge must keep.
-    keep_detail: float = 0.5
     #: Copy whole every small feature of an example (eye, lips, brow) that the copy cut:
     #: busts with every feature 92 -> 100 % (4x: 67 -> 83 %).
     complete_features: bool = True
-    #: Shift a part copied from two examples (a face's skin) into one palette. Off: no
-    #: detail measure moves and busts' dE00 rises by 0.45, though the faces look right.
-    even_palettes: bool = False
     #: How far the copy may drift towards the voted colours in the seam blend, as a
     #: fraction of the object's size (8 px for a 200x150 fish, 85 px at 2048^2).
     blend_scale: float = 0.1
@@ -262,7 +275,6 @@ class Finish:
         if self.vote not in VOTES:
             raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
         check_float("seam_smoothness", self.seam_smoothness, minimum=0.0)
-        check_float("keep_detail", self.keep_detail, minimum=0.0, maximum=1.0)
         check_float("blend_scale", self.blend_scale, minimum=0.0)
         check_float("edge_support", self.edge_support, minimum=0.0, maximum=1.0)
 
@@ -290,10 +302,6 @@ class DepthConfig:
     guides: Guides = field(default_factory=Guides)
     matching: Matching = field(default_factory=Matching)
     finish: Finish = field(default_factory=Finish)
-
-    def __post_init__(self) -> None:
-        if self.finish.even_palettes and not self.finish.copies:
-            raise InputError("even_palettes needs vote 'copy' or 'mode' (a copied map)")
 
     def replace_fields(self, **values: Any) -> DepthConfig:
         """A copy with fields replaced by their own name, whatever group holds them.
@@ -325,38 +333,44 @@ class DepthConfig:
 
 _GROUPS = ("selection", "pyramid", "guides", "matching", "finish")
 _GROUP_TYPES = {"selection": Selection, "pyramid": Pyramid, "guides": Guides}
-_GROUP_TYPES.update({"matching": Matching, "finish": Finish})  # type: ignore[dict-item]
+_GROUP_TYPES.update({"matching": Matching, "finish": Finish})
 #: Field name -> the group that holds it (field names are unique across groups).
 _FIELD_GROUPS = {f.name: group for group, cls in _GROUP_TYPES.items() for f in fields(cls)}
 
 
-def _preset(m: int, patch_sizes: tuple[int, ...], position_weight: float) -> DepthConfig:
+def _preset(
+    m: int, patch_sizes: tuple[int, ...], position_weight: float, feature_factor: float = 0.25
+) -> DepthConfig:
     return DepthConfig(
         selection=Selection(m=m),
         pyramid=Pyramid(patch_sizes=patch_sizes),
-        guides=Guides(position_weight=position_weight),
+        guides=Guides(position_weight=position_weight, registered_feature_factor=feature_factor),
     )
 
 
 #: Class presets after the paper's Table 1 (m and windows as published; weights
 #: restated per band standard deviation, see ``docs/presets.md``).
 PRESETS: dict[str, DepthConfig] = {
-    "humans": _preset(1, (7, 9, 9), 3.0),
+    # Humans: no small feature to draw by relief at 150x200, and the whole position weight
+    # at the finest level keeps 12 figures in 9 fragments (52 at 0.25).
+    "humans": _preset(1, (7, 9, 9), 3.0, feature_factor=1.0),
     "busts": _preset(2, (7, 11, 9), 1.0),
     "fish": _preset(2, (7, 11, 9), 0.5),
 }
 
 #: Named finishes: field values that make a known method. "paper" is Hassner & Basri's
-#: own: the mean M-step on YCbCr Laplacian bands, collapsed, and no finishing stage
-#: (on our guide bands).
+#: own: positions relative to each object's centroid (no registration), no example
+#: preference, the mean M-step on YCbCr Laplacian bands, collapsed, and no finishing
+#: stage (on our guide bands).
 FINISHES: dict[str, dict[str, Any]] = {
     "copy": {},
     "paper": {
+        "registration": False,
+        "example_preference": 0.0,
+        "preference_at_finest": False,
         "vote": "mean",
         "appearance_pyramid": "laplacian",
         "complete_features": False,
-        "even_palettes": False,
-        "merge_regions": False,
     },
 }
 
@@ -397,9 +411,9 @@ OPTIONS: tuple[Option, ...] = (
         "example_preference",
         "--example-preference",
         "non_negative_float",
-        "extra cost per rank of a selected example at the coarser levels (default 0.3): "
-        "each region of the object from one example where it fits nearly as well, instead "
-        "of patches of two palettes; 0 is the paper's method",
+        "extra cost per rank of a selected example (default 30): each region of the "
+        "object from the nearest example where it fits at all, one palette per part; "
+        "0 is the paper's method",
     ),
     Option(
         "vote",
@@ -439,15 +453,6 @@ OPTIONS: tuple[Option, ...] = (
         "leave an example's eye, lips or brow as the copy cut it (by default a small feature "
         "copied only in part, say lips cut into a lozenge where two offsets meet, is copied "
         "whole)",
-    ),
-    Option(
-        "even_palettes",
-        "even_palettes",
-        "--even-palettes",
-        "switch_on",
-        "where the map shows one part (a face's skin, a plain shirt) in two examples' "
-        "colours, shift the smaller share into the larger's: one skin tone from face to "
-        "neck (off by default; docs/presets.md)",
     ),
     Option(
         "finish",

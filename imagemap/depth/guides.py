@@ -214,7 +214,10 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
     >>> mask = np.zeros((150, 200), bool); mask[30:120, 50:150] = True
     >>> plans = level_plans(DepthConfig(), mask, n_examples=2)
     >>> [(p.patch_size, p.exemplar_costs, p.final_reseed) for p in plans]
-    [(7, (), 0.7), (11, (0.0, 0.3), 0.0), (9, (0.0, 0.3), 0.0)]
+    [(7, (0.0, 30.0), 0.7), (11, (0.0, 30.0), 0.0), (9, (0.0, 30.0), 0.0)]
+    >>> paper = DepthConfig().replace_fields(example_preference=0.3, preference_at_finest=False)
+    >>> [plan.exemplar_costs for plan in level_plans(paper, mask, n_examples=2)]
+    [(), (0.0, 0.3), (0.0, 0.3)]
     """
     pyramid, guides, matching = config.pyramid, config.guides, config.matching
     n_levels = pyramid.levels
@@ -252,9 +255,11 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
                 position_weight=(
                     guides.registered_position_weight
                     * max(1.0, size / 2**level / guides.registered_reference_size)
+                    * (guides.registered_feature_factor if level == feature else 1.0)
                     if guides.registration
                     else None
                 ),
+                final_reseed_any_exemplar=bool(guides.registration and guides.free_final_reseed),
             )
         )
     return tuple(plans)
@@ -329,11 +334,11 @@ def depth_mappings(
     ``positions`` (per level, (H_l, W_l, 2)) replace the engine's relative position."""
     depth = validate_depth(depth)
     masks = mask_pyramid(depth > 0, levels)
-    positions = positions or [None] * levels
+    level_positions: list[np.ndarray | None] = list(positions) if positions else [None] * levels
     return [
         Mapping(guide=guide, mask=mask if mask.any() else None, position=position)
         for guide, mask, position in zip(
-            _depth_guides(depth, masks, guides), masks, positions, strict=True
+            _depth_guides(depth, masks, guides), masks, level_positions, strict=True
         )
     ]
 
@@ -399,7 +404,7 @@ def example_mappings(
     else:
         appearance = gaussian_pyramid(ycbcr, levels)
     masks = mask_pyramid(mask, levels)
-    positions = positions or [None] * levels
+    level_positions: list[np.ndarray | None] = list(positions) if positions else [None] * levels
     return [
         Mapping(
             guide=guide,
@@ -408,6 +413,10 @@ def example_mappings(
             position=position,
         )
         for guide, bands, level_mask, position in zip(
-            _depth_guides(example.depth, masks, guides), appearance, masks, positions, strict=True
+            _depth_guides(example.depth, masks, guides),
+            appearance,
+            masks,
+            level_positions,
+            strict=True,
         )
     ]

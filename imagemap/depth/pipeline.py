@@ -12,15 +12,14 @@ stage                  what it does
 ``units``              the query at the examples' depth scale; not an example
 ``select``             the examples: named, or the nearest ``m`` in depth
 ``pyramid``            as many levels as the object's size calls for
+``register``           each example warped onto the query (whole regions)
 ``bands``              guide bands of query and examples, their colour levels
 ``synthesize``         the engine, coarse to fine, by the level plan
 ``collapse``           the voted map at the finest level
 ``copy``               every pixel's source: the pixel its windows agree on
 ``seams``              the copy's seams moved to where the sources agree
-``merge_regions``      stray patches of another source merged (off)
 ``complete_features``  small features the copy cut, copied whole
 ``outside``            the blend's reference outside the object: the copy
-``even_palettes``      one palette per part (off)
 ``blend``              the seams blended in the gradient domain
 ``rgb``                back to RGB, background 0
 =====================  ==================================================
@@ -46,6 +45,7 @@ Examples
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -56,16 +56,11 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap.core.blend import (
-    copy_through,
-    merge_regions,
-    place_seams,
-    seamless_copy,
-)
+from imagemap.core.blend import copy_through, place_seams, seamless_copy
 from imagemap.core.engine import EngineParams, EngineResult, ReleasableLevels, synthesize
 from imagemap.core.pyramid import collapse_laplacian
 from imagemap.database import Database
-from imagemap.depth import completion, palettes
+from imagemap.depth import completion
 from imagemap.depth.budget import guard_colorize
 from imagemap.depth.config import OPTIONS, PRESETS, DepthConfig, resolve_config
 from imagemap.depth.guides import (
@@ -114,7 +109,7 @@ class State:
     seed: int = 0
     quiet: bool = True
     names: list[str] | None = None
-    mask: np.ndarray | None = None
+    mask: np.ndarray = field(init=False)  # the object: depth > 0
     chosen: list[Example] = field(default_factory=list)
     warps: list[Warp] = field(default_factory=list)  # each example onto the query
     query_levels: ReleasableLevels | None = None
@@ -123,9 +118,19 @@ class State:
     ycbcr: np.ndarray | None = None  # the voted map, then the map being finished (YCbCr)
     exemplars: list[np.ndarray] | None = None  # the examples' colours the copy reads
     source: np.ndarray | None = None  # (H, W, 3): example, y, x of every pixel
-    edge_reference: np.ndarray | None = None
     image: np.ndarray | None = None
     changed: str = ""  # what the last stage changed, for the record
+
+    def __post_init__(self) -> None:
+        self.mask = np.asarray(self.depth) > 0
+
+    def made(self, name: str) -> Any:
+        """The value of ``name`` that an earlier stage made (an error naming it if none did:
+        a stage run out of order)."""
+        value = getattr(self, name)
+        if value is None:
+            raise RuntimeError(f"pipeline: no stage has made {name!r} yet (stage order)")
+        return value
 
 
 @dataclass(frozen=True)
@@ -181,18 +186,21 @@ def _pyramid(state: State, config: DepthConfig) -> State:
 
 
 def _register(state: State, config: DepthConfig) -> State:
-    state.warps = [register(state.depth, example.depth) for example in state.chosen]
+    relief = config.guides.registration_relief
+    state.warps = [register(state.depth, example.depth, relief) for example in state.chosen]
     state.changed = f"{len(state.warps)} examples warped onto the query"
     return state
 
 
 def _bands(state: State, config: DepthConfig) -> State:
     levels = config.pyramid.levels
-    query_positions, example_positions = None, [None] * len(state.chosen)
+    query_positions: list[np.ndarray] | None = None
+    example_positions: list[list[np.ndarray] | None] = [None] * len(state.chosen)
     if state.warps:
-        query_positions, example_positions = registered_positions(
+        query_positions, registered = registered_positions(
             state.mask, [e.depth.shape for e in state.chosen], state.warps, levels
         )
+        example_positions = list(registered)
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions)
@@ -241,27 +249,28 @@ def engine_params(config: DepthConfig, mask: np.ndarray, n_examples: int) -> Eng
 
 def _synthesize(state: State, config: DepthConfig) -> State:
     params = engine_params(config, state.mask, len(state.chosen))
-    query, exemplars = state.query_levels, state.exemplar_levels
+    query, exemplars = state.made("query_levels"), state.made("exemplar_levels")
     # The pyramids are the engine's now (it frees each level once packed): not held here.
     state.query_levels = state.exemplar_levels = None
-    state.engine = synthesize(query, exemplars, params, seed=state.seed, quiet=state.quiet)
+    engine = synthesize(query, exemplars, params, seed=state.seed, quiet=state.quiet)
     del query, exemplars
+    state.engine = engine
     state.changed = "iterations per level (fine to coarse): " + ", ".join(
-        str(len(values)) for values in state.engine.objective
+        str(len(values)) for values in engine.objective
     )
     return state
 
 
 def _collapse(state: State, config: DepthConfig) -> State:
-    engine = state.engine
+    engine: EngineResult = state.made("engine")
     if config.matching.appearance_pyramid == "laplacian":
         state.ycbcr = collapse_laplacian(engine.appearance)
     else:
         state.ycbcr = engine.appearance[0]
-    engine.appearance = None  # collapsed: not held through the finish
+    engine.appearance = None  # type: ignore[assignment]  # collapsed: not held through the finish
     if not config.finish.copies:
         state.source = engine.source
-        engine.source = engine.copy_source = None
+        engine.source = engine.copy_source = None  # type: ignore[assignment]  # handed over
     state.changed = "voted map"
     return state
 
@@ -270,46 +279,34 @@ def _copy(state: State, config: DepthConfig) -> State:
     # Every pixel copied from the exemplar pixel its windows agree on. The examples'
     # colours are made again rather than kept from the pyramids: full-size arrays held
     # through the synthesis would add to its peak memory, and they cost little to remake.
-    engine = state.engine
+    engine: EngineResult = state.made("engine")
     state.exemplars = [example_ycbcr(example) for example in state.chosen]
-    state.source = engine.copy_source
-    differ = _changed_pixels(engine.source, engine.copy_source)
-    engine.source = engine.copy_source = None
+    copied = state.source = engine.copy_source
+    differ = 0 if copied is None else _changed_pixels(engine.source, copied)
+    engine.source = engine.copy_source = None  # type: ignore[assignment]  # handed over
     state.changed = f"{differ} pixels copied from another source than their window's match"
     return state
 
 
 def _seams(state: State, config: DepthConfig) -> State:
-    old = state.source
-    state.source = place_seams(
-        state.exemplars, old, state.ycbcr, smoothness=config.finish.seam_smoothness
+    old = state.made("source")
+    new = place_seams(
+        state.made("exemplars"), old, state.made("ycbcr"), smoothness=config.finish.seam_smoothness
     )
-    state.changed = f"{_changed_pixels(old, state.source)} pixels take another source"
-    return state
-
-
-def _merge_regions(state: State, config: DepthConfig) -> State:
-    old = state.source
-    state.source = merge_regions(
-        state.exemplars,
-        old,
-        state.ycbcr,
-        smoothness=config.finish.seam_smoothness,
-        masks=[example.mask for example in state.chosen],
-        keep_detail=config.finish.keep_detail,
-    )
-    state.changed = f"{_changed_pixels(old, state.source)} pixels take another source"
+    state.source = new
+    state.changed = f"{_changed_pixels(old, new)} pixels take another source"
     return state
 
 
 def _complete_features(state: State, config: DepthConfig) -> State:
+    exemplars = state.made("exemplars")
     features = [
         completion.small_features(exemplar, example.mask)
-        for exemplar, example in zip(state.exemplars, state.chosen, strict=True)
+        for exemplar, example in zip(exemplars, state.chosen, strict=True)
     ]
     state.source, completed = completion.complete_features(
-        state.exemplars,
-        state.source,
+        exemplars,
+        state.made("source"),
         features,
         state.mask,
         [example.mask for example in state.chosen],
@@ -328,34 +325,16 @@ def _outside(state: State, config: DepthConfig) -> State:
     # Outside the object the voted map is whatever the windows left there (zero where no
     # window reached: black in YCbCr terms is green); the blend must not pull the
     # object's edge towards it, so the reference there is the copy itself.
-    mask, source, ycbcr = state.mask, state.source, state.ycbcr
+    mask, source, ycbcr = state.mask, state.made("source"), state.made("ycbcr")
+    exemplars = state.made("exemplars")
     count = 0
     for y0 in range(0, mask.shape[0], _ROWS):
         rows = slice(y0, y0 + _ROWS)
         outside = ~mask[rows] & (source[rows, :, 0] >= 0)
         if outside.any():
-            ycbcr[rows][outside] = copy_through(state.exemplars, source[rows][outside][None])[0]
+            ycbcr[rows][outside] = copy_through(exemplars, source[rows][outside][None])[0]
             count += int(outside.sum())
     state.changed = f"{count} pixels outside the object set to the copy"
-    return state
-
-
-def _even_palettes(state: State, config: DepthConfig) -> State:
-    shift = palettes.even_palettes(
-        state.exemplars,
-        [example.mask for example in state.chosen],
-        state.source,
-        state.mask,
-        seed=state.seed,
-    )
-    if shift is None:
-        state.changed = "no part in two palettes"
-        return state
-    # The edges kept are judged on the colours as copied: a part shifted next to one
-    # that is not must not lose its edge.
-    state.edge_reference = state.ycbcr.copy()
-    state.ycbcr += shift
-    state.changed = f"{int(np.count_nonzero(np.any(shift != 0, axis=-1)))} pixels shifted"
     return state
 
 
@@ -363,21 +342,20 @@ def _blend(state: State, config: DepthConfig) -> State:
     size = float(np.sqrt(state.mask.sum()))
     scale = max(config.finish.blend_scale * size, 1.0)
     state.ycbcr = seamless_copy(
-        state.exemplars,
-        state.source,
-        state.ycbcr,
+        state.made("exemplars"),
+        state.made("source"),
+        state.made("ycbcr"),
         scale=scale,
         edge_support=config.finish.edge_support,
         mask=state.mask,
-        edge_reference=state.edge_reference,
     )
-    state.edge_reference = state.exemplars = None
+    state.exemplars = None
     state.changed = f"seams blended at scale {scale:.1f} px"
     return state
 
 
 def _rgb(state: State, config: DepthConfig) -> State:
-    image = to_rgb(state.ycbcr)
+    image = to_rgb(state.made("ycbcr"))
     image[~state.mask] = 0.0
     state.image, state.ycbcr = image, None
     state.changed = "RGB"
@@ -399,14 +377,12 @@ STAGES: tuple[Stage, ...] = (
     Stage("collapse", _collapse),
     Stage("copy", _copy, _copies),
     Stage("seams", _seams, lambda c: c.finish.copies and c.finish.seam_smoothness > 0),
-    Stage("merge_regions", _merge_regions, lambda c: c.finish.copies and c.finish.merge_regions),
     Stage(
         "complete_features",
         _complete_features,
         lambda c: c.finish.copies and c.finish.complete_features,
     ),
     Stage("outside", _outside, _copies),
-    Stage("even_palettes", _even_palettes, lambda c: c.finish.copies and c.finish.even_palettes),
     Stage("blend", _blend, _copies),
     Stage("rgb", _rgb),
 )
@@ -525,15 +501,15 @@ class ColorizeResult:
     @property
     def legend(self) -> list[tuple[str, tuple[float, float, float]]]:
         """(example name, tint colour) for the provenance picture."""
+        tints = [_PALETTE[i % len(_PALETTE)] for i in range(len(self.example_names))]
         return [
-            (name, tuple(float(c) for c in _PALETTE[i % len(_PALETTE)]))
-            for i, name in enumerate(self.example_names)
+            (name, (float(tint[0]), float(tint[1]), float(tint[2])))
+            for name, tint in zip(self.example_names, tints, strict=True)
         ]
 
 
 def _check_arguments(depth, database, preset, examples, seed) -> list[str] | None:
     """The arguments :func:`colorize` checks before any work; ``examples`` as a list."""
-    import os
 
     if isinstance(depth, (str, os.PathLike)):
         raise InputError(
@@ -606,10 +582,10 @@ def colorize(
     if len(database) == 0:
         raise InputError("the database has no examples")
     state = State(depth=depth, database=database, seed=seed, quiet=quiet, names=names)
-    state.mask = depth > 0
     state, config, records = run_pipeline(state, config)
+    engine: EngineResult = state.made("engine")
     timings: dict[str, float] = {"selection": 0.0, "pyramids": 0.0}
-    timings.update(state.engine.timings)
+    timings.update(engine.timings)
     timings["collapse"] = 0.0
     seen_engine = False
     for record in records:
@@ -620,12 +596,12 @@ def colorize(
         elif seen_engine:
             timings["collapse"] += record.seconds
     return ColorizeResult(
-        image=state.image,
+        image=state.made("image"),
         mask=state.mask,
-        source=state.source,
-        cost=state.engine.cost,
+        source=state.made("source"),
+        cost=engine.cost,
         example_names=[e.name for e in state.chosen],
-        objective=state.engine.objective,
+        objective=engine.objective,
         timings=timings,
         config=config,
         stages=records,

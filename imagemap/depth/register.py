@@ -56,12 +56,19 @@ ITERATIONS = 12
 STIFFNESS = 1e-2
 #: Pixels of the working grid used for the fit at most (a regular subsample).
 FIT_PIXELS = 3000
+#: Weight of the relief's detail (the depth less its smoothing over
+#: ``RELIEF_DETAIL_SCALE`` of the object's size, in units of its 95th percentile inside
+#: the object) in the guide image: eyes, lips and brow ridges pull the warp into place.
+RELIEF_DETAIL_WEIGHT = 0.5
+RELIEF_DETAIL_SCALE = 0.03
 #: Soft clip (fraction of the object's size) of the signed distance in the guide image:
 #: the outline and the band within a few percent of it lead the fit.
 OUTLINE_REACH = 0.04
 
 
-def registration_guide(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def registration_guide(
+    depth: np.ndarray, mask: np.ndarray, relief_weight: float = RELIEF_DETAIL_WEIGHT
+) -> np.ndarray:
     """The image the warp is fitted on: soft-clipped signed distance to the outline plus
     the depth relative to the object's deepest point (both in [-0.5, 1]).
 
@@ -77,7 +84,13 @@ def registration_guide(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
     outline = np.tanh(signed / (OUTLINE_REACH * size))
     deepest = float(depth[mask].max()) if mask.any() else 1.0
     relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
-    return (0.5 * outline + 0.5 * relief).astype(np.float32)
+    guide = 0.5 * outline + 0.5 * relief
+    if relief_weight and mask.any():
+        smooth = ndimage.gaussian_filter(relief, RELIEF_DETAIL_SCALE * size)
+        detail = np.where(mask, relief - smooth, 0.0)
+        unit = float(np.percentile(np.abs(detail[mask]), 95)) or 1.0
+        guide = guide + relief_weight * np.tanh(detail / unit)
+    return guide.astype(np.float32)
 
 
 def _moments(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -225,13 +238,17 @@ def _fit(fixed, moving, fixed_mask, moving_mask) -> Warp:
     return Warp(query_centre, example_centre, scale, box, coefficients, n)
 
 
-def register(query_depth: np.ndarray, example_depth: np.ndarray) -> Warp:
+def register(
+    query_depth: np.ndarray, example_depth: np.ndarray, relief_weight: float = RELIEF_DETAIL_WEIGHT
+) -> Warp:
     """The smooth warp from the query's object onto the example's (full-resolution pixels).
 
     Parameters
     ----------
     query_depth, example_depth : ndarray (H, W)
         Depth maps, background 0 (any units: each is taken relative to its own range).
+    relief_weight : float
+        Weight of the relief's detail in the guide image (see ``RELIEF_DETAIL_WEIGHT``).
 
     Returns
     -------
@@ -242,7 +259,7 @@ def register(query_depth: np.ndarray, example_depth: np.ndarray) -> Warp:
     zoom = min(1.0, WORK_SIZE / max(size, 1.0))
 
     def working(depth, mask):
-        guide = registration_guide(depth, mask)
+        guide = registration_guide(depth, mask, relief_weight)
         if zoom >= 1.0:
             return guide, mask
         small = ndimage.zoom(guide, zoom, order=1, prefilter=False)

@@ -29,7 +29,7 @@ from scipy import ndimage
 
 from imagemap.io import InputError
 from imagemap.mesh.files import textured_mesh
-from imagemap.mesh.views import MeshRender, fill_from_nearest, sample_pixels
+from imagemap.mesh.views import MeshRender, fill_from_nearest, sample_pixels, texture_image
 
 __all__ = [
     "bake_views",
@@ -73,7 +73,7 @@ def uv_atlas(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     if uv is not None and len(uv) == len(vertices):
         return vertices, faces, np.asarray(uv, dtype=np.float64), np.arange(len(vertices))
     try:
-        import xatlas
+        import xatlas  # deferred: start-up: xatlas only for a mesh without UVs
     except ImportError as exc:
         raise InputError(
             "the mesh has no UV coordinates and xatlas is not installed "
@@ -261,7 +261,6 @@ def texture_size_for(mesh, pixel_size: float | None = None) -> int:
     >>> texture_size_for(plane, pixel_size=0.01)  # 2 / 0.01 * 2 = 400 texels -> 512
     512
     """
-    from imagemap.mesh.views import texture_image
 
     own = texture_image(mesh) if getattr(mesh.visual, "uv", None) is not None else None
     # A texture smaller than an atlas can be is a placeholder (trimesh gives a mesh with
@@ -431,7 +430,9 @@ def bake_views(
     -------
     trimesh.Trimesh with the atlas UVs and the baked texture (and the chosen views).
     """
-    from scipy.spatial import cKDTree
+    from scipy.spatial import (
+        cKDTree,
+    )  # deferred: start-up: scipy.spatial only where a k-d tree is built
 
     if len(renders) != len(images) or not renders:
         raise InputError("bake_views: one image per view is needed")

@@ -20,10 +20,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imagemap.align import centroid
 from imagemap.database import Database, database_at_view
+from imagemap.depth.config import resolve_config
+from imagemap.depth.pipeline import colorize
 from imagemap.io import InputError
 from imagemap.mesh.bake import bake_views, project_texture, view_shares
-from imagemap.mesh.files import load_mesh
+from imagemap.mesh.examples import MeshExample
+from imagemap.mesh.files import load_mesh, textured_mesh
+from imagemap.mesh.uvspace import (
+    LAYOUT_TEST_SIZE,
+    UVExample,
+    colorize_uv,
+    mesh_uv_arrays,
+    shares_layout,
+    surface_maps,
+)
 from imagemap.mesh.views import (
     DEFAULT_SIZE,
     FRONT,
@@ -90,7 +102,6 @@ def selection_distances(depth: np.ndarray, database: Database) -> np.ndarray:
     the query's, the example's depth outside the query's frame counted in full
     (paper, Sec. 2.3). One value per example, in the database's order.
     """
-    from imagemap.align import centroid
 
     depth = np.asarray(depth, dtype=np.float32)
     query_centroid = centroid(depth > 0)
@@ -183,14 +194,6 @@ def uv_layout_examples(
         With ``uv_space=True``, when the path cannot run (no UVs, no textured mesh
         example, an example named that is not one).
     """
-    from imagemap.mesh.examples import MeshExample
-    from imagemap.mesh.uvspace import (
-        LAYOUT_TEST_SIZE,
-        UVExample,
-        mesh_uv_arrays,
-        shares_layout,
-        surface_maps,
-    )
 
     if uv_space is False:
         return None
@@ -280,8 +283,6 @@ def colorize_mesh(
     -------
     MeshResult
     """
-    from imagemap.depth.config import resolve_config
-    from imagemap.depth.pipeline import colorize
 
     if not hasattr(mesh, "faces"):
         mesh = load_mesh(check_mesh(mesh))  # a path; None, a Scene, a PointCloud: InputError
@@ -309,9 +310,6 @@ def colorize_mesh(
     else:
         uv_examples = uv_layout_examples(mesh, database, uv_space, names)
     if uv_examples is not None:
-        from imagemap.mesh.files import textured_mesh
-        from imagemap.mesh.uvspace import colorize_uv, mesh_uv_arrays
-
         if texture_size is None:
             own = texture_image(mesh)
             sizes = [max(e.texture.shape[:2]) for e in uv_examples]

@@ -10,7 +10,8 @@ import numpy as np
 
 from imagemap.example import Example
 from imagemap.io import InputError, read_npz, write_npz
-from imagemap.mesh.files import file_digest, is_mesh_path, load_mesh
+from imagemap.materials import NEUTRAL, atlas_normals_to_view
+from imagemap.mesh.files import _material_maps, file_digest, is_mesh_path, load_mesh
 from imagemap.mesh.views import (
     DEFAULT_MARGIN,
     DEFAULT_SIZE,
@@ -19,6 +20,7 @@ from imagemap.mesh.views import (
     parse_view,
     render_colours,
     render_mesh,
+    sample_image,
 )
 
 __all__ = ["RENDER_VERSION", "MeshExample", "mesh_examples"]
@@ -111,7 +113,6 @@ class MeshExample(Example):
 
     def map_kinds(self) -> list[str]:
         """The PBR maps this mesh's material carries (roughness, metallic, ao, normal)."""
-        from imagemap.mesh.files import _material_maps
 
         if "map_kinds" not in self._arrays:
             material = getattr(load_mesh(self.mesh_path).visual, "material", None)
@@ -136,9 +137,6 @@ def _maps_seen(mesh, render) -> dict[str, np.ndarray]:
     """A mesh material's PBR maps as ``render`` sees them: grey maps sampled at each
     pixel's UVs; the normal map turned from the mesh's UV tangent frame into the
     picture's (:func:`imagemap.materials.atlas_normals_to_view`)."""
-    from imagemap.materials import NEUTRAL, atlas_normals_to_view
-    from imagemap.mesh.files import _material_maps
-    from imagemap.mesh.views import sample_image
 
     maps = _material_maps(getattr(mesh.visual, "material", None))
     uv = getattr(mesh.visual, "uv", None)

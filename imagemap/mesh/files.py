@@ -81,7 +81,7 @@ def load_mesh(path: str | os.PathLike):
     InputError
         Missing file, unknown format, unreadable, or no triangles.
     """
-    import trimesh
+    import trimesh  # deferred: start-up (trimesh)
 
     path = Path(path)
     if not path.is_file():
@@ -116,7 +116,7 @@ def _file_normals(path: Path, loaded) -> np.ndarray | None:
     geometry's transformed like its vertices (None when a geometry has none or the
     vertex counts do not agree).
     """
-    import trimesh
+    import trimesh  # deferred: start-up (trimesh)
 
     scene = trimesh.load(path)
     if isinstance(scene, trimesh.Trimesh):
@@ -149,7 +149,7 @@ def file_digest(path: str | os.PathLike) -> str:
 
 def _pil(image: np.ndarray):
     """RGB, RGBA or grey (H, W[, C]) in [0, 1] -> an 8-bit PIL image of the same bands."""
-    from PIL import Image
+    from PIL import Image  # deferred: start-up: Pillow only where a texture is written
 
     image = np.asarray(image)
     if image.ndim == 3 and image.shape[2] == 1:
@@ -350,8 +350,8 @@ def textured_mesh(
     >>> mesh.visual.material.metallicFactor, mesh.visual.material.roughnessFactor
     (0.0, 1.0)
     """
-    import trimesh
-    from trimesh.visual.material import PBRMaterial
+    import trimesh  # deferred: start-up (trimesh)
+    from trimesh.visual.material import PBRMaterial  # deferred: start-up (trimesh)
 
     material = material or SurfaceMaterial()
     maps = dict(maps or {})
@@ -462,7 +462,7 @@ def export_textured(mesh, path: str | os.PathLike, *, scale: float = 1.0) -> lis
         with atomic_path(path) as tmp:
             tmp.write_bytes(data)
         return [path]
-    from trimesh.exchange.obj import export_obj
+    from trimesh.exchange.obj import export_obj  # deferred: start-up (trimesh)
 
     material = getattr(mesh.visual, "material", None)
     if material is not None:

@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 def ray_backend() -> str:
     """The ray tracer trimesh will use: ``"embreex"`` if importable, else ``"rtree"``."""
     try:
-        import embreex  # noqa: F401
+        import embreex  # deferred: optional dependency (fast ray tracer)  # noqa: F401
     except ImportError:
         return "rtree"
     return "embreex"
@@ -91,8 +91,8 @@ def _narrow_phase(
     candidate_rays: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """trimesh's plane and barycentric tests on candidate pairs; nearest hit per ray."""
-    from trimesh import intersections
-    from trimesh import triangles as triangles_mod
+    from trimesh import intersections  # deferred: start-up (trimesh)
+    from trimesh import triangles as triangles_mod  # deferred: start-up (trimesh)
 
     triangles = mesh.triangles[candidate_faces]
     normals, valid_normal = triangles_mod.normals(triangles)
@@ -123,7 +123,7 @@ def _narrow_phase(
 
 def _tol_zero() -> float:
     """trimesh's zero tolerance for the barycentric inside test."""
-    from trimesh.constants import tol
+    from trimesh.constants import tol  # deferred: start-up (trimesh)
 
     return float(tol.zero)
 

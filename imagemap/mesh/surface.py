@@ -105,7 +105,9 @@ def _carried_alpha(textured, source, shape: tuple[int, int]) -> np.ndarray | Non
     covered.flat[texel] = True
     values = fill_from_nearest(values, covered)
     if (height, width) != (size, size):
-        from skimage.transform import resize
+        from skimage.transform import (
+            resize,
+        )  # deferred: start-up: skimage.transform (0.4 s) only for a resized texture
 
         values = resize(values, (height, width), order=1, anti_aliasing=False)
     return values.astype(np.float32)

@@ -49,7 +49,22 @@ import numpy as np
 from scipy import sparse
 
 from imagemap.core.blend import copy_through, fill_background
+from imagemap.core.engine import ReleasableLevels, synthesize
+from imagemap.core.mapping import Mapping
+from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
+from imagemap.database import Database
+from imagemap.depth.guides import level_plans, to_ycbcr
+from imagemap.depth.pipeline import (
+    STAGES,
+    ColorizeResult,
+    Stage,
+    State,
+    engine_params,
+    run_pipeline,
+)
 from imagemap.errors import InputError
+from imagemap.example import Example
+from imagemap.mesh.bake import covered_texels, rasterize_uv
 
 __all__ = [
     "LAYOUT_TEST_SIZE",
@@ -94,9 +109,7 @@ FINISH_STAGES = (
     "collapse",
     "copy",
     "seams",
-    "merge_regions",
     "outside",
-    "even_palettes",
     "blend",
     "rgb",
 )
@@ -252,7 +265,6 @@ def surface_maps(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: 
     InputError
         When the UVs cover no texel.
     """
-    from imagemap.mesh.bake import rasterize_uv
 
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
@@ -417,7 +429,9 @@ def resize_texture(texture: np.ndarray, size: int) -> np.ndarray:
     >>> resize_texture(np.ones((8, 8, 3), np.float32), 4).shape
     (4, 4, 3)
     """
-    from skimage.transform import resize
+    from skimage.transform import (
+        resize,
+    )  # deferred: start-up: skimage.transform (0.4 s) only for a resized texture
 
     texture = _unit(np.asarray(texture)[..., :3])
     if texture.shape[:2] == (size, size):
@@ -459,8 +473,6 @@ def _uv_mappings(
     guides: np.ndarray, mask: np.ndarray, levels: int, appearance=None, kind="gaussian"
 ):
     """A pyramid (finest first) of Mappings of guide bands (and appearance) over a mask."""
-    from imagemap.core.mapping import Mapping
-    from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
 
     masks = mask_pyramid(mask, levels)
     guide_levels = gaussian_pyramid(guides, levels)
@@ -611,19 +623,6 @@ def colorize_uv(
     >>> result.example_names, bool(np.allclose(result.image, texture, atol=1e-6))
     (['sheet'], True)
     """
-    from imagemap.core.engine import synthesize
-    from imagemap.database import Database
-    from imagemap.depth.guides import level_plans, to_ycbcr
-    from imagemap.depth.pipeline import (
-        STAGES,
-        ColorizeResult,
-        Stage,
-        State,
-        engine_params,
-        run_pipeline,
-    )
-    from imagemap.example import Example
-    from imagemap.mesh.bake import covered_texels
 
     working = int(min(working_size, size))
     vertices, faces, uv = mesh_uv_arrays(mesh)
@@ -656,7 +655,6 @@ def colorize_uv(
         return state
 
     def bands(state: State, config) -> State:
-        from imagemap.core.engine import ReleasableLevels
 
         levels, kind = config.pyramid.levels, config.matching.appearance_pyramid
         state.query_levels = ReleasableLevels(

@@ -214,9 +214,12 @@ def render_mesh(
     >>> round(float(render.depth[30, 40]), 3)  # front face: 0.1 + 0.9 * 0.5 / 2
     0.325
     """
-    import trimesh
+    import trimesh  # deferred: start-up (trimesh)
 
-    from imagemap.mesh.raycast import OrthographicView, cast_orthographic
+    from imagemap.mesh.raycast import (  # deferred: start-up (trimesh)
+        OrthographicView,
+        cast_orthographic,
+    )
 
     view = parse_view(view)
     width, height = (int(v) for v in size)

@@ -1,0 +1,81 @@
+"""Registration of examples onto the query, and the coherence it gives the copy (#32)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imagemap import Database, Example, colorize
+from imagemap.depth.register import register, registered_positions
+from imagemap.metrics import fragments
+
+
+def ellipsoid(shape=(90, 120), centre=(45, 60), radii=(30, 48)):
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    u = ((yy - centre[0]) / radii[0]) ** 2 + ((xx - centre[1]) / radii[1]) ** 2
+    return np.where(u < 1, 0.3 + np.sqrt(np.clip(1 - u, 0, 1)), 0.0).astype(np.float32)
+
+
+def stripes(depth, period=11.0, phase=0.0):
+    """Crisp vertical stripes with a little grain, painted on the object."""
+    xx = np.arange(depth.shape[1])[None, :] + phase
+    dark = (np.sin(2 * np.pi * xx / period) > 0)[..., None]
+    image = np.where(dark, [0.25, 0.15, 0.1], [0.9, 0.7, 0.3])
+    grain = 0.03 * np.random.default_rng(0).standard_normal(depth.shape)[..., None]
+    return np.clip(image + grain, 0, 1) * (depth > 0)[..., None]
+
+
+def test_the_warp_carries_the_outline_onto_the_example():
+    """An example that is the query moved and stretched: the warp maps the query's tips,
+    top and bottom onto the example's (known answer, within 1.5 px)."""
+    query = ellipsoid(centre=(45, 60), radii=(30, 48))
+    example = ellipsoid(centre=(40, 66), radii=(24, 40))
+    warp = register(query, example)
+    ys = np.array([45.0, 45.0, 16.0, 74.0])
+    xs = np.array([13.0, 107.0, 60.0, 60.0])
+    wy, wx = warp.forward(ys, xs)
+    expected_y = 40 + (ys - 45) * 24 / 30
+    expected_x = 66 + (xs - 60) * 40 / 48
+    assert np.max(np.abs(wy - expected_y)) < 1.5 and np.max(np.abs(wx - expected_x)) < 1.5
+    # The inverse takes the example's points back.
+    qy, qx = warp.inverse(wy, wx)
+    np.testing.assert_allclose(np.c_[qy, qx], np.c_[ys, xs], atol=0.5)
+
+
+def test_depth_units_do_not_change_the_warp():
+    query, example = ellipsoid(), ellipsoid(centre=(42, 58), radii=(28, 52))
+    a = register(query, example)
+    b = register(query * 1000.0, example * 0.001)
+    # Float32 rounding only: 1e-3 px of a displacement of tenths of a pixel.
+    np.testing.assert_allclose(a.coefficients, b.coefficients, atol=1e-3)
+
+
+def test_registered_positions_agree_where_the_warp_says():
+    """An example pixel's registered position is its query pixel's own position."""
+    query, example = ellipsoid(), ellipsoid(centre=(42, 58), radii=(28, 52))
+    warp = register(query, example)
+    query_levels, example_levels = registered_positions(query > 0, [example.shape], [warp], 2)
+    ey, ex = (int(round(v[0])) for v in warp.forward(np.array([45.0]), np.array([80.0])))
+    np.testing.assert_allclose(example_levels[0][0][ey, ex], query_levels[0][45, 80], atol=0.05)
+    assert query_levels[1].shape == (45, 60, 2) and example_levels[0][1].shape == (45, 60, 2)
+
+
+def test_shifted_copies_of_one_striped_map_give_a_handful_of_fragments():
+    """Two examples that are one striped map shifted (each on its own, slightly different
+    object) and a query of a third shape: registered, the copy is a couple of whole
+    regions that keep the stripes; the paper's method cuts it into more pieces."""
+    shapes = [((45, 60), (30, 48)), ((43, 62), (29, 50)), ((46, 58), (31, 46))]
+    examples = []
+    for i, (centre, radii) in enumerate(shapes[:2]):
+        depth = ellipsoid(centre=centre, radii=radii)
+        examples.append(Example.from_arrays(f"fish_{i}", depth, stripes(depth, phase=3.0 * i)))
+    query = ellipsoid(centre=shapes[2][0], radii=shapes[2][1])
+    database = Database(examples)
+    ours = colorize(query, database, "fish", seed=0)
+    paper = colorize(query, database, "fish", seed=0, finish="paper")
+    count = fragments(ours.source, query > 0)
+    assert count.count_90 <= 3 and count.mean_share > 0.4, count
+    assert fragments(paper.source, query > 0).count_90 > 2 * count.count_90
+    # Stripes kept: across the object's middle, each column is mostly one tone.
+    lum = ours.image[35:55, 20:100].mean(axis=2)
+    dark = lum < 0.45
+    assert np.mean(np.abs(dark.mean(axis=0) - 0.5) > 0.35) > 0.8
