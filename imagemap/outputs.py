@@ -1,6 +1,6 @@
 """Output paths planned and checked before any work, then written all-or-nothing.
 
-Rules (the README's "Errors and overwrite rules"):
+Rules (docs/errors.md):
 
 - Every output path is resolved (symbolic links followed) and compared with every
   input and every other output before any work. An output that is an input (the

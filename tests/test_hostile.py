@@ -1,4 +1,4 @@
-"""Hostile and faulty input: one case per kind of bad input or unsafe output (README, Errors).
+"""Hostile and faulty input: one case per kind of bad input or unsafe output (docs/errors.md).
 
 Every case asserts the exit code (or the exception), a message naming the file or
 option, and that no input or earlier output changed (SHA-256 of every file under

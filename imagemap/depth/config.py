@@ -147,9 +147,11 @@ class Guides:
     #: at any resolution (4x fish: 1,488 fragments without, about 50 with).
     registered_reference_size: float = 100.0
     #: Factor on the registered position weight at the feature level, where the final
-    #: reseed draws the small features by their relief: the warp places an eye or lips
-    #: within a few pixels only (12 busts' eyes 0.69 -> 0.79, lips 0.48 -> 0.61 of their
-    #: pixels from the same part at 0.25; humans, with no small feature, keep 1).
+    #: reseed draws the small features by their relief, and at the finer levels of a large
+    #: map, which must keep them: the warp places an eye or lips within a few pixels only
+    #: (12 busts' eyes 0.69 -> 0.79, lips 0.48 -> 0.61 of their pixels from the same part
+    #: at 0.25; at 4x, the full weight at the finer levels erased a third of the fish's
+    #: eyes; humans, with no small feature, keep 1).
     registered_feature_factor: float = 0.25
     #: Weight of the relief's detail in the registration's guide image
     #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges

@@ -255,7 +255,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
                 position_weight=(
                     guides.registered_position_weight
                     * max(1.0, size / 2**level / guides.registered_reference_size)
-                    * (guides.registered_feature_factor if level == feature else 1.0)
+                    * (guides.registered_feature_factor if level <= feature else 1.0)
                     if guides.registration
                     else None
                 ),
