@@ -9,6 +9,7 @@ from scipy import ndimage
 from imagemap.core.blend import copy_through
 from imagemap.depth import completion
 from imagemap.depth.completion import complete_features, small_features
+from imagemap.depth.config import Completion
 
 SKIN = 0.5
 
@@ -139,7 +140,7 @@ def test_whole_copies_and_stray_fragments_are_left_alone():
     assert complete_features([exemplar], whole, features, mask, [mask])[1] == 0
     fragment = _identity(80)
     fragment[30:50, 36:60, 2] += 10  # only 2 of the 12 columns copied: a fragment
-    assert 2 / 12 < completion.PARTIAL_SHARE
+    assert 2 / 12 < Completion().partial_share
     assert complete_features([exemplar], fragment, features, mask, [mask])[1] == 0
 
 
@@ -177,7 +178,7 @@ def test_the_most_complete_copy_is_completed_and_a_lesser_one_beside_it_left():
     source[30:34, 37:48, 2] += 9  # only columns 34-36: a quarter
     shown = copy_through(exemplars, source)
     assert (shown[30:34] < 0.3).sum() == 4 * 3 and (shown[38:42] < 0.3).sum() == 4 * 8
-    assert completion.PARTIAL_SHARE <= 0.25
+    assert Completion().partial_share <= 0.25
     completed_source, completed = complete_features(exemplars, source, features, mask, [mask, mask])
     assert completed == 1
     result = copy_through(exemplars, completed_source)
@@ -215,7 +216,7 @@ def test_a_feature_must_land_inside_the_object():
 
 
 def test_shading_below_the_contrast_is_no_feature():
-    threshold = completion.FEATURE_CONTRAST
+    threshold = Completion().feature_contrast
     image = _skin()
     image[20:24, 20:34] = SKIN - 0.8 * threshold
     assert small_features(image, np.ones((120, 120), bool))[1] == 0
@@ -368,6 +369,6 @@ def test_a_feature_copied_twice_over_itself_is_drawn_once():
     # a double, left to the seams.
     ragged = _identity(80)
     ragged[42:48, :, 1] -= 2
-    assert 2 < completion.DOUBLE_SHIFT * 13
+    assert 2 < Completion().double_shift * 13
     kept, _ = complete_features([exemplar], ragged, features, mask, [mask])
     np.testing.assert_array_equal(kept[42:48], ragged[42:48])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import fields
 
 import numpy as np
 import pytest
@@ -198,3 +199,55 @@ def test_a_stage_left_out_changes_the_map_and_a_copy_of_the_stages_does_not(
     assert run(tuple(STAGES)).tobytes() == full.tobytes()
     unblended = run(tuple(stage for stage in STAGES if stage.name != "blend"))
     assert unblended.tobytes() != full.tobytes()
+
+
+def test_every_setting_has_one_name_and_one_group():
+    """Field names are unique across the groups (replace_fields finds each by its name)
+    and flat() gives every field of every group."""
+    config = DepthConfig()
+    names = [f.name for group in fields(config) for f in fields(getattr(config, group.name))]
+    assert len(names) == len(set(names))
+    assert list(config.flat()) == names
+    changed = config.replace_fields(rim=3, work_size=32.0, scale_tolerance=1.2, edge_floor=0.1)
+    assert (changed.completion.rim, changed.registration.work_size) == (3, 32.0)
+    assert (changed.selection.scale_tolerance, changed.finish.edge_floor) == (1.2, 0.1)
+    with pytest.raises(InputError, match="control_grids"):
+        config.replace_fields(control_grids=(3, 5))
+    with pytest.raises(InputError, match="partial_share"):
+        config.replace_fields(partial_share=1.5)
+
+
+def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, monkeypatch):
+    """The registration's, the completion's, the units' and the blend's thresholds are
+    handed from the configuration to the functions the stages call (not read from
+    module constants)."""
+    import imagemap.depth.units
+
+    pipeline = imagemap.depth.pipeline
+    seen: dict = {}
+
+    def spy(module, name, key):
+        original = getattr(module, name)
+
+        def recording(*args, **kwargs):
+            seen.setdefault(key, []).append((args, kwargs))
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(module, name, recording)
+
+    spy(pipeline, "register", "register")
+    spy(pipeline.completion, "small_features", "small_features")
+    spy(pipeline.completion, "complete_features", "complete_features")
+    spy(pipeline, "seamless_copy", "seamless_copy")
+    spy(imagemap.depth.units, "match_scale", "match_scale")
+    config = resolve_config("busts").replace_fields(
+        work_size=48.0, rim_agreement=0.06, scale_tolerance=1.4, edge_contrast=2.5
+    )
+    depth, _ = query_blob
+    imagemap.colorize(depth, blob_database, config)
+    assert all(kw["registration"] is config.registration for _, kw in seen["register"])
+    assert all(kw["completion"] is config.completion for _, kw in seen["small_features"])
+    assert all(kw["completion"] is config.completion for _, kw in seen["complete_features"])
+    assert seen["seamless_copy"][0][1]["edge_contrast"] == 2.5
+    assert seen["seamless_copy"][0][1]["edge_floor"] == config.finish.edge_floor
+    assert seen["match_scale"][0][0][2] == 1.4

@@ -173,6 +173,8 @@ def seamless_copy(
     *,
     scale: float = 8.0,
     edge_support: float = 0.0,
+    edge_contrast: float = 2.0,
+    edge_floor: float = 0.05,
     mask: np.ndarray | None = None,
 ) -> np.ndarray:
     """Copy exemplar pixels through a source map, blending the seams in the gradient domain.
@@ -192,8 +194,8 @@ def seamless_copy(
 
     With ``edge_support`` > 0, a seam between two pixels copied from the *same*
     exemplar keeps the copy's own step where that step is an edge (at least
-    ``EDGE_CONTRAST`` times as strong as either side's own gradient, and at
-    least ``EDGE_FLOOR``: smaller steps are shading) that the reference shows too
+    ``edge_contrast`` times as strong as either side's own gradient, and at
+    least ``edge_floor``: smaller steps are shading) that the reference shows too
     (a change in the same direction, over the four pixels around the pair, of at
     least ``edge_support`` times the step). A part
     boundary that the copy put on a seam (a sleeve copied from one place ending
@@ -215,6 +217,15 @@ def seamless_copy(
     edge_support : float
         Share of a same-exemplar seam's step the reference must show for the step
         to be kept (0: every seam blended).
+    edge_contrast : float
+        A seam's step is an edge only when it is at least this many times as strong
+        as either side's own gradient (weaker steps are texture, continued by the
+        stronger side).
+    edge_floor : float
+        ...and at least this large (norm of the step, in the bands' units: for YCbCr
+        in [0, 1], 0.05 is about ΔE00 5 in luminance alone; smaller steps between two
+        offsets of a smooth region are shading). The depth pipeline passes
+        :class:`imagemap.depth.config.Finish`'s values, where their measurements are.
     mask : ndarray of bool, (H, W), optional
         The object. Across its outline the target difference is the reference's
         own step: the outline is not a seam to blend across, so colours copied
@@ -236,6 +247,10 @@ def seamless_copy(
         raise ValueError(f"scale must be positive, got {scale}")
     if not 0 <= edge_support <= 1:
         raise ValueError(f"edge_support must be in [0, 1], got {edge_support}")
+    if edge_contrast < 0 or edge_floor < 0:
+        raise ValueError(
+            f"edge_contrast and edge_floor must be >= 0, got {edge_contrast}, {edge_floor}"
+        )
     h, w, n_channels = reference.shape
     has = source[..., 0] >= 0
     none_x = ~(has[:, 1:] & has[:, :-1])
@@ -274,6 +289,8 @@ def seamless_copy(
             reference,
             edge_support,
             strongest,
+            edge_contrast,
+            edge_floor,
         )
     del strongest
     lam = 1.0 / scale**2
@@ -321,23 +338,10 @@ def seamless_copy(
 _ROWS = 256  # rows per block of the DCT denominator
 
 
-EDGE_CONTRAST = 2.0
-"""A seam's step counts as an edge when it is at least this many times as strong as
-either side's own gradient; weaker steps are texture, continued by the stronger side."""
-
-EDGE_FLOOR = 0.05
-"""...and when it is at least this large (norm of the YCbCr step, channels in [0, 1]: about
-ΔE00 5 for a step in luminance alone, more for one in hue). Two offsets of a smooth
-region (skin, a plain shirt) differ by a few hundredths of shading; next to sides that
-smooth even such a step passes the contrast test. Kept, it drew a faint tile edge (a
-blocky face at 4x the default size). On the generated humans and busts the kept steps
-fall into two groups, under 0.04 (shading) and from 0.06 (part edges); the floor lies
-between (``docs/presets.md``)."""
-
-
-def _supported_edges(groups, has, source, reference, support, strongest):
+def _supported_edges(groups, has, source, reference, support, strongest, contrast, floor):
     """Horizontal and vertical neighbour pairs (see :func:`seamless_copy`) copied from the
-    same exemplar whose copied step is an edge that the reference shows too.
+    same exemplar whose copied step is an edge (``contrast`` times either side's own
+    gradient and at least ``floor``) that the reference shows too.
 
     ``strongest``: per direction, the larger summed square of the two sides' own
     gradients. This runs on a large map's memory peak: float32 accumulators, one
@@ -366,8 +370,8 @@ def _supported_edges(groups, has, source, reference, support, strongest):
         dot, span2, step2 = terms
         keep = has[ahead] & has[behind] & (e[ahead] == e[behind]) & (dot > 0)
         keep &= span2 >= np.float32(support**2) * step2
-        keep &= step2 >= np.float32(EDGE_CONTRAST**2) * strongest[1 - axis]
-        keep &= step2 >= np.float32(EDGE_FLOOR**2)
+        keep &= step2 >= np.float32(contrast**2) * strongest[1 - axis]
+        keep &= step2 >= np.float32(floor**2)
         pairs.append(keep)
         del terms, dot, span2, step2
     return pairs[0], pairs[1]

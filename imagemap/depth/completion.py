@@ -9,23 +9,23 @@ of the feature as the cut copy.
 
 :func:`small_features` finds an exemplar's features from its colours alone (no
 labels): components of pixels whose YCbCr colour is at least
-``FEATURE_CONTRAST`` from the median colour around them, holes filled (an eye's
+``feature_contrast`` from the median colour around them, holes filled (an eye's
 iris belongs to its eye), that are
 
-- compact: no wider than ``FEATURE_EXTENT`` of the object's size (not a stripe,
+- compact: no wider than ``feature_extent`` of the object's size (not a stripe,
   a hairline or a sleeve); a feature touching a larger part that stands out too
   (a brow touching the hair) is cut from it where the colour steps;
-- inside the object: at least ``INSIDE_SHARE`` of its surroundings (not a
+- inside the object: at least ``inside_share`` of its surroundings (not a
   stripe's corner cut by the outline);
 - on one ground, and ending at an edge: the pixels just outside are of one
   colour and differ from the feature's boundary (not a blush, whose colour fades
   over its width, nor a shirt's corner cut by a neckline);
-- rare: at most ``MAX_REPEATS`` of one colour (not a shirt's squares or a
+- rare: at most ``max_repeats`` of one colour (not a shirt's squares or a
   fish's spots, which the copy draws as texture).
 
 :func:`complete_features` then looks, for each feature, at the pixels of the
 map that copy it. Where they lie together (one instance) and cover between
-``PARTIAL_SHARE`` and ``COMPLETE_SHARE`` of it, the whole feature, with a rim of
+``partial_share`` and ``complete_share`` of it, the whole feature, with a rim of
 its surroundings, is copied at the mean offset of those pixels (the most complete
 copies first): the feature appears once, whole, where the cut copy had put it.
 Not where the rim would not match what the map shows there (a feature is
@@ -36,12 +36,17 @@ brow is a stray).
 A feature can also be skipped whole: the map copies the skin around an eye from
 around the example's eye, at offsets near one another, and fills the eye's place
 with plain skin from elsewhere (a large map's finer levels wear an eye down this
-way). Where the map copies ``SKIPPED_RING_SHARE`` of a feature's ring and nothing
+way). Where the map copies ``skipped_ring_share`` of a feature's ring and nothing
 of it, the feature is completed too, at the offset where its relief fits the
-query's depth best (``SKIPPED_RELIEF_FIT``), under the same tests, and only where
+query's depth best (``skipped_relief_fit``), under the same tests, and only where
 the map shows nothing there yet that stands out from the ring
-(``SKIPPED_PLACE_SHOWN``): the copy may have drawn an eye from pixels that no
+(``skipped_place_shown``): the copy may have drawn an eye from pixels that no
 example's feature detection found.
+
+The thresholds named here are the fields of
+:class:`imagemap.depth.config.Completion`, each with its reason and the measurement it
+came from; :func:`small_features` and :func:`complete_features` take one as
+``completion`` (default: ``Completion()``, the pipeline passes its configuration's).
 """
 
 from __future__ import annotations
@@ -54,61 +59,23 @@ from scipy import fft, ndimage, sparse, spatial
 from scipy.sparse import csgraph
 
 from imagemap.core.blend import copy_through, fill_background
+from imagemap.depth.config import Completion
 
 __all__ = ["complete_features", "small_features"]
 
 log = logging.getLogger(__name__)
 
-#: A feature is at most this share of the object's size (square root of its area)
-#: across: an eye, lips, a brow; not a stripe, a sleeve or hair.
-FEATURE_EXTENT = 0.2
-#: Its colour stands out from its surroundings' (their median) by at least this
-#: much (YCbCr distance; lips on skin 0.09, an eye 0.3, shading under 0.03).
-FEATURE_CONTRAST = 0.07
-#: More components of one colour than this are a texture's elements, not features.
-MAX_REPEATS = 4
-#: The share of the pixels around a feature that must be of one colour (its ground).
-SURROUND_SHARE = 0.8
-#: The share of those pixels that must lie inside the object.
-INSIDE_SHARE = 0.75
-#: The host colour's median window, in pixels of the resolution it is taken at.
-HOST_WINDOW = 9
-#: An instance that copies at least this share of the feature's pixels counts as
-#: drawn whole and is left alone.
-COMPLETE_SHARE = 0.8
-#: An instance copying less than this share is a stray fragment, not an attempt to
-#: draw the feature: left alone too.
-PARTIAL_SHARE = 0.2
-#: A feature none of whose pixels the map copies is still completed where the map
-#: copies at least this share of its ring (the pixels within half its width around
-#: it) at offsets near one another: its surroundings were taken and it was skipped.
-#: (busts_003's eye at 4x: 0.31; busts_009's lips: between 0.2 and 0.3.)
-SKIPPED_RING_SHARE = 0.2
-#: Given the reliefs, a skipped feature is completed only where the exemplar's relief
-#: of it and its ring correlates at least this well with the query's at the place
-#: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7).
-SKIPPED_RELIEF_FIT = 0.9
-#: A skipped feature is not completed where this share of its place already stands
-#: out from its surroundings in the map: something is drawn there.
-SKIPPED_PLACE_SHOWN = 0.3
-#: Two copies of one feature at offsets this share of its width apart (and more than
-#: ``DOUBLE_TOLERANCE`` px) that copy some of the same pixels draw it twice (an eye
-#: with two pupils, seen at 512x512 on an ellipsoid fish with a large eye).
-DOUBLE_SHIFT = 0.25
-#: Offsets within this many pixels of the main copy's belong to it.
-DOUBLE_TOLERANCE = 2
-#: A double is redrawn from its main copy only when that copy holds at least this
-#: share of the feature (and under ``COMPLETE_SHARE``: a whole copy with a few
-#: displaced pixels is a ragged edge, left to the seams), and the copies overlap in
-#: at least ``PARTIAL_SHARE`` of it.
-DOUBLE_MAIN = 0.5
-#: Pixels of surroundings copied with the feature around it.
-RIM = 2
-#: The rim's largest mean colour difference (YCbCr) from what the map shows there.
-RIM_AGREEMENT = 0.07
+#: The defaults of every threshold (a :class:`DepthConfig`'s ``completion``).
+_COMPLETION = Completion()
 
 
-def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | None = None):
+def small_features(
+    exemplar: np.ndarray,
+    mask: np.ndarray,
+    *,
+    extent: float | None = None,
+    completion: Completion = _COMPLETION,
+):
     """Label an exemplar's small features: compact regions that stand out in colour.
 
     Parameters
@@ -118,8 +85,11 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     mask : ndarray of bool, (H, W)
         Its object.
     extent : float, optional
-        Largest feature width in pixels; default ``FEATURE_EXTENT`` times the
-        square root of the object's area.
+        Largest feature width in pixels; default ``completion.feature_extent`` times
+        the square root of the object's area.
+    completion : Completion
+        The detection's thresholds (``feature_extent``, ``feature_contrast``,
+        ``max_repeats``, ``surround_share``, ``inside_share``, ``host_window``).
 
     Returns
     -------
@@ -142,7 +112,7 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
             "(H, W, C) colours and an (H, W) mask"
         )
     if extent is None:
-        extent = FEATURE_EXTENT * np.sqrt(mask.sum())
+        extent = completion.feature_extent * np.sqrt(mask.sum())
     inside = ndimage.binary_erosion(mask, iterations=2)
     colours = np.asarray(exemplar, np.float32)
     if not mask.all():
@@ -150,11 +120,11 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
         colours = fill_background(colours, mask)
     # The host colour around each pixel: the median over a feature's width, which a
     # feature (under half the window) does not move. Taken at a resolution where that
-    # width is HOST_WINDOW pixels: the host varies slowly, and a large window's
+    # width is ``host_window`` pixels: the host varies slowly, and a large window's
     # median is slow. A pixel stands out when it differs from the hosts of its own
     # low-resolution cell and of the eight around it: next to an edge between two
     # parts one of them has its own side's colour, so the edge is no feature.
-    factor = min(1.0, HOST_WINDOW / max(extent, 1.0))
+    factor = min(1.0, completion.host_window / max(extent, 1.0))
     small = ndimage.zoom(colours, (factor, factor, 1), order=1) if factor < 1 else colours
     size = max(int(round(extent * factor)) | 1, 3)
     host = np.stack(
@@ -169,7 +139,7 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
             xs = np.clip(cell_x + dx, 0, host.shape[1] - 1)
             near = host[ys[:, None], xs[None, :]]
             np.minimum(distance, np.sqrt(((colours - near) ** 2).sum(-1)), out=distance)
-    stands_out = distance >= FEATURE_CONTRAST
+    stands_out = distance >= completion.feature_contrast
     stands_out &= inside
     stands_out = ndimage.binary_fill_holes(stands_out)
     labels, n = ndimage.label(stands_out)
@@ -189,7 +159,9 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
     wide = np.flatnonzero(spans > extent)
     first_piece = n + 1
     if len(wide):
-        labels, n, keep = _pieces_of_wide(colours, labels, n, keep, np.isin(labels, wide), extent)
+        labels, n, keep = _pieces_of_wide(
+            colours, labels, n, keep, np.isin(labels, wide), extent, completion.feature_contrast
+        )
         boxes = ndimage.find_objects(labels, max_label=n)
     # A texture's elements repeat (a shirt's squares, a fish's spots); a feature is
     # rare (two eyes, two brows, lips). Elements of a texture are drawn by the copy
@@ -207,13 +179,13 @@ def small_features(exemplar: np.ndarray, mask: np.ndarray, *, extent: float | No
         # thousands of compact components, too many for a table of all pairs.
         tree = spatial.cKDTree(means[compact])
         repeats = tree.query_ball_point(
-            means[compact], r=FEATURE_CONTRAST * (1 - 1e-6), return_length=True
+            means[compact], r=completion.feature_contrast * (1 - 1e-6), return_length=True
         )
-        keep[compact] = repeats <= MAX_REPEATS
+        keep[compact] = repeats <= completion.max_repeats
     for i in map(int, np.flatnonzero(keep)):
         box = boxes[i - 1]
         keep[i] = _stands_alone(
-            colours, mask, labels, i, box, _span(box), grounds=1 + (i >= first_piece)
+            colours, mask, labels, i, box, _span(box), completion, grounds=1 + (i >= first_piece)
         )
     # Numbered 1..n in order, each kept feature its own label (two pieces of one
     # cut component may touch).
@@ -228,8 +200,9 @@ def _span(box) -> int:
     return max(box[0].stop - box[0].start, box[1].stop - box[1].start)
 
 
-def _pieces_of_wide(colours, labels, n, keep, region, extent):
-    """Cut the wide components at colour steps; their compact pieces become new
+def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
+    """Cut the wide components at colour steps (half the feature ``contrast`` between
+    neighbouring pixels); their compact pieces become new
     components (numbered after n, holes filled: an enclosed piece is taken in by
     its enclosure) and the rest of them is dropped. Vectorized but for pieces
     with holes: a noisy picture cut at its colour steps has millions of pieces,
@@ -237,7 +210,7 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent):
     index = np.full(region.shape, -1, np.int32)
     size = int(region.sum())
     index[region] = np.arange(size, dtype=np.int32)
-    step = FEATURE_CONTRAST / 2
+    step = contrast / 2
     first, second = [], []
     for a, b in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1, :], np.s_[1:, :])):
         joined = region[a] & region[b]
@@ -324,10 +297,10 @@ def _euler_numbers(pieces, m):
     return ((3 * single - triple + 3 * diagonal) / 12.0)[1:]
 
 
-def _stands_alone(colours, mask, labels, i, box, span, grounds=1):
+def _stands_alone(colours, mask, labels, i, box, span, completion, grounds=1):
     """Whether component i is a feature on one ground: the pixels a short way
     outside it (an eighth of its width, at least 2 px) are of one colour (at
-    least ``SURROUND_SHARE`` of them within ``FEATURE_CONTRAST`` of their
+    least ``surround_share`` of them within ``feature_contrast`` of their
     median), and its boundary differs from them by half the feature contrast.
     Lips, eyes and brows on skin do. A blush, whose colour fades out over its
     width, and a piece of a part cut by another (a shirt's corner at a neckline,
@@ -343,20 +316,21 @@ def _stands_alone(colours, mask, labels, i, box, span, grounds=1):
     # A feature shows whole inside its object: one whose surroundings the outline
     # cuts (a shirt's stripe at the neckline, a spot at the hair's edge) is a
     # part's corner, not a feature.
-    if outside.sum() < INSIDE_SHARE * ring.sum():
+    if outside.sum() < completion.inside_share * ring.sum():
         return False
+    contrast = completion.feature_contrast
     here = colours[y0:y1, x0:x1]
     ground = here[outside]
-    on_ground = np.sqrt(((ground - np.median(ground, axis=0)) ** 2).sum(-1)) < FEATURE_CONTRAST
+    on_ground = np.sqrt(((ground - np.median(ground, axis=0)) ** 2).sum(-1)) < contrast
     if grounds == 2 and not on_ground.all():
         # A piece cut from a larger part it touches (a brow touching the hair) has
         # that part as its second ground.
         rest = ground[~on_ground]
-        on_ground |= np.sqrt(((ground - np.median(rest, axis=0)) ** 2).sum(-1)) < FEATURE_CONTRAST
-    if on_ground.mean() < SURROUND_SHARE:
+        on_ground |= np.sqrt(((ground - np.median(rest, axis=0)) ** 2).sum(-1)) < contrast
+    if on_ground.mean() < completion.surround_share:
         return False
     step = here[edge].mean(0) - ground.mean(0)
-    return bool(np.sqrt((step**2).sum()) >= FEATURE_CONTRAST / 2)
+    return bool(np.sqrt((step**2).sum()) >= contrast / 2)
 
 
 class _Instance(NamedTuple):
@@ -390,6 +364,8 @@ def complete_features(
     object_mask: np.ndarray,
     exemplar_masks: list[np.ndarray],
     relief: tuple[np.ndarray, list[np.ndarray]] | None = None,
+    *,
+    completion: Completion = _COMPLETION,
 ) -> tuple[np.ndarray, int]:
     """A source map in which every partly copied (or skipped) small feature is copied whole.
 
@@ -408,6 +384,9 @@ def complete_features(
     relief : (ndarray, list of ndarray), optional
         The query's depth and the exemplars' depths: a skipped feature (see
         :func:`_skipped_instances`) is placed where its relief fits the query's.
+    completion : Completion
+        The thresholds (``complete_share``, ``partial_share``, ``feature_contrast``,
+        ``rim``, ``rim_agreement``, the doubles' and the skipped features').
 
     Returns
     -------
@@ -428,11 +407,13 @@ def complete_features(
     source = np.array(source, dtype=np.int32, copy=True)
     height, width = source.shape[:2]
     inside = ndimage.binary_erosion(object_mask, iterations=1)
-    rim = ndimage.generate_binary_structure(2, 1)
+    cross = ndimage.generate_binary_structure(2, 1)
+    whole, contrast = completion.complete_share, completion.feature_contrast
+    margin = completion.rim  # pixels of surroundings copied with a feature
     instances = _instances(exemplars, source, features)
-    if _undouble(source, instances, features, object_mask, exemplar_masks):
+    if _undouble(source, instances, features, object_mask, exemplar_masks, completion):
         instances = _instances(exemplars, source, features)  # the recopied pixels moved
-    instances += _skipped_instances(source, features, exemplars, exemplar_masks, relief)
+    instances += _skipped_instances(source, features, exemplars, exemplar_masks, relief, completion)
     # Where the map already shows a whole feature, and its colour: a partial copy
     # beside a whole feature of the same colour (a piece of a second brow above the
     # brow, of a second eye beside the eye) is a stray, not a feature to complete.
@@ -441,7 +422,7 @@ def complete_features(
     drawn = np.zeros((height, width), np.int32)
     colours = [np.full(exemplars[0].shape[-1], np.inf, np.float32)]
     for item in instances:
-        if item.covered >= COMPLETE_SHARE * item.size:
+        if item.covered >= whole * item.size:
             drawn[item.ys, item.xs] = len(colours)
             colours.append(item.colour)
     taken = np.zeros((height, width), bool)  # completed regions: not overwritten again
@@ -451,11 +432,11 @@ def complete_features(
     # and the second, a whole one now beside it, is left.
     for item in sorted(instances, key=lambda item: (-item.covered / item.size, -item.size)):
         k, f, ys, xs, size, span = item.k, item.f, item.ys, item.xs, item.size, item.span
-        if item.covered >= COMPLETE_SHARE * size:
+        if item.covered >= whole * size:
             continue
-        # A cut copy of under PARTIAL_SHARE is a stray fragment. A skipped feature (its
+        # A cut copy of under ``partial_share`` is a stray fragment. A skipped feature (its
         # pixels are its ring's at the chosen offset) passed its own ring-share test.
-        if item.offset is None and len(ys) < PARTIAL_SHARE * size:
+        if item.offset is None and len(ys) < completion.partial_share * size:
             continue
         if item.offset is not None:
             dy, dx = item.offset
@@ -472,14 +453,14 @@ def complete_features(
             ]
         )
         near = np.asarray([colours[i] for i in near if i > 0]).reshape(-1, len(colours[0]))
-        if len(near) and np.sqrt(((near - item.colour) ** 2).sum(-1)).min() < FEATURE_CONTRAST:
+        if len(near) and np.sqrt(((near - item.colour) ** 2).sum(-1)).min() < contrast:
             log.debug("feature %d of exemplar %d: a whole one beside it", f, k)
             continue
-        by0, bx0 = max(ty.min() - RIM, 0), max(tx.min() - RIM, 0)
-        by1, bx1 = min(ty.max() + RIM + 1, height), min(tx.max() + RIM + 1, width)
+        by0, bx0 = max(ty.min() - margin, 0), max(tx.min() - margin, 0)
+        by1, bx1 = min(ty.max() + margin + 1, height), min(tx.max() + margin + 1, width)
         region = np.zeros((by1 - by0, bx1 - bx0), bool)
         region[ty - by0, tx - bx0] = True
-        region = ndimage.binary_dilation(region, rim, iterations=RIM)
+        region = ndimage.binary_dilation(region, cross, iterations=margin)
         region &= object_mask[by0:by1, bx0:bx1]
         ry, rx = np.nonzero(region)
         ry, rx = ry + by0, rx + bx0
@@ -495,7 +476,7 @@ def complete_features(
             now = copy_through(exemplars, source[ry[rim_here], rx[rim_here]][None])[0]
             new = exemplars[k][sy[rim_here], sx[rim_here]]
             disagreement = float(np.sqrt(((now - new) ** 2).sum(-1)).mean())
-            if disagreement > RIM_AGREEMENT:
+            if disagreement > completion.rim_agreement:
                 log.debug(
                     "feature %d of exemplar %d: rim disagrees by %.3f at y %d x %d",
                     f,
@@ -514,7 +495,7 @@ def complete_features(
     return source, completed
 
 
-def _undouble(source, instances, features, object_mask, exemplar_masks) -> int:
+def _undouble(source, instances, features, object_mask, exemplar_masks, completion) -> int:
     """Recopy, in ``source`` (in place), every feature drawn twice over itself; return
     how many were.
 
@@ -524,15 +505,17 @@ def _undouble(source, instances, features, object_mask, exemplar_masks) -> int:
     around them copied at its offset within a quarter of the feature's width, take
     the main copy's offset (the one most of the feature's pixels came from). The
     main copy is then completed like any cut feature. ``instances``: the map's
-    :func:`_instances`."""
+    :func:`_instances`; ``completion``: the thresholds (``double_shift``,
+    ``double_tolerance``, ``double_main``, ``complete_share``, ``partial_share``)."""
     height, width = source.shape[:2]
+    tolerance = completion.double_tolerance
     recopied = 0
     for item in instances:
         k, ys, xs = item.k, item.ys, item.xs
         offsets = np.stack([source[ys, xs, 1] - ys, source[ys, xs, 2] - xs], axis=1)
         distinct, counts = np.unique(offsets, axis=0, return_counts=True)
         main = distinct[np.argmax(counts)]
-        threshold = max(DOUBLE_TOLERANCE + 1, item.span * DOUBLE_SHIFT)
+        threshold = max(tolerance + 1, item.span * completion.double_shift)
         far = np.abs(offsets - main).max(1) >= threshold
         if not far.any():
             continue
@@ -542,12 +525,13 @@ def _undouble(source, instances, features, object_mask, exemplar_masks) -> int:
             for part in (~far, far)
         ]
         doubled = np.intersect1d(covers[0], covers[1], assume_unique=True).size
-        if not DOUBLE_MAIN * item.size <= len(covers[0]) < COMPLETE_SHARE * item.size:
+        main_copy, whole = len(covers[0]), completion.complete_share
+        if not completion.double_main * item.size <= main_copy < whole * item.size:
             continue
-        if doubled < PARTIAL_SHARE * item.size:
+        if doubled < completion.partial_share * item.size:
             continue  # the displaced copy fills in what the main one lacks: no double
         # The displaced copy and what it brought along: pixels near it at its offsets.
-        reach = max(RIM, item.span // 4)
+        reach = max(completion.rim, item.span // 4)
         y0, x0 = max(ys.min() - reach, 0), max(xs.min() - reach, 0)
         y1, x1 = min(ys.max() + reach + 1, height), min(xs.max() + reach + 1, width)
         box = source[y0:y1, x0:x1]
@@ -555,7 +539,7 @@ def _undouble(source, instances, features, object_mask, exemplar_masks) -> int:
         box_offsets = np.stack([box[..., 1] - by, box[..., 2] - bx], axis=-1)
         along = np.zeros(box.shape[:2], bool)
         for offset in distinct[np.abs(distinct - main).max(1) >= threshold]:
-            along |= np.abs(box_offsets - offset).max(-1) <= DOUBLE_TOLERANCE
+            along |= np.abs(box_offsets - offset).max(-1) <= tolerance
         along &= box[..., 0] == k
         seeds = np.zeros(box.shape[:2], bool)
         seeds[ys[far] - y0, xs[far] - x0] = True
@@ -581,18 +565,18 @@ def _feature_pixels(labels, box, f):
     return fy, fx, span, max(span // 2, 1)
 
 
-def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None):
+def _skipped_instances(source, features, exemplars, exemplar_masks, relief, completion):
     """Features whose surroundings the map copies around one place, without them: an
     eye's ring of skin copied around a hole that other offsets filled with plain skin.
 
     For each feature, its ring (the pixels within half its width around it, inside its
     exemplar) is looked up in the source map. Where the map copies at least
-    ``SKIPPED_RING_SHARE`` of the ring's pixels at offsets within half the feature's
+    ``skipped_ring_share`` of the ring's pixels at offsets within half the feature's
     width of their median, the feature belongs near there. With ``relief`` (the
     query's depth and the exemplars' depths) the offset is then the one, within half
     the feature's width, at which the exemplar's relief of the feature and its ring
     correlates best with the query's (an eye goes on the eye's bulge), and the
-    feature is left out unless that correlation reaches ``SKIPPED_RELIEF_FIT``
+    feature is left out unless that correlation reaches ``skipped_relief_fit``
     (the relief must say where it goes). Where no pixel
     the feature would cover at that offset copies a feature of any exemplar, the
     feature is an instance with nothing of it covered: :func:`complete_features`
@@ -600,6 +584,7 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
     shows something at that place (:func:`_shows_something`).
     """
     height, width = source.shape[:2]
+    ring_share = completion.skipped_ring_share
     found = []
     for k, (labels, n) in enumerate(features):
         if n == 0:
@@ -621,21 +606,21 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
                 continue
             inside = np.flatnonzero((sy >= y0) & (sy < y1) & (sx >= x0) & (sx < x1))
             pick = inside[ring[sy[inside] - y0, sx[inside] - x0]]  # the map's ring copies
-            if len(pick) < SKIPPED_RING_SHARE * n_ring:
+            if len(pick) < ring_share * n_ring:
                 continue
             ys, xs = np.divmod(here[pick], width)
             dy, dx = sy[pick] - ys, sx[pick] - xs
             my, mx = int(np.median(dy)), int(np.median(dx))
             near = pick[(np.abs(dy - my) <= reach) & (np.abs(dx - mx) <= reach)]
             covered = np.unique(sy[near] * labels.shape[1] + sx[near]).size
-            if covered < SKIPPED_RING_SHARE * n_ring:
+            if covered < ring_share * n_ring:
                 continue
             if relief is not None:
                 my, mx, fit = _register(
                     relief[0], relief[1][k], feature | ring, y0, x0, my, mx, reach
                 )
-                if fit < SKIPPED_RELIEF_FIT:  # the relief does not say where it goes
-                    continue
+                if fit < completion.skipped_relief_fit:
+                    continue  # the relief does not say where it goes
             ty, tx = fy - my, fx - mx
             if not _within(ty, tx, (height, width)) or _copies_feature(source, features, ty, tx):
                 continue
@@ -645,7 +630,7 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
             ry, rx = np.nonzero(ring)
             ry, rx = ry + y0 - my, rx + x0 - mx
             keep = (ry >= 0) & (rx >= 0) & (ry < height) & (rx < width)
-            if _shows_something(exemplars, source, ty, tx, ry[keep], rx[keep]):
+            if _shows_something(exemplars, source, ty, tx, ry[keep], rx[keep], completion):
                 continue
             found.append(
                 _Instance(k, f, ry[keep], rx[keep], fy, fx, len(fy), span, 0, colour, (my, mx))
@@ -653,10 +638,10 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief=None)
     return found
 
 
-def _shows_something(exemplars, source, ys, xs, ring_ys, ring_xs) -> bool:
+def _shows_something(exemplars, source, ys, xs, ring_ys, ring_xs, completion) -> bool:
     """Whether the map already shows something at (ys, xs) that stands out from what it
-    shows on the ring around: at least ``SKIPPED_PLACE_SHOWN`` of those pixels
-    ``FEATURE_CONTRAST`` or more from the ring's median colour (an eye the copy drew
+    shows on the ring around: at least ``skipped_place_shown`` of those pixels
+    ``feature_contrast`` or more from the ring's median colour (an eye the copy drew
     from pixels that no feature detection found). Independent of the detection."""
     here = source[ys, xs][None]
     around = source[ring_ys, ring_xs]
@@ -665,14 +650,14 @@ def _shows_something(exemplars, source, ys, xs, ring_ys, ring_xs) -> bool:
         return True  # a place the map does not cover, or nothing to compare it with
     shown = copy_through(exemplars, here)[0]
     ground = np.median(copy_through(exemplars, around)[0], axis=0)
-    stands_out = np.sqrt(((shown - ground) ** 2).sum(-1)) >= FEATURE_CONTRAST
+    stands_out = np.sqrt(((shown - ground) ** 2).sum(-1)) >= completion.feature_contrast
     log.debug(
         "skipped feature at y %d x %d: %.2f of its place stands out",
         ys.mean(),
         xs.mean(),
         stands_out.mean(),
     )
-    return bool(stands_out.mean() >= SKIPPED_PLACE_SHOWN)
+    return bool(stands_out.mean() >= completion.skipped_place_shown)
 
 
 def _copies_feature(source, features, ys, xs) -> bool:

@@ -2,10 +2,12 @@
 
 Every setting of a depth-map colorization is a field here, grouped by the part of
 the pipeline that reads it (:mod:`imagemap.depth.pipeline`): which examples
-(:class:`Selection`), how many pyramid levels (:class:`Pyramid`), the depth's guide
-bands (:class:`Guides`), the engine's matching (:class:`Matching`) and how the
-matches make the map (:class:`Finish`). Each field's comment says what it is for
-and where its value comes from; ``docs/presets.md`` has the measurements.
+(:class:`Selection`), how many pyramid levels (:class:`Pyramid`), how each example is
+warped onto the query (:class:`Registration`), the depth's guide bands
+(:class:`Guides`), the engine's matching (:class:`Matching`), how the matches make the
+map (:class:`Finish`) and which small features the copy completes
+(:class:`Completion`). Each field's comment says what it is for and where its value
+comes from; ``docs/presets.md`` has the measurements.
 
 Class presets are configurations (:data:`PRESETS`), and the options a user may set
 from the command line, a batch or the Python API are declared once, in
@@ -38,12 +40,14 @@ __all__ = [
     "OPTIONS",
     "PRESETS",
     "VOTES",
+    "Completion",
     "DepthConfig",
     "Finish",
     "Guides",
     "Matching",
     "Option",
     "Pyramid",
+    "Registration",
     "Selection",
     "apply_options",
     "resolve_config",
@@ -55,14 +59,23 @@ VOTES = ("copy", "mean", "mode")
 
 @dataclass(frozen=True)
 class Selection:
-    """Which examples the synthesis uses."""
+    """Which examples the synthesis uses, and the query brought to their depth scale
+    (the ``units`` and ``select`` stages)."""
 
     #: Examples chosen automatically, nearest in centroid-aligned depth (paper, Sec. 2.3;
     #: Table 1: 1 for humans, 2 for busts and fish).
     m: int = 2
+    #: A query's depth scale (its object's median depth) within this factor of the
+    #: examples' range of scales is used as it is; further away it is brought to their
+    #: median scale (:mod:`imagemap.depth.units`). The 36 generated examples (fish,
+    #: busts, humans) have median depths 0.514-0.605 (one class spans at most 1.17x);
+    #: x0.5 already changed the examples chosen and the map (0.22 mean |RGB| from the
+    #: map at x1, fish_000 at 200x150), so the band must stop short of 2x.
+    scale_tolerance: float = 1.5
 
     def __post_init__(self) -> None:
         check_int("m", self.m, minimum=1)
+        check_float("scale_tolerance", self.scale_tolerance, minimum=1.0)
 
 
 @dataclass(frozen=True)
@@ -100,6 +113,69 @@ class Pyramid:
     @property
     def levels(self) -> int:
         return len(self.patch_sizes)
+
+
+@dataclass(frozen=True)
+class Registration:
+    """How each example is warped onto the query (:mod:`imagemap.depth.register`): an
+    affine map from the objects' moments composed with a cubic B-spline free-form
+    deformation, fitted by Levenberg-Marquardt to a guide image of each object. Whether
+    the ``register`` stage runs at all, and how strongly the engine holds the registered
+    positions, are :class:`Guides` settings (``registration``,
+    ``registered_position_weight``). A field whose comment gives no measurement was set
+    when the fit was written (9718736, 16d4e17) and has not been swept since."""
+
+    #: The working resolution: the object is about this many pixels across (square root
+    #: of its area) while the warp is fitted. A smooth warp of a whole object needs no
+    #: more, and a 4x map costs what a 1x one does (0.05-0.2 s per pair). Registering at
+    #: 128 px with a 10-point grid did not bring the examples' eyes into place either
+    #: (4x fish, docs/presets.md).
+    work_size: float = 64.0
+    #: Control points per side of the B-spline grids, coarse to fine (over the query
+    #: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
+    control_grids: tuple[int, ...] = (4, 5, 7)
+    #: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture
+    #: range first, the outline's detail last.
+    grid_smoothing: tuple[float, ...] = (2.0, 1.0, 0.5)
+    #: Levenberg-Marquardt iterations per grid at most.
+    fit_iterations: int = 12
+    #: Weight of the control points' squared displacement against the mean squared guide
+    #: difference: keeps the warp smooth where the guide says nothing (inside a flat body).
+    stiffness: float = 1e-2
+    #: Pixels of the working grid used for the fit at most (a regular subsample).
+    fit_pixels: int = 3000
+    #: Weight of the relief's detail in the registration's guide image
+    #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges
+    #: pull the warp into place (12 busts' macro part transfer 0.779 -> 0.789 at 0.5).
+    registration_relief: float = 0.5
+    #: The relief's detail is the relative depth less its Gaussian smoothing over this
+    #: fraction of the object's size (square root of its area), in units of its 95th
+    #: percentile inside the object: a feature's bulge, not the body's curvature.
+    relief_detail_scale: float = 0.03
+    #: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
+    #: image: the outline and the band within a few percent of it lead the fit.
+    outline_reach: float = 0.04
+
+    def __post_init__(self) -> None:
+        if (
+            not self.control_grids
+            or any(
+                not isinstance(n, int) or isinstance(n, bool) or n < 4 for n in self.control_grids
+            )
+            or len(self.grid_smoothing) != len(self.control_grids)
+        ):
+            raise InputError(
+                f"control_grids: integers of at least 4 (a cubic B-spline's support), one "
+                f"grid_smoothing each; got {self.control_grids} and {self.grid_smoothing}"
+            )
+        for sigma in self.grid_smoothing:
+            check_float("grid_smoothing", sigma, minimum=0.0)
+        check_float("work_size", self.work_size, minimum=1.0)
+        check_int("fit_iterations", self.fit_iterations, minimum=0)
+        check_int("fit_pixels", self.fit_pixels, minimum=1)
+        for name in ("stiffness", "registration_relief", "relief_detail_scale"):
+            check_float(name, getattr(self, name), minimum=0.0)
+        check_float("outline_reach", self.outline_reach, minimum=1e-6)
 
 
 @dataclass(frozen=True)
@@ -153,10 +229,6 @@ class Guides:
     #: at 0.25; at 4x, the full weight at the finer levels erased a third of the fish's
     #: eyes; humans, with no small feature, keep 1).
     registered_feature_factor: float = 0.25
-    #: Weight of the relief's detail in the registration's guide image
-    #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges
-    #: pull the warp into place (12 busts' macro part transfer 0.779 -> 0.789 at 0.5).
-    registration_relief: float = 0.5
     #: The final reseed may take a feature from any example (the example preference does
     #: not apply to it), while the EM keeps each region's example (12 busts: brows 0.50
     #: -> 0.53 of their pixels from brows).
@@ -184,7 +256,6 @@ class Guides:
             "registered_position_weight",
             "registered_reference_size",
             "registered_feature_factor",
-            "registration_relief",
             "context_weight",
             "wide_context_weight",
         ):
@@ -272,6 +343,18 @@ class Finish:
     #: the voted map shows at least this share of it (a sleeve meeting a hand; 0: blend
     #: every seam): blur ratio fish 0.93 -> 0.97, humans 0.88 -> 0.97.
     edge_support: float = 0.3
+    #: A seam's step counts as an edge (for ``edge_support``) when it is at least this many
+    #: times as strong as either side's own gradient; weaker steps are texture, continued
+    #: by the stronger side (12 objects per class: 3 or 4 instead of 2 moved ΔE00, SSIM
+    #: and the blur ratio by at most 0.04, 0.001 and 0).
+    edge_contrast: float = 2.0
+    #: ...and when it is at least this large (norm of the YCbCr step, channels in [0, 1]:
+    #: about ΔE00 5 for a step in luminance alone). Two offsets of smooth skin differ by a
+    #: few hundredths of shading, which passed the contrast test next to smooth sides and
+    #: drew a blocky face at 4x; the kept steps fall into two groups, under 0.04 (shading)
+    #: and from 0.06 (part edges). With it 4x fish SSIM 0.588 -> 0.597, busts 0.673 ->
+    #: 0.677; 0.03 left some tiles, 0.06 and 0.1 looked like 0.05.
+    edge_floor: float = 0.05
 
     def __post_init__(self) -> None:
         if self.vote not in VOTES:
@@ -279,11 +362,98 @@ class Finish:
         check_float("seam_smoothness", self.seam_smoothness, minimum=0.0)
         check_float("blend_scale", self.blend_scale, minimum=0.0)
         check_float("edge_support", self.edge_support, minimum=0.0, maximum=1.0)
+        check_float("edge_contrast", self.edge_contrast, minimum=0.0)
+        check_float("edge_floor", self.edge_floor, minimum=0.0)
 
     @property
     def copies(self) -> bool:
         """Whether the map is copied from example pixels (not the engine's vote)."""
         return self.vote in ("copy", "mode")
+
+
+@dataclass(frozen=True)
+class Completion:
+    """Which small features the copy completes, and how (:mod:`imagemap.depth.completion`;
+    on or off: ``Finish.complete_features``). ``docs/presets.md`` ("Small features copied
+    whole") has the measurements, on the 12 generated objects per class unless said; a
+    field whose comment gives no measurement was set with its step and not swept."""
+
+    #: A feature is at most this share of the object's size (square root of its area)
+    #: across: an eye, lips, a brow; not a stripe, a sleeve or hair (0.15 or 0.25 moved
+    #: the macro part transfer by at most 0.011).
+    feature_extent: float = 0.2
+    #: Its colour stands out from its surroundings' (their median) by at least this much
+    #: (YCbCr distance; lips on skin 0.09, an eye 0.3, shading under 0.03; at 0.1 the
+    #: busts' lips were no longer features).
+    feature_contrast: float = 0.07
+    #: More components of one colour than this are a texture's elements, not features (a
+    #: checked shirt's squares were "completed" at 4x without it).
+    max_repeats: int = 4
+    #: The share of the pixels around a feature that must be of one colour (its ground):
+    #: not a blush, nor a shirt's corner cut by a neckline (one put an orange glow into
+    #: busts_003's V-neck at 4x).
+    surround_share: float = 0.8
+    #: The share of those pixels that must lie inside the object: a shirt's stripe cut by
+    #: the neckline, completed into a smudge at busts_000's neck at 4x, is no feature.
+    inside_share: float = 0.75
+    #: The host colour's median window, in pixels of the resolution it is taken at: the
+    #: host varies slowly, and a large window's median is slow.
+    host_window: int = 9
+    #: An instance that copies at least this share of the feature's pixels counts as drawn
+    #: whole and is left alone.
+    complete_share: float = 0.8
+    #: An instance copying less than this share is a stray fragment, not an attempt to draw
+    #: the feature: left alone too (0.2, 0.3 and 0.4 gave the same macro part transfer).
+    partial_share: float = 0.2
+    #: A feature none of whose pixels the map copies is still completed where the map
+    #: copies at least this share of its ring (the pixels within half its width around it)
+    #: at offsets near one another: its surroundings were taken and it was skipped
+    #: (busts_003's eye at 4x: 0.31; busts_009's lips: between 0.2 and 0.3).
+    skipped_ring_share: float = 0.2
+    #: Given the reliefs, a skipped feature is completed only where the exemplar's relief
+    #: of it and its ring correlates at least this well with the query's at the place
+    #: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7).
+    skipped_relief_fit: float = 0.9
+    #: A skipped feature is not completed where this share of its place already stands out
+    #: from its surroundings in the map: something is drawn there (it refused a blue-grey
+    #: eye over busts_008's own brown one).
+    skipped_place_shown: float = 0.3
+    #: Two copies of one feature at offsets this share of its width apart (and more than
+    #: ``double_tolerance`` px) that copy some of the same pixels draw it twice (an eye
+    #: with two pupils, seen at 512x512 on an ellipsoid fish with a large eye).
+    double_shift: float = 0.25
+    #: Offsets within this many pixels of the main copy's belong to it.
+    double_tolerance: int = 2
+    #: A double is redrawn from its main copy only when that copy holds at least this
+    #: share of the feature (and under ``complete_share``: a whole copy with a few
+    #: displaced pixels is a ragged edge, left to the seams), and the copies overlap in at
+    #: least ``partial_share`` of it.
+    double_main: float = 0.5
+    #: Pixels of surroundings copied with the feature around it.
+    rim: int = 2
+    #: The rim's largest mean colour difference (YCbCr) from what the map shows there
+    #: (without it an orange glow went into a V-neck; at 0.14 every 4x bust drew every
+    #: feature, but a brow's skin rim glowed as a light patch).
+    rim_agreement: float = 0.07
+
+    def __post_init__(self) -> None:
+        for name in ("feature_extent", "feature_contrast", "double_shift", "rim_agreement"):
+            check_float(name, getattr(self, name), minimum=0.0)
+        for name in (
+            "surround_share",
+            "inside_share",
+            "complete_share",
+            "partial_share",
+            "skipped_ring_share",
+            "skipped_relief_fit",
+            "skipped_place_shown",
+            "double_main",
+        ):
+            check_float(name, getattr(self, name), minimum=0.0, maximum=1.0)
+        check_int("max_repeats", self.max_repeats, minimum=0)
+        check_int("host_window", self.host_window, minimum=1)
+        check_int("double_tolerance", self.double_tolerance, minimum=0)
+        check_int("rim", self.rim, minimum=0)
 
 
 @dataclass(frozen=True)
@@ -301,9 +471,11 @@ class DepthConfig:
 
     selection: Selection = field(default_factory=Selection)
     pyramid: Pyramid = field(default_factory=Pyramid)
+    registration: Registration = field(default_factory=Registration)
     guides: Guides = field(default_factory=Guides)
     matching: Matching = field(default_factory=Matching)
     finish: Finish = field(default_factory=Finish)
+    completion: Completion = field(default_factory=Completion)
 
     def replace_fields(self, **values: Any) -> DepthConfig:
         """A copy with fields replaced by their own name, whatever group holds them.
@@ -333,9 +505,16 @@ class DepthConfig:
         }
 
 
-_GROUPS = ("selection", "pyramid", "guides", "matching", "finish")
-_GROUP_TYPES = {"selection": Selection, "pyramid": Pyramid, "guides": Guides}
-_GROUP_TYPES.update({"matching": Matching, "finish": Finish})
+_GROUP_TYPES: dict[str, type] = {
+    "selection": Selection,
+    "pyramid": Pyramid,
+    "registration": Registration,
+    "guides": Guides,
+    "matching": Matching,
+    "finish": Finish,
+    "completion": Completion,
+}
+_GROUPS = tuple(_GROUP_TYPES)
 #: Field name -> the group that holds it (field names are unique across groups).
 _FIELD_GROUPS = {f.name: group for group, cls in _GROUP_TYPES.items() for f in fields(cls)}
 

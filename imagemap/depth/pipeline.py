@@ -186,8 +186,10 @@ def _pyramid(state: State, config: DepthConfig) -> State:
 
 
 def _register(state: State, config: DepthConfig) -> State:
-    relief = config.guides.registration_relief
-    state.warps = [register(state.depth, example.depth, relief) for example in state.chosen]
+    state.warps = [
+        register(state.depth, example.depth, registration=config.registration)
+        for example in state.chosen
+    ]
     state.changed = f"{len(state.warps)} examples warped onto the query"
     return state
 
@@ -301,7 +303,7 @@ def _seams(state: State, config: DepthConfig) -> State:
 def _complete_features(state: State, config: DepthConfig) -> State:
     exemplars = state.made("exemplars")
     features = [
-        completion.small_features(exemplar, example.mask)
+        completion.small_features(exemplar, example.mask, completion=config.completion)
         for exemplar, example in zip(exemplars, state.chosen, strict=True)
     ]
     state.source, completed = completion.complete_features(
@@ -311,6 +313,7 @@ def _complete_features(state: State, config: DepthConfig) -> State:
         state.mask,
         [example.mask for example in state.chosen],
         relief=(state.depth, [example.depth for example in state.chosen]),
+        completion=config.completion,
     )
     del features  # label maps: not held through the blend, the finish's peak
     log.info("small features completed: %d", completed)
@@ -347,6 +350,8 @@ def _blend(state: State, config: DepthConfig) -> State:
         state.made("ycbcr"),
         scale=scale,
         edge_support=config.finish.edge_support,
+        edge_contrast=config.finish.edge_contrast,
+        edge_floor=config.finish.edge_floor,
         mask=state.mask,
     )
     state.exemplars = None

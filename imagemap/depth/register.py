@@ -13,8 +13,9 @@ B-spline free-form deformation (Rueckert et al. 1999), fitted by Levenberg-Marqu
 to a guide image of each object: its signed distance to the outline (soft-clipped)
 and its depth relative to its own deepest point, so that depth units do not
 matter. It is fitted at a working resolution where the object is
-``WORK_SIZE`` pixels across, coarse to fine over control grids of growing
-density, and evaluated at any resolution.
+``work_size`` pixels across, coarse to fine over control grids of growing
+density, and evaluated at any resolution. Every setting of the fit is a field of
+:class:`imagemap.depth.config.Registration`, with its reason.
 
 Examples
 --------
@@ -37,40 +38,28 @@ import numpy as np
 from scipy import ndimage
 from threadpoolctl import threadpool_limits
 
+from imagemap.depth.config import Registration
+
 __all__ = ["Warp", "register", "registered_positions", "registration_guide"]
 
-#: The working resolution: the object is about this many pixels across (square root of
-#: its area) while the warp is fitted. A smooth warp of a whole object needs no more; a
-#: 4x map costs what a 1x one does.
-WORK_SIZE = 64.0
-#: Control points per side of the B-spline grids, coarse to fine (over the query
-#: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
-CONTROL_GRIDS = (4, 5, 7)
-#: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture range
-#: first, the outline's detail last.
-GRID_SMOOTHING = (2.0, 1.0, 0.5)
-#: Levenberg-Marquardt iterations per grid at most.
-ITERATIONS = 12
-#: Weight of the control points' squared displacement against the mean squared guide
-#: difference: keeps the warp smooth where the guide says nothing (inside a flat body).
-STIFFNESS = 1e-2
-#: Pixels of the working grid used for the fit at most (a regular subsample).
-FIT_PIXELS = 3000
-#: Weight of the relief's detail (the depth less its smoothing over
-#: ``RELIEF_DETAIL_SCALE`` of the object's size, in units of its 95th percentile inside
-#: the object) in the guide image: eyes, lips and brow ridges pull the warp into place.
-RELIEF_DETAIL_WEIGHT = 0.5
-RELIEF_DETAIL_SCALE = 0.03
-#: Soft clip (fraction of the object's size) of the signed distance in the guide image:
-#: the outline and the band within a few percent of it lead the fit.
-OUTLINE_REACH = 0.04
+#: The defaults of every setting of the fit (a :class:`DepthConfig`'s ``registration``).
+_REGISTRATION = Registration()
 
 
 def registration_guide(
-    depth: np.ndarray, mask: np.ndarray, relief_weight: float = RELIEF_DETAIL_WEIGHT
+    depth: np.ndarray,
+    mask: np.ndarray,
+    relief_weight: float = _REGISTRATION.registration_relief,
+    *,
+    relief_scale: float = _REGISTRATION.relief_detail_scale,
+    outline_reach: float = _REGISTRATION.outline_reach,
 ) -> np.ndarray:
     """The image the warp is fitted on: soft-clipped signed distance to the outline plus
-    the depth relative to the object's deepest point (both in [-0.5, 1]).
+    the depth relative to the object's deepest point (both in [-0.5, 1]), plus
+    ``relief_weight`` times the relief's detail (the relative depth less its smoothing
+    over ``relief_scale`` of the object's size, soft-clipped at its 95th percentile
+    inside the object). ``outline_reach``: the signed distance's soft clip, as a
+    fraction of the object's size (see :class:`~imagemap.depth.config.Registration`).
 
     Examples
     --------
@@ -81,12 +70,12 @@ def registration_guide(
     """
     size = max(float(np.sqrt(mask.sum())), 1.0)
     signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
-    outline = np.tanh(signed / (OUTLINE_REACH * size))
+    outline = np.tanh(signed / (outline_reach * size))
     deepest = float(depth[mask].max()) if mask.any() else 1.0
     relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
     guide = 0.5 * outline + 0.5 * relief
     if relief_weight and mask.any():
-        smooth = ndimage.gaussian_filter(relief, RELIEF_DETAIL_SCALE * size)
+        smooth = ndimage.gaussian_filter(relief, relief_scale * size)
         detail = np.where(mask, relief - smooth, 0.0)
         unit = float(np.percentile(np.abs(detail[mask]), 95)) or 1.0
         guide = guide + relief_weight * np.tanh(detail / unit)
@@ -182,21 +171,21 @@ class Warp:
         return qy, qx
 
 
-def _fit(fixed, moving, fixed_mask, moving_mask) -> Warp:
+def _fit(fixed, moving, fixed_mask, moving_mask, registration: Registration) -> Warp:
     """The warp of ``moving`` onto ``fixed`` (same working resolution), fitted coarse to
-    fine by Levenberg-Marquardt."""
+    fine by Levenberg-Marquardt over ``registration``'s control grids."""
     query_centre, query_spread = _moments(fixed_mask)
     example_centre, example_spread = _moments(moving_mask)
     scale = example_spread / query_spread
     region = ndimage.binary_dilation(fixed_mask, iterations=3)
     ys, xs = np.nonzero(region)
-    step = max(1, int(np.ceil(len(ys) / FIT_PIXELS)))
+    step = max(1, int(np.ceil(len(ys) / registration.fit_pixels)))
     ys, xs = ys[::step].astype(np.float64), xs[::step].astype(np.float64)
     box = (ys.min() - 2.0, ys.max() + 2.0, xs.min() - 2.0, xs.max() + 2.0)
     displacement = None
     coefficients = np.zeros((2, 16))
-    n = CONTROL_GRIDS[0]
-    for n, sigma in zip(CONTROL_GRIDS, GRID_SMOOTHING, strict=True):
+    n = registration.control_grids[0]
+    for n, sigma in zip(registration.control_grids, registration.grid_smoothing, strict=True):
         target = ndimage.gaussian_filter(fixed, sigma)[ys.astype(int), xs.astype(int)]
         image = ndimage.gaussian_filter(moving, sigma * float(scale.mean()))
         grad_y, grad_x = np.gradient(image)
@@ -205,7 +194,7 @@ def _fit(fixed, moving, fixed_mask, moving_mask) -> Warp:
             coefficients = np.zeros((2, n * n))
         else:  # the coarser grid's displacement, refitted on this grid
             coefficients = np.linalg.lstsq(basis, displacement.T, rcond=None)[0].T
-        penalty = STIFFNESS * len(ys) / (n * n)
+        penalty = registration.stiffness * len(ys) / (n * n)
 
         def residual(c, basis=basis, image=image, target=target, penalty=penalty):
             wy = example_centre[0] + scale[0] * (ys + basis @ c[0] - query_centre[0])
@@ -215,7 +204,7 @@ def _fit(fixed, moving, fixed_mask, moving_mask) -> Warp:
 
         r, wy, wx, energy = residual(coefficients)
         damping = 1e-3
-        for _ in range(ITERATIONS):
+        for _ in range(registration.fit_iterations):
             gy = ndimage.map_coordinates(grad_y, [wy, wx], order=1, mode="nearest") * scale[0]
             gx = ndimage.map_coordinates(grad_x, [wy, wx], order=1, mode="nearest") * scale[1]
             jacobian = np.concatenate([gy[:, None] * basis, gx[:, None] * basis], axis=1)
@@ -239,7 +228,10 @@ def _fit(fixed, moving, fixed_mask, moving_mask) -> Warp:
 
 
 def register(
-    query_depth: np.ndarray, example_depth: np.ndarray, relief_weight: float = RELIEF_DETAIL_WEIGHT
+    query_depth: np.ndarray,
+    example_depth: np.ndarray,
+    *,
+    registration: Registration = _REGISTRATION,
 ) -> Warp:
     """The smooth warp from the query's object onto the example's (full-resolution pixels).
 
@@ -247,8 +239,9 @@ def register(
     ----------
     query_depth, example_depth : ndarray (H, W)
         Depth maps, background 0 (any units: each is taken relative to its own range).
-    relief_weight : float
-        Weight of the relief's detail in the guide image (see ``RELIEF_DETAIL_WEIGHT``).
+    registration : Registration
+        The fit's settings (working size, control grids, the guide image's weights; a
+        :class:`~imagemap.depth.config.DepthConfig`'s ``registration``).
 
     Returns
     -------
@@ -256,10 +249,16 @@ def register(
     """
     query_mask, example_mask = query_depth > 0, example_depth > 0
     size = float(np.sqrt(query_mask.sum()))
-    zoom = min(1.0, WORK_SIZE / max(size, 1.0))
+    zoom = min(1.0, registration.work_size / max(size, 1.0))
 
     def working(depth, mask):
-        guide = registration_guide(depth, mask, relief_weight)
+        guide = registration_guide(
+            depth,
+            mask,
+            registration.registration_relief,
+            relief_scale=registration.relief_detail_scale,
+            outline_reach=registration.outline_reach,
+        )
         if zoom >= 1.0:
             return guide, mask
         small = ndimage.zoom(guide, zoom, order=1, prefilter=False)
@@ -269,7 +268,7 @@ def register(
     fixed, fixed_mask = working(query_depth, query_mask)
     moving, moving_mask = working(example_depth, example_mask)
     with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
-        warp = _fit(fixed, moving, fixed_mask, moving_mask)
+        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration)
     if zoom >= 1.0:
         return warp
 

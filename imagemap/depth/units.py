@@ -10,11 +10,11 @@ seeds at x1.
 
 So the ``units`` stage (the first of :data:`imagemap.depth.pipeline.STAGES`) measures the
 query's depth scale (the median depth of its object) against the examples'. Within
-:data:`SCALE_TOLERANCE` of theirs the query is used as it is (every map of a query in
-the database's own units stays byte for byte what it was); further away it is
-multiplied so that its scale is the examples' median scale, with a notice: then a
-query's map does not depend on its unit (x1e-6 to x1e6, millimetres, a 16-bit PNG
-give the same map).
+:attr:`~imagemap.depth.config.Selection.scale_tolerance` (1.5) of theirs the query is
+used as it is (every map of a query in the database's own units stays byte for byte
+what it was); further away it is multiplied so that its scale is the examples' median
+scale, with a notice: then a query's map does not depend on its unit (x1e-6 to x1e6,
+millimetres, a 16-bit PNG give the same map).
 
 The same stage looks for the query among the examples by content (the same depth,
 value for value): an example chosen automatically is left out, with a notice (a
@@ -50,10 +50,10 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
+from imagemap.depth.config import Selection
 from imagemap.errors import InputError
 
 __all__ = [
-    "SCALE_TOLERANCE",
     "depth_scale",
     "find_example",
     "match_scale",
@@ -63,12 +63,9 @@ __all__ = [
 
 log = logging.getLogger("imagemap")
 
-#: A query's depth scale within this factor of the examples' range of scales is used as it
-#: is; further away it is brought to their median scale. The 36 generated examples
-#: (fish, busts, humans) have median depths 0.514-0.605 (one class spans at most 1.17x);
-#: x0.5 already changed the examples chosen and the map (0.22 mean |RGB|), so the band
-#: must stop short of 2x.
-SCALE_TOLERANCE = 1.5
+#: The default tolerance of :func:`match_scale` (the reason for its value is at
+#: :attr:`imagemap.depth.config.Selection.scale_tolerance`).
+_TOLERANCE = Selection().scale_tolerance
 
 
 _QUERY_IN_DATABASE = contextvars.ContextVar("imagemap_query_in_database", default=False)
@@ -114,7 +111,7 @@ def _scale_of(example) -> float:
 
 
 def match_scale(
-    depth: np.ndarray, examples: Sequence, tolerance: float = SCALE_TOLERANCE
+    depth: np.ndarray, examples: Sequence, tolerance: float = _TOLERANCE
 ) -> tuple[np.ndarray, float]:
     """``depth`` at the examples' scale, and the factor it was multiplied by (1.0: as it is).
 
@@ -125,7 +122,8 @@ def match_scale(
     examples : sequence of Example
         The examples it will be matched with.
     tolerance : float
-        See :data:`SCALE_TOLERANCE`.
+        Within this factor of the examples' range of scales the query is used as it is
+        (see :attr:`~imagemap.depth.config.Selection.scale_tolerance`).
 
     Returns
     -------
@@ -180,7 +178,9 @@ def units_stage(state, config):
         state.database = database.without(same)
         notes.append(f"{same} (the query itself) left out")
     scale = depth_scale(state.depth)
-    state.depth, factor = match_scale(state.depth, named or state.database)
+    state.depth, factor = match_scale(
+        state.depth, named or state.database, config.selection.scale_tolerance
+    )
     if factor != 1.0:
         log.warning(
             "the query's depth scale (%.3g, its object's median depth) is far from the "
