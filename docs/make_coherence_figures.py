@@ -122,11 +122,12 @@ def mesh_four_angles(out: Path, size: int = 240):
         made = colorize_mesh(truth, database, views, preset="fish", seed=0)
         angles = ("0,0", "90,0", "180,0", "-40,25")
         rows = []
-        for mesh in (truth, made.mesh):
+        for name, mesh in (("truth", truth), ("ours", made.mesh)):
             cells = [
                 render_textured(mesh, angle, size=(size, size * 3 // 4), shaded=True)
                 for angle in angles
             ]
+            cells[0] = _label(cells[0], name)
             rows.append(np.concatenate(cells, axis=1))
     imagemap.write_image(out / "mesh_four_angles.png", np.concatenate(rows, axis=0))
 
