@@ -59,6 +59,38 @@ def test_registered_positions_agree_where_the_warp_says():
     assert query_levels[1].shape == (45, 60, 2) and example_levels[0][1].shape == (45, 60, 2)
 
 
+def test_a_large_pair_is_registered_from_block_averaged_guides_as_well():
+    """At 1200x1600 the guides are made from 3x3 block averages (guide_oversampling),
+    not at full size; the warp still maps the tips, top and bottom onto the example's
+    (known answer, within 3 px: a working pixel is 14 px here), as the full-size guides'
+    warp does."""
+    from imagemap.depth.config import Registration
+
+    query = ellipsoid((1200, 1600), centre=(600, 800), radii=(400, 640))
+    example = ellipsoid((1200, 1600), centre=(540, 880), radii=(320, 540))
+    ys = np.array([600.0, 600.0, 210.0, 990.0])
+    xs = np.array([170.0, 1430.0, 800.0, 800.0])
+    for oversampling in (Registration().guide_oversampling, 1e6):  # blocks, full size
+        warp = register(query, example, registration=Registration(guide_oversampling=oversampling))
+        wy, wx = warp.forward(ys, xs)
+        assert np.max(np.abs(wy - (540 + (ys - 600) * 320 / 400))) < 3.0
+        assert np.max(np.abs(wx - (880 + (xs - 800) * 540 / 640))) < 3.0
+
+
+def test_a_coarser_position_grid_interpolates_the_same_positions():
+    """Positions from a grid of 32 points along the longer side agree with every 4th
+    pixel's within a hundredth of the object's radius (the warp is smooth)."""
+    query, example = (
+        ellipsoid((300, 400), (150, 200), (100, 160)),
+        ellipsoid((300, 400), (140, 210), (90, 170)),
+    )
+    warp = register(query, example)
+    _, fine = registered_positions(query > 0, [example.shape], [warp], 1)
+    _, coarse = registered_positions(query > 0, [example.shape], [warp], 1, grid_points=32)
+    inside = example > 0
+    assert np.max(np.abs(fine[0][0][inside] - coarse[0][0][inside])) < 0.01
+
+
 def test_shifted_copies_of_one_striped_map_give_a_handful_of_fragments():
     """Two examples that are one striped map shifted (each on its own, slightly different
     object) and a query of a third shape: registered, the copy is a couple of whole

@@ -200,7 +200,11 @@ def _bands(state: State, config: DepthConfig) -> State:
     example_positions: list[list[np.ndarray] | None] = [None] * len(state.chosen)
     if state.warps:
         query_positions, registered = registered_positions(
-            state.mask, [e.depth.shape for e in state.chosen], state.warps, levels
+            state.mask,
+            [e.depth.shape for e in state.chosen],
+            state.warps,
+            levels,
+            grid_points=config.registration.position_grid,
         )
         example_positions = list(registered)
     # Handed over to the engine, which drops each level once it has packed its bands.

@@ -251,7 +251,13 @@ def register(
     size = float(np.sqrt(query_mask.sum()))
     zoom = min(1.0, registration.work_size / max(size, 1.0))
 
+    # The guides are made at most guide_oversampling x the working size: block averages
+    # of `block` x `block` pixels first (1: full size, as for maps up to 4x the default).
+    block = max(1, int(1.0 / (registration.guide_oversampling * zoom)))
+
     def working(depth, mask):
+        if block > 1:
+            depth, mask = _block_average(depth, mask, block)
         guide = registration_guide(
             depth,
             mask,
@@ -259,10 +265,11 @@ def register(
             relief_scale=registration.relief_detail_scale,
             outline_reach=registration.outline_reach,
         )
-        if zoom >= 1.0:
+        scale = zoom * block
+        if scale >= 1.0:
             return guide, mask
-        small = ndimage.zoom(guide, zoom, order=1, prefilter=False)
-        small_mask = ndimage.zoom(mask.astype(np.float32), zoom, order=1, prefilter=False) > 0.5
+        small = ndimage.zoom(guide, scale, order=1, prefilter=False)
+        small_mask = ndimage.zoom(mask.astype(np.float32), scale, order=1, prefilter=False) > 0.5
         return small, small_mask if small_mask.any() else small > 0.25
 
     fixed, fixed_mask = working(query_depth, query_mask)
@@ -287,6 +294,21 @@ def register(
     )
 
 
+def _block_average(depth: np.ndarray, mask: np.ndarray, block: int) -> tuple:
+    """Depth and mask averaged over ``block`` x ``block`` pixels: the mask where at least
+    half a block is object, the depth as the mean of its object pixels."""
+    h, w = (depth.shape[0] // block) * block, (depth.shape[1] // block) * block
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        return values[:h, :w].reshape(h // block, block, w // block, block).mean(axis=(1, 3))
+
+    cover = mean(mask.astype(np.float32))
+    small_mask = cover >= 0.5
+    object_mean = mean(np.where(mask, depth, 0.0).astype(np.float32)) / np.maximum(cover, 1e-6)
+    small_depth = np.where(small_mask, object_mean, 0.0)
+    return small_depth.astype(np.float32), small_mask
+
+
 def _frame(mask: np.ndarray) -> np.ndarray:
     """(yc, xc, r): the query object's centroid and RMS radius (the engine's frame)."""
     ys, xs = np.nonzero(mask)
@@ -309,13 +331,15 @@ def registered_positions(
     warps: list[Warp],
     levels: int,
     grid_step: int = 4,
+    grid_points: int | None = None,
 ) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
     """Position bands for the engine: per level, the query's own position and each
     example pixel's position where its warp puts it on the query, both relative to the
     query object's centroid in units of its RMS radius.
 
     The inverse warp is evaluated on a grid of every ``grid_step``-th pixel and
-    interpolated (it is smooth).
+    interpolated (it is smooth); with ``grid_points``, the step grows so that the grid
+    has about that many points along an example's longer side.
 
     Returns
     -------
@@ -330,6 +354,8 @@ def registered_positions(
         query_levels.append(np.stack([grid_y.T, grid_x.T], axis=-1).astype(np.float32))
     example_levels = []
     for shape, warp in zip(example_shapes, warps, strict=True):
+        if grid_points is not None:
+            grid_step = max(grid_step, -(-max(shape) // grid_points))
         coarse_y = np.arange(0, shape[0] + grid_step, grid_step, dtype=np.float64)
         coarse_x = np.arange(0, shape[1] + grid_step, grid_step, dtype=np.float64)
         cy, cx = np.meshgrid(coarse_y, coarse_x, indexing="ij")
