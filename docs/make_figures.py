@@ -4,16 +4,14 @@
   depth, the examples selected, the synthesized map, its provenance and the
   held-out truth.
 - ``crops.png``: close-ups (3x) of a fish's eye and a stripe boundary and a bust's
-  face: truth, the paper's mean vote on Laplacian bands, the copy on Laplacian bands
-  (the previous default), the default (the copy on plain colour levels), and the
-  nearest example's map pasted over.
+  face: truth, the paper's method (``--finish paper``), 0.1.0's default (no
+  registration), the default, and the nearest example's map pasted over.
 """
 
 from __future__ import annotations
 
 import argparse
 import tempfile
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +19,7 @@ from PIL import Image, ImageDraw
 
 from data_gen import make_instance
 from imagemap import Database, Example, colorize
-from imagemap.depth.config import PRESETS
+from imagemap.depth.config import FINISHES, PRESETS
 from imagemap.evaluation import _copy_nearest
 from imagemap.io import write_image
 
@@ -80,6 +78,11 @@ def results_figure(count: int = 12) -> np.ndarray:
     return _stack(rows)
 
 
+#: 0.1.0's default matching: positions relative to each object's centroid, the example
+#: preference at the coarser levels only (as in make_coherence_figures.py).
+BEFORE = dict(registration=False, example_preference=0.3, preference_at_finest=False)
+
+
 def _crop(image, box, zoom=3):
     y0, y1, x0, x1 = box
     return np.kron(image[y0:y1, x0:x1], np.ones((zoom, zoom, 1))).astype(np.float32)
@@ -90,9 +93,8 @@ def crops_figure(count: int = 12) -> np.ndarray:
     for cls, name_boxes in (("fish", ("eye", "stripes")), ("busts", ("face",))):
         db, query = _database(cls, count)
         mask = query.mask
-        laplacian = PRESETS[cls].replace_fields(appearance_pyramid="laplacian")
-        paper = colorize(query.depth, db, replace(laplacian, vote="mean"), seed=0)
-        laplacian_copy = colorize(query.depth, db, laplacian, seed=0)
+        paper = colorize(query.depth, db, PRESETS[cls].replace_fields(**FINISHES["paper"]), seed=0)
+        before = colorize(query.depth, db, PRESETS[cls].replace_fields(**BEFORE), seed=0)
         default = colorize(query.depth, db, cls, seed=0)
         pasted, _, _ = _copy_nearest(query.depth, db)
         labels = query.labels
@@ -109,9 +111,9 @@ def crops_figure(count: int = 12) -> np.ndarray:
             box = (max(cy - half, 0), cy + half, max(cx - half, 0), cx + half)
             tiles = [
                 _caption(_crop(_on_backdrop(query.image, mask), box), f"{cls} {what}: truth"),
-                _caption(_crop(_on_backdrop(paper.image, mask), box), "paper: mean, Laplacian"),
-                _caption(_crop(_on_backdrop(laplacian_copy.image, mask), box), "copy, Laplacian"),
-                _caption(_crop(_on_backdrop(default.image, mask), box), "default (copy, colour)"),
+                _caption(_crop(_on_backdrop(paper.image, mask), box), "--finish paper"),
+                _caption(_crop(_on_backdrop(before.image, mask), box), "0.1.0 default"),
+                _caption(_crop(_on_backdrop(default.image, mask), box), "0.2.0 default"),
                 _caption(_crop(_on_backdrop(pasted, mask), box), "nearest pasted"),
             ]
             rows.append(_row(tiles))
