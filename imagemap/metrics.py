@@ -376,8 +376,8 @@ def class_reference(
     Returns
     -------
     rule : FaultyRule
-        With labels: limits at the pastes' median SSIM and part transfer; without:
-        at their median SSIM and ΔE00.
+        With labels: a limit at the pastes' median part transfer (issue #10's decision:
+        no SSIM limit); without: at their median SSIM and ΔE00.
     stats : dict
         ``pairs`` and the quartiles of every metric over the pastes.
 
@@ -385,7 +385,7 @@ def class_reference(
     -------
     >>> rule, stats = class_reference(list(db))  # doctest: +SKIP
     >>> rule.describe()  # doctest: +SKIP
-    'SSIM < 0.352 or part transfer < 0.741'
+    'part transfer < 0.741'
     """
     if len(examples) < 2:
         raise InputError("a class reference needs at least two examples")

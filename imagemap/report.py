@@ -340,9 +340,9 @@ def summary_markdown(evaluation: Evaluation) -> str:
         "coherence over the truth's, blind to blur; mid-tones: share of pixels in the middle "
         "of their window's tones over the truth's, blind to order) are defined in "
         "docs/measures.md. Faulty: "
-        "worse than the median paste of another member's map onto the object in luminance "
-        "SSIM or in part transfer (ΔE00 where there are no labels), or a small feature not "
-        "drawn: the class's bar below. The generated classes draw a palette per object, "
+        "part transfer below the median paste of another member's map onto the object, or "
+        "a small feature not drawn (without labels: ΔE00 or luminance SSIM worse than that "
+        "median): the class's bar below. The generated classes draw a palette per object, "
         "which no method can know from the depth, so ΔE00 and part accuracy mostly measure "
         "that lottery and reward blurred averages; SSIM and part transfer do not."
     )
