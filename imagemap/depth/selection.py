@@ -9,7 +9,7 @@ from imagemap.database import Database
 from imagemap.io import validate_depth
 from imagemap.validate import check_int
 
-__all__ = ["select_examples"]
+__all__ = ["select_examples", "selection_distances"]
 
 
 def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[int]:
@@ -31,14 +31,26 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
     """
     m = check_int("m", m, minimum=1)
     depth = validate_depth(depth)
+    order = np.argsort(selection_distances(depth, database), kind="stable")
+    return [int(i) for i in order[:m]]
+
+
+def selection_distances(depth: np.ndarray, database: Database) -> np.ndarray:
+    """Each example's selection distance to ``depth`` (as :func:`select_examples` ranks them).
+
+    The sum of squared depth differences once the example's foreground centroid is on
+    the query's, the example's depth outside the query's frame counted in full
+    (paper, Sec. 2.3). One value per example, in the database's order.
+    """
+    depth = np.asarray(depth, dtype=np.float32)
     # SSD over the query frame plus the example's depth that falls outside it (a larger
     # object is a worse fit) = |D|^2 + |Di|^2 - 2 <D, shifted Di> over their overlap, with
     # each example's centroid and |Di|^2 computed once (Example.selection_stats).
     query_centroid = _centroid(depth > 0)
     query_norm = float(np.square(depth, dtype=np.float64).sum())
     height, width = depth.shape
-    distances = []
-    for example in database:
+    distances = np.empty(len(database))
+    for k, example in enumerate(database):
         other = example.depth
         centroid, other_norm = example.selection_stats
         dy, dx = (int(round(s)) for s in query_centroid - centroid)
@@ -50,6 +62,5 @@ def select_examples(depth: np.ndarray, database: Database, m: int = 2) -> list[i
             there = other[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
             # Not a BLAS dot: a multithreaded BLAS spins on a busy machine (15 ms a call).
             cross = float(np.multiply(here, there, dtype=np.float64).sum())
-        distances.append(query_norm + other_norm - 2.0 * cross)
-    order = np.argsort(distances, kind="stable")
-    return [int(i) for i in order[:m]]
+        distances[k] = query_norm + other_norm - 2.0 * cross
+    return distances

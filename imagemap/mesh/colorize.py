@@ -20,10 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imagemap.align import centroid
 from imagemap.database import Database, database_at_view
 from imagemap.depth.config import resolve_config
 from imagemap.depth.pipeline import colorize
+from imagemap.depth.selection import selection_distances
 from imagemap.io import InputError
 from imagemap.mesh.bake import bake_views, project_texture, view_shares
 from imagemap.mesh.examples import MeshExample
@@ -93,34 +93,6 @@ class MeshResult:
     def example_names(self) -> list[str]:
         """The examples used (the same for every view)."""
         return list(self.results[0].example_names)
-
-
-def selection_distances(depth: np.ndarray, database: Database) -> np.ndarray:
-    """Each example's selection distance to ``depth`` (as :func:`select_examples` ranks them).
-
-    The sum of squared depth differences once the example's foreground centroid is on
-    the query's, the example's depth outside the query's frame counted in full
-    (paper, Sec. 2.3). One value per example, in the database's order.
-    """
-
-    depth = np.asarray(depth, dtype=np.float32)
-    query_centroid = centroid(depth > 0)
-    query_norm = float(np.square(depth, dtype=np.float64).sum())
-    height, width = depth.shape
-    distances = np.empty(len(database))
-    for k, example in enumerate(database):
-        other = example.depth
-        example_centroid, other_norm = example.selection_stats
-        dy, dx = (int(round(s)) for s in query_centroid - example_centroid)
-        y0, x0 = max(0, dy), max(0, dx)
-        y1, x1 = min(height, other.shape[0] + dy), min(width, other.shape[1] + dx)
-        cross = 0.0
-        if y1 > y0 and x1 > x0:
-            here = depth[y0:y1, x0:x1]
-            there = other[y0 - dy : y1 - dy, x0 - dx : x1 - dx]
-            cross = float(np.multiply(here, there, dtype=np.float64).sum())
-        distances[k] = query_norm + other_norm - 2.0 * cross
-    return distances
 
 
 def shared_examples(
