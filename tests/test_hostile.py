@@ -45,16 +45,22 @@ def depth16(depth: np.ndarray) -> np.ndarray:
     return np.round(depth * 65535).astype(np.uint16)
 
 
+def write_database(db: Path, examples) -> None:
+    """Write ``examples`` into the folder ``db`` as a database: 16-bit depth, image,
+    labels (depth above 0.5) and a JSON per example."""
+    for example in examples:
+        write_image(db / f"{example.name}_depth.png", depth16(example.depth))
+        write_image(db / f"{example.name}_image.png", example.image)
+        write_image(db / f"{example.name}_labels.png", (example.depth > 0.5).astype(np.uint8))
+        (db / f"{example.name}.json").write_text(json.dumps({"name": example.name}))
+
+
 @pytest.fixture
 def world(tmp_path, blob_database, query_blob):
     """db/ (five examples with labels and JSON), holdout/q_depth.png with its truth beside it."""
     db = tmp_path / "db"
     db.mkdir()
-    for example in blob_database:
-        write_image(db / f"{example.name}_depth.png", depth16(example.depth))
-        write_image(db / f"{example.name}_image.png", example.image)
-        write_image(db / f"{example.name}_labels.png", (example.depth > 0.5).astype(np.uint8))
-        (db / f"{example.name}.json").write_text(json.dumps({"name": example.name}))
+    write_database(db, blob_database)
     holdout = tmp_path / "holdout"
     holdout.mkdir()
     depth, truth = query_blob

@@ -30,7 +30,7 @@ import trimesh
 from conftest import PALETTE, blob, painted
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_hostile import assert_unchanged, cli, depth16, snapshot
+from test_hostile import assert_unchanged, cli, depth16, snapshot, write_database
 
 import imagemap
 import imagemap.batch
@@ -66,11 +66,7 @@ def world(tmp_path, tmp_path_factory, blob_database, query_blob, monkeypatch):
     root = tmp_path
     db = root / "db"
     db.mkdir()
-    for example in blob_database:
-        write_image(db / f"{example.name}_depth.png", depth16(example.depth))
-        write_image(db / f"{example.name}_image.png", example.image)
-        write_image(db / f"{example.name}_labels.png", (example.depth > 0.5).astype(np.uint8))
-        (db / f"{example.name}.json").write_text(json.dumps({"name": example.name}))
+    write_database(db, blob_database)
     export_textured(ball((1.4, 1.0, 0.7)), db / "m0.glb")
     q = root / "q"
     export_textured(ball(), q / "f46.obj")  # f46.obj, f46.mtl, f46.png (the "photo")
