@@ -30,7 +30,14 @@ import trimesh
 from conftest import PALETTE, blob, painted
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_hostile import assert_unchanged, cli, depth16, snapshot, write_database
+from test_hostile import (
+    assert_unchanged,
+    cli,
+    depth16,
+    run_refused,
+    snapshot,
+    write_database,
+)
 
 import imagemap
 import imagemap.batch
@@ -108,16 +115,6 @@ def no_work(monkeypatch):
     monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
     monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
     monkeypatch.setattr(imagemap.batch, "process_job", refuse)
-
-
-def run_refused(world, capsys, argv, words):
-    before = snapshot(world["root"])
-    code, message = cli(argv, capsys)
-    assert code == 2, message
-    for word in words:
-        assert word in message, message
-    assert "Traceback" not in message
-    assert_unchanged(world, before)
 
 
 def mesh_synth(w, source, *extra):
