@@ -77,8 +77,9 @@ def _cgroup_room() -> int | None:
     return None
 
 
-def _address_space_room() -> int | None:
-    """RLIMIT_AS's soft limit minus this process's mapped address space (VmSize)."""
+def _address_space_room(mapped_at_least: int = 0) -> int | None:
+    """RLIMIT_AS's soft limit minus this process's mapped address space (VmSize), or minus
+    ``mapped_at_least`` where that is larger (what a run will have mapped)."""
     try:
         import resource  # deferred: not on every platform (Windows)
     except ImportError:  # not on this platform
@@ -92,12 +93,14 @@ def _address_space_room() -> int | None:
             if line.startswith("VmSize:"):
                 mapped = int(line.split()[1]) * 1024
                 break
-    return soft - mapped
+    return soft - max(mapped, mapped_at_least)
 
 
-def available_memory() -> int | None:
+def available_memory(mapped_at_least: int = 0) -> int | None:
     """Bytes this process can still use: the smallest of MemAvailable, the cgroup's room
-    and RLIMIT_AS's room (None: none of them known).
+    and RLIMIT_AS's room (None: none of them known). ``mapped_at_least``: the address space
+    counted as mapped under RLIMIT_AS when more than is mapped now (a run's modules and
+    threads, mapped later).
 
     Example
     -------
@@ -106,7 +109,9 @@ def available_memory() -> int | None:
     True
     """
     rooms = [
-        r for r in (_meminfo_available(), _cgroup_room(), _address_space_room()) if r is not None
+        r
+        for r in (_meminfo_available(), _cgroup_room(), _address_space_room(mapped_at_least))
+        if r is not None
     ]
     return max(min(rooms), 0) if rooms else None
 

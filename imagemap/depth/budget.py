@@ -209,33 +209,13 @@ def _engine_address_space() -> int:
     return _ENGINE_ADDRESS_SPACE + _THREAD_ADDRESS_SPACE * max(count, 1)
 
 
-def _address_space_room() -> int | None:
-    """RLIMIT_AS's soft limit less the larger of the address space mapped now and the one
-    the engine will map (:data:`_ENGINE_ADDRESS_SPACE`); None without a limit."""
-    try:
-        import resource  # deferred: optional dependency (not on Windows)
-    except ImportError:
-        return None
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft == resource.RLIM_INFINITY:
-        return None
-    mapped = 0
-    with contextlib.suppress(OSError, ValueError):
-        for line in open("/proc/self/status"):
-            if line.startswith("VmSize:"):
-                mapped = int(line.split()[1]) * 1024
-                break
-    return soft - max(mapped, _engine_address_space())
-
-
 def available_memory() -> int | None:
     """Bytes this process can still use: the smallest of MemAvailable, a cgroup's room (v1 or
     v2) and ``RLIMIT_AS``'s room (``ulimit -v``, where an allocation past it fails at once
     whatever the machine has free; counted from the address space the engine will have
     mapped, not only what is mapped now); None when none is known. See
     :func:`imagemap.memory.available_memory`."""
-    rooms = [r for r in (memory.available_memory(), _address_space_room()) if r is not None]
-    return max(min(rooms), 0) if rooms else None
+    return memory.available_memory(mapped_at_least=_engine_address_space())
 
 
 @contextlib.contextmanager
@@ -255,7 +235,7 @@ def memory_check(enabled: bool = True) -> Iterator[None]:
 
 
 def _enabled() -> bool:
-    return _CHECK.get() and os.environ.get("IMAGEMAP_NO_MEMORY_CHECK", "") in ("", "0")
+    return _CHECK.get() and memory._enabled()  # and IMAGEMAP_NO_MEMORY_CHECK unset or 0
 
 
 def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Estimate:
