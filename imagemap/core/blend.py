@@ -105,19 +105,24 @@ def place_seams(
     reference: np.ndarray,
     *,
     smoothness: float = 1.0,
-    sweeps: int = 8,
+    spread: float = 2.0,
+    sweeps: int = 2,
+    mask: np.ndarray | None = None,
+    exemplar_masks: list[np.ndarray] | None = None,
 ) -> np.ndarray:
-    """A source map with fewer seams, placed where the sources agree.
+    """A source map with fewer, cheaper seams, placed where the sources agree.
 
-    Every pixel's source is an exemplar and an offset. A pixel may take a
-    neighbour's exemplar and offset when that lowers the squared distance of
-    its copied colour to ``reference`` plus ``smoothness`` times its seam
-    costs: zero between equal offsets, else how much the two sources disagree
-    on both pixels (the seam cost of Kwatra et al. 2003, "Graphcut textures",
-    minimised here by iterated conditional modes instead of a graph cut).
-    Coherent regions grow over fragments, and a boundary between two sources
-    moves to where they show the same colours. Deterministic for any number of
-    threads.
+    Every pixel's source is an exemplar and an offset: a *label*. The labels are
+    chosen again, among those the map already uses, to minimise the squared
+    distance of each copied colour to ``reference`` plus ``smoothness`` times the
+    seam costs: zero between equal labels, else the two sources' colour gap on both
+    pixels (Kwatra et al. 2003, "Graphcut textures"). The minimisation is Boykov,
+    Veksler & Zabih's alpha-expansion (2001): each label in turn, largest first, may
+    take over any set of pixels near where it is used (``spread``), chosen by one
+    minimum cut (PyMaxflow). Unlike pixel-by-pixel moves, a whole fragment can give
+    way to its neighbour's copy at once, so a few large copies replace many small
+    ones and the boundaries between them run where they show the same colours.
+    Deterministic.
 
     Parameters
     ----------
@@ -128,31 +133,148 @@ def place_seams(
         The colours the copy should stay near (the voted map).
     smoothness : float
         Weight of the seam costs against the data cost.
+    spread : float
+        How far a label may spread in one move, in units of its own size (the square
+        root of its area): a move's cost grows with its reach, and a copy of a few
+        pixels rarely wins more than its surroundings.
     sweeps : int
-        Red-black sweeps over the image.
+        Passes over the labels.
+    mask : ndarray of bool, (H, W), optional
+        The pixels whose labels may change (default: every pixel with a source).
+    exemplar_masks : list of ndarray of bool, (H_e, W_e), optional
+        The exemplars' objects: a pixel only takes a new label whose source lies
+        inside one (the exemplars' colours past their outlines are a continuation for
+        the windows, not a part to copy). Default: anywhere in the exemplar.
 
     Returns
     -------
     ndarray of int32, (H, W, 3)
+
+    Examples
+    --------
+    Stripes copied through two offsets 3 rows apart, in a checkerboard of 8-px tiles
+    (16 pieces), where the voted map cannot tell them apart (it is their mean): the
+    first move gives the whole map to one offset.
+
+    >>> stripes = np.repeat(np.sin(np.arange(64) / 2.0)[:, None], 64, axis=1)[..., None]
+    >>> rows, columns = np.mgrid[0:32, 0:32]
+    >>> shift = 3 * (((rows // 8) + (columns // 8)) % 2)
+    >>> source = np.stack([np.zeros_like(rows), rows + 8 + shift, columns + 8], -1)
+    >>> voted = (stripes[rows + 8, columns + 8] + stripes[rows + 11, columns + 8]) / 2
+    >>> placed = place_seams([stripes], source, voted)
+    >>> np.unique(placed[..., 1] - rows).tolist()  # one offset left
+    [8]
     """
     from imagemap.core import kernels as _kernels  # deferred: start-up (numba)
 
     packed, shapes = _packed(exemplars)
-    yy, xx = np.ogrid[0 : source.shape[0], 0 : source.shape[1]]
-    label_e = source[..., 0].astype(np.int64).copy()
+    inside = np.zeros(packed.shape[:3], bool)
+    for k, exemplar in enumerate(exemplars):
+        inside[k, : exemplar.shape[0], : exemplar.shape[1]] = (
+            True if exemplar_masks is None else exemplar_masks[k]
+        )
+    height, width = source.shape[:2]
+    yy, xx = np.ogrid[0:height, 0:width]
+    label_e = source[..., 0].astype(np.int64)
     label_y = (source[..., 1] - yy).astype(np.int64)
     label_x = (source[..., 2] - xx).astype(np.int64)
-    _kernels.seam_sweeps(
-        packed,
-        shapes,
-        np.ascontiguousarray(reference, dtype=np.float32),
-        label_e,
-        label_y,
-        label_x,
-        float(smoothness),
-        int(sweeps),
-    )
+    movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    reference = np.ascontiguousarray(reference, dtype=np.float32)
+    # The move after which each pixel last changed, and each label's last move: a
+    # label's move is not repeated while nothing in or around its crop has changed
+    # since (it would find the same cut), unless that move spread it.
+    changed_at = np.zeros((height, width), np.int64)
+    expanded_at: dict[tuple[int, ...], int] = {}
+    moves = 0
+    for _ in range(sweeps):
+        alphas, ids, areas, boxes = _label_table(label_e, label_y, label_x, movable)
+        for k in np.argsort(-areas, kind="stable"):  # largest first, ties in label order
+            if areas[k] == 0:  # taken over by the others' moves
+                continue
+            alpha = alphas[k]
+            # The boxes are from the start of the sweep: a label only ever loses
+            # pixels to the others' moves, so its box still holds it.
+            reach = int(np.ceil(spread * np.sqrt(areas[k])))
+            box_rows, box_columns = boxes[k]
+            rows = slice(max(box_rows.start - reach, 0), min(box_rows.stop + reach, height))
+            columns = slice(max(box_columns.start - reach, 0), min(box_columns.stop + reach, width))
+            key = tuple(int(v) for v in alpha)
+            around = changed_at[
+                max(rows.start - 1, 0) : rows.stop + 1, max(columns.start - 1, 0) : columns.stop + 1
+            ]
+            if key in expanded_at and around.max() <= expanded_at[key]:
+                continue
+            region = ndimage.maximum_filter(ids[rows, columns] == k + 1, size=2 * reach + 1)
+            moves += 1
+            moved = _expand(
+                _kernels, (packed, shapes, inside), reference, (label_e, label_y, label_x), movable,
+                (rows, columns), region, alpha, smoothness,
+            )
+            if moved is None:
+                expanded_at[key] = moves
+                continue
+            # it spread: its next move reaches further
+            expanded_at[key] = moves - 1
+            changed_at[rows, columns][moved] = moves
+            losers = ids[rows, columns][moved]
+            areas -= np.bincount(losers - 1, minlength=len(areas))[: len(areas)]
+            areas[k] += int(moved.sum())
+            ids[rows, columns][moved] = k + 1
     return np.stack([label_e, label_y + yy, label_x + xx], axis=-1).astype(np.int32)
+
+
+#: Cost of a seam besides the colour gap: between two sources that show the same
+#: colours, one copy is still preferred over two.
+_SEAM_FLOOR = 1e-3
+
+
+def _label_table(label_e, label_y, label_x, movable):
+    """The labels in use: (exemplar, dy, dx) of each, a map of their numbers + 1 (0: none),
+    their areas and their bounding boxes."""
+    # One integer per label: offsets fit in 20 bits whatever the image size (< 2^19 px).
+    key = (label_e[movable] << 40) | ((label_y[movable] + (1 << 19)) << 20)
+    key |= label_x[movable] + (1 << 19)
+    keys, inverse, areas = np.unique(key, return_inverse=True, return_counts=True)
+    ids = np.zeros(movable.shape, np.int64)
+    ids[movable] = inverse.ravel() + 1
+    alphas = np.stack(
+        [keys >> 40, ((keys >> 20) & 0xFFFFF) - (1 << 19), (keys & 0xFFFFF) - (1 << 19)], axis=1
+    )
+    return alphas, ids, areas.astype(np.int64), ndimage.find_objects(ids, max_label=len(keys))
+
+
+def _expand(kernels, exemplars, reference, labels, movable, crop, region, alpha, smoothness):
+    """One alpha-expansion move over ``region`` (inside ``crop``), labels updated in place;
+    the pixels that took ``alpha`` (in the crop), or None."""
+    import maxflow  # deferred: start-up: only the copy's seams need it
+
+    label_e, label_y, label_x = labels
+    rows, columns = crop
+    packed, shapes, inside = exemplars
+    node, cost0, cost1, first, second, capacity = kernels.expansion_terms(
+        packed, shapes, inside, reference, label_e, label_y, label_x, movable, region,
+        rows.start, columns.start, alpha, float(smoothness), _SEAM_FLOOR,
+    )
+    n = len(cost0)
+    if n == 0:
+        return None
+    graph = maxflow.Graph[float](n, len(first))
+    nodes = graph.add_nodes(n)
+    graph.add_edges(first, second, capacity, np.zeros_like(capacity))
+    low = np.minimum(cost0, cost1)
+    # A node ends on the sink side (takes alpha) by cutting its source edge: cost1.
+    graph.add_grid_tedges(nodes, cost1 - low, cost0 - low)
+    graph.maxflow()
+    takes = graph.get_grid_segments(nodes)
+    if not takes.any():
+        return None
+    free = node >= 0
+    moved = np.zeros(node.shape, bool)
+    moved[free] = takes[node[free]]
+    label_e[rows, columns][moved] = alpha[0]
+    label_y[rows, columns][moved] = alpha[1]
+    label_x[rows, columns][moved] = alpha[2]
+    return moved
 
 
 def _packed(exemplars):

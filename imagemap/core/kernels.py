@@ -590,136 +590,158 @@ def vote_mode(
     )
 
 
+#: Data cost of a source outside its exemplar: never taken.
+_OUTSIDE = 1e9
+
+
 @njit(cache=True, nogil=True)
-def _label_colour_distance(exemplars, e1, y1, x1, e2, y2, x2):
+def _colour_gap(exemplars, shapes, e1, y1, x1, e2, y2, x2):
+    """|colour of source 1 - colour of source 2| (1.0 where either lies outside its exemplar)."""
+    if (
+        e1 < 0
+        or e2 < 0
+        or y1 < 0
+        or x1 < 0
+        or y2 < 0
+        or x2 < 0
+        or y1 >= shapes[e1, 0]
+        or x1 >= shapes[e1, 1]
+        or y2 >= shapes[e2, 0]
+        or x2 >= shapes[e2, 1]
+    ):
+        return 1.0
     s = 0.0
     for ch in range(exemplars.shape[3]):
         d = exemplars[e1, y1, x1, ch] - exemplars[e2, y2, x2, ch]
+        s += d * d
+    return np.sqrt(s)
+
+
+@njit(cache=True, nogil=True)
+def _seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor):
+    """Kwatra et al.'s seam cost between pixel (y, x) labelled (e, oy, ox) and its
+    neighbour (ny, nx) labelled (f, fy, fx): the two sources' colour gap on both pixels
+    (a distance, so the expansion moves below are exact), plus ``floor`` per seam."""
+    if e == f and oy == fy and ox == fx:
+        return 0.0
+    return (
+        floor
+        + _colour_gap(exemplars, shapes, e, y + oy, x + ox, f, y + fy, x + fx)
+        + _colour_gap(exemplars, shapes, e, ny + oy, nx + ox, f, ny + fy, nx + fx)
+    )
+
+
+@njit(cache=True, nogil=True)
+def _data(exemplars, shapes, reference, e, oy, ox, y, x):
+    """Squared distance of label (e, oy, ox)'s colour at (y, x) to the reference."""
+    sy, sx = y + oy, x + ox
+    if e < 0 or sy < 0 or sx < 0 or sy >= shapes[e, 0] or sx >= shapes[e, 1]:
+        return _OUTSIDE
+    s = 0.0
+    for ch in range(exemplars.shape[3]):
+        d = exemplars[e, sy, sx, ch] - reference[y, x, ch]
         s += d * d
     return s
 
 
 @njit(cache=True, nogil=True)
-def _pair_seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx):
-    """Kwatra et al.'s seam cost between pixel (y, x) labelled (e, oy, ox) and its
-    neighbour (ny, nx) labelled (f, fy, fx): the two sources' disagreement on both."""
-    if e == f and oy == fy and ox == fx:
-        return 0.0
-    seam = 1e-3
-    for py, px in ((y, x), (ny, nx)):
-        a, b, c, d = py + oy, px + ox, py + fy, px + fx
-        if (
-            0 <= a < shapes[e, 0]
-            and 0 <= b < shapes[e, 1]
-            and 0 <= c < shapes[f, 0]
-            and 0 <= d < shapes[f, 1]
-        ):
-            seam += _label_colour_distance(exemplars, e, a, b, f, c, d)
-        else:
-            seam += 1.0
-    return seam
+def expansion_terms(
+    exemplars,
+    shapes,
+    inside,
+    reference,
+    label_e,
+    label_y,
+    label_x,
+    mask,
+    region,
+    y0,
+    x0,
+    alpha,
+    smooth,
+    floor,
+):
+    """The graph of one alpha-expansion move (Boykov, Veksler & Zabih 2001).
 
+    Every object pixel has a label: an exemplar and an offset (source = pixel +
+    offset). In the move, each *free* pixel (inside ``region``, a crop whose corner
+    is (y0, x0), not labelled ``alpha`` yet, with ``alpha``'s source inside its
+    exemplar's object, ``inside``) keeps its label (x = 0) or takes ``alpha`` (x = 1); all other pixels
+    keep theirs. Costs: the squared distance of the copied colour to ``reference``,
+    plus ``smooth`` times the seam costs (:func:`_seam`). A pair of free neighbours
+    p, q costs E(xp, xq) = a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with
+    a = seam(lp, lq), b = seam(lp, alpha), c = seam(alpha, lq); b + c >= a as the seam
+    cost is a distance, so the move is a minimum cut (Kolmogorov & Zabih 2004).
 
-@njit(cache=True, nogil=True)
-def _label_cost(exemplars, shapes, reference, label_e, label_y, label_x, y, x, e, oy, ox, smooth):
-    """Data + seam cost of giving pixel (y, x) the label (e, oy, ox) (source = pixel + o)."""
-    height, width = label_e.shape
-    sy, sx = y + oy, x + ox
-    if e < 0 or sy < 0 or sx < 0 or sy >= shapes[e, 0] or sx >= shapes[e, 1]:
-        return np.inf
-    cost = 0.0
-    for ch in range(exemplars.shape[3]):
-        d = exemplars[e, sy, sx, ch] - reference[y, x, ch]
-        cost += d * d
-    for k in range(4):
-        ny = y + (1 if k == 0 else -1 if k == 1 else 0)
-        nx = x + (1 if k == 2 else -1 if k == 3 else 0)
-        if ny < 0 or nx < 0 or ny >= height or nx >= width:
-            continue
-        ne = label_e[ny, nx]
-        if ne < 0:
-            continue
-        noy, nox = label_y[ny, nx], label_x[ny, nx]
-        if ne == e and noy == oy and nox == ox:
-            continue
-        cost += smooth * _pair_seam(exemplars, shapes, e, oy, ox, ne, noy, nox, y, x, ny, nx)
-    return cost
-
-
-@njit(cache=True, nogil=True)
-def _seam_rows(exemplars, shapes, reference, label_e, label_y, label_x, smooth, colour, row0, row1):
-    """One colour of a red-black sweep over rows [row0, row1) (see :func:`seam_sweeps`)."""
-    height, width = label_e.shape
-    for y in range(row0, row1):
-        for x in range((y + colour) % 2, width, 2):
-            e = label_e[y, x]
-            if e < 0:
+    Returns
+    -------
+    node : (h, w) int64, the free pixels' node numbers (-1: fixed)
+    cost0, cost1 : (n,) the unary costs of keeping the label and of taking alpha
+    first, second, capacity : (m,) edges first -> second, paid when first keeps its
+        label and second takes alpha
+    """
+    h, w = region.shape
+    height, width = mask.shape
+    ae, ay, ax = alpha[0], alpha[1], alpha[2]
+    node = np.full((h, w), -1, np.int64)
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            y, x = y0 + i, x0 + j
+            if not (region[i, j] and mask[y, x]):
                 continue
-            oy, ox = label_y[y, x], label_x[y, x]
-            best = _label_cost(
-                exemplars,
-                shapes,
-                reference,
-                label_e,
-                label_y,
-                label_x,
-                y,
-                x,
-                e,
-                oy,
-                ox,
-                smooth,
-            )
+            if label_e[y, x] == ae and label_y[y, x] == ay and label_x[y, x] == ax:
+                continue
+            sy, sx = y + ay, x + ax
+            if sy < 0 or sx < 0 or sy >= shapes[ae, 0] or sx >= shapes[ae, 1]:
+                continue
+            if not inside[ae, sy, sx]:
+                continue
+            node[i, j] = n
+            n += 1
+    cost0 = np.zeros(n)
+    cost1 = np.zeros(n)
+    first = np.empty(2 * n, np.int64)
+    second = np.empty(2 * n, np.int64)
+    capacity = np.empty(2 * n)
+    m = 0
+    for i in range(h):
+        for j in range(w):
+            p = node[i, j]
+            if p < 0:
+                continue
+            y, x = y0 + i, x0 + j
+            e, oy, ox = label_e[y, x], label_y[y, x], label_x[y, x]
+            cost0[p] += _data(exemplars, shapes, reference, e, oy, ox, y, x)
+            cost1[p] += _data(exemplars, shapes, reference, ae, ay, ax, y, x)
             for k in range(4):
                 ny = y + (1 if k == 0 else -1 if k == 1 else 0)
                 nx = x + (1 if k == 2 else -1 if k == 3 else 0)
-                if ny < 0 or nx < 0 or ny >= height or nx >= width:
+                if ny < 0 or nx < 0 or ny >= height or nx >= width or not mask[ny, nx]:
                     continue
-                ce = label_e[ny, nx]
-                if ce < 0:
-                    continue
-                cy, cx = label_y[ny, nx], label_x[ny, nx]
-                if ce == label_e[y, x] and cy == label_y[y, x] and cx == label_x[y, x]:
-                    continue
-                cost = _label_cost(
-                    exemplars,
-                    shapes,
-                    reference,
-                    label_e,
-                    label_y,
-                    label_x,
-                    y,
-                    x,
-                    ce,
-                    cy,
-                    cx,
-                    smooth,
-                )
-                if cost < best:
-                    best = cost
-                    label_e[y, x] = ce
-                    label_y[y, x] = cy
-                    label_x[y, x] = cx
-
-
-def seam_sweeps(exemplars, shapes, reference, label_e, label_y, label_x, smooth, sweeps):
-    """Iterated conditional modes on source offsets: fewer, cheaper seams.
-
-    Every pixel's label is an exemplar and an offset (source = pixel + offset).
-    A pixel may take the label of one of its four neighbours when that lowers
-    its data cost (squared distance of the copied colour to ``reference``) plus
-    ``smooth`` times the seam costs with its neighbours (zero for equal labels,
-    else the disagreement of the two sources on both pixels, after Kwatra et
-    al.'s graph-cut textures). Pixels are updated in a red-black order, so the
-    result does not depend on the number of threads.
-    """
-    height = label_e.shape[0]
-    for _ in range(sweeps):
-        for colour in range(2):
-            _run(
-                lambda a, b, colour=colour: _seam_rows(
-                    exemplars, shapes, reference, label_e, label_y, label_x, smooth, colour, a, b
-                ),
-                height,
-                8,
-            )
+                f, fy, fx = label_e[ny, nx], label_y[ny, nx], label_x[ny, nx]
+                ci, cj = ny - y0, nx - x0
+                q = node[ci, cj] if 0 <= ci < h and 0 <= cj < w else -1
+                if q < 0:  # a fixed neighbour keeps its label: a unary term
+                    cost0[p] += smooth * _seam(
+                        exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor
+                    )
+                    cost1[p] += smooth * _seam(
+                        exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor
+                    )
+                elif k == 0 or k == 2:  # each pair of free pixels once
+                    a = smooth * _seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor)
+                    b = smooth * _seam(
+                        exemplars, shapes, e, oy, ox, ae, ay, ax, y, x, ny, nx, floor
+                    )
+                    c = smooth * _seam(
+                        exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor
+                    )
+                    cost0[p] += a
+                    cost1[p] += c
+                    cost1[q] -= c
+                    first[m] = p
+                    second[m] = q
+                    capacity[m] = max(b + c - a, 0.0)  # >= 0 but for rounding
+                    m += 1
+    return node, cost0, cost1, first[:m], second[:m], capacity[:m]

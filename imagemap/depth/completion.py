@@ -61,7 +61,7 @@ from scipy.sparse import csgraph
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.depth.config import Completion
 
-__all__ = ["complete_features", "small_features"]
+__all__ = ["complete_features", "copies_features", "small_features"]
 
 log = logging.getLogger(__name__)
 
@@ -658,6 +658,29 @@ def _shows_something(exemplars, source, ys, xs, ring_ys, ring_xs, completion) ->
         stands_out.mean(),
     )
     return bool(stands_out.mean() >= completion.skipped_place_shown)
+
+
+def copies_features(source: np.ndarray, features: list[tuple[np.ndarray, int]]) -> np.ndarray:
+    """Where a source map copies a small feature of its exemplar.
+
+    Parameters
+    ----------
+    source : ndarray of int, (H, W, 3)
+        Exemplar index, y, x per pixel (index < 0: none).
+    features : list of (labels, n)
+        Per exemplar, :func:`small_features` of it.
+
+    Returns
+    -------
+    ndarray of bool, (H, W)
+    """
+    found = np.zeros(source.shape[:2], bool)
+    for k, (labels, _) in enumerate(features):
+        at = source[..., 0] == k
+        sy = np.clip(source[..., 1][at], 0, labels.shape[0] - 1)
+        sx = np.clip(source[..., 2][at], 0, labels.shape[1] - 1)
+        found[at] = labels[sy, sx] > 0
+    return found
 
 
 def _copies_feature(source, features, ys, xs) -> bool:

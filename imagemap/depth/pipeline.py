@@ -118,6 +118,7 @@ class State:
     ycbcr: np.ndarray | None = None  # the voted map, then the map being finished (YCbCr)
     exemplars: list[np.ndarray] | None = None  # the examples' colours the copy reads
     source: np.ndarray | None = None  # (H, W, 3): example, y, x of every pixel
+    features: list[tuple[np.ndarray, int]] | None = None  # the examples' small features
     image: np.ndarray | None = None
     changed: str = ""  # what the last stage changed, for the record
 
@@ -296,20 +297,40 @@ def _copy(state: State, config: DepthConfig) -> State:
 
 def _seams(state: State, config: DepthConfig) -> State:
     old = state.made("source")
+    exemplars = state.made("exemplars")
+    state.features = _features(state, config)
+    # A copied small feature (an eye, a brow) is kept where it is: the rearrangement
+    # weighs colours against seams, and a feature's seams are its outline, which a few
+    # pixels of colour can lose to. The feature stage completes what the copy cut.
+    on_feature = completion.copies_features(old, state.features)
+    size = float(np.sqrt(state.mask.sum()))
     new = place_seams(
-        state.made("exemplars"), old, state.made("ycbcr"), smoothness=config.finish.seam_smoothness
+        exemplars,
+        old,
+        state.made("ycbcr"),
+        smoothness=config.finish.seam_smoothness * size / 100.0,
+        spread=config.finish.seam_spread,
+        mask=state.mask & ~on_feature,
+        exemplar_masks=[example.mask for example in state.chosen],
     )
     state.source = new
     state.changed = f"{_changed_pixels(old, new)} pixels take another source"
     return state
 
 
+def _features(state: State, config: DepthConfig) -> list[tuple[np.ndarray, int]]:
+    """The chosen examples' small features (:func:`completion.small_features`)."""
+    if state.features is None:
+        state.features = [
+            completion.small_features(exemplar, example.mask, completion=config.completion)
+            for exemplar, example in zip(state.made("exemplars"), state.chosen, strict=True)
+        ]
+    return state.features
+
+
 def _complete_features(state: State, config: DepthConfig) -> State:
     exemplars = state.made("exemplars")
-    features = [
-        completion.small_features(exemplar, example.mask, completion=config.completion)
-        for exemplar, example in zip(exemplars, state.chosen, strict=True)
-    ]
+    features = _features(state, config)
     state.source, completed = completion.complete_features(
         exemplars,
         state.made("source"),
@@ -319,7 +340,8 @@ def _complete_features(state: State, config: DepthConfig) -> State:
         relief=(state.depth, [example.depth for example in state.chosen]),
         completion=config.completion,
     )
-    del features  # label maps: not held through the blend, the finish's peak
+    state.features = None  # label maps: not held through the blend, the finish's peak
+    del features
     log.info("small features completed: %d", completed)
     state.changed = f"{completed} small features copied whole"
     return state
