@@ -17,8 +17,8 @@ stage                  what it does
 ``synthesize``         the engine, coarse to fine, by the level plan
 ``collapse``           the voted map at the finest level
 ``copy``               every pixel's source: the pixel its windows agree on
-``seams``              the copy's seams moved to where the sources agree
 ``complete_features``  small features the copy cut, copied whole
+``seams``              a few whole copies, their seams where they agree
 ``outside``            the blend's reference outside the object: the copy
 ``blend``              the seams blended in the gradient domain
 ``rgb``                back to RGB, background 0
@@ -299,10 +299,13 @@ def _seams(state: State, config: DepthConfig) -> State:
     old = state.made("source")
     exemplars = state.made("exemplars")
     state.features = _features(state, config)
-    # A copied small feature (an eye, a brow) is kept where it is: the rearrangement
-    # weighs colours against seams, and a feature's seams are its outline, which a few
-    # pixels of colour can lose to. The feature stage completes what the copy cut.
-    on_feature = completion.copies_features(old, state.features)
+    # A small feature (an eye, a brow) that the map copies from an example's, completed
+    # whole by the stage before, or that the voted map shows, is kept where it is: the
+    # rearrangement weighs colours against seams, and a small feature's outline is long
+    # for its few pixels of colour (a low-contrast eye ring lost to its seams).
+    shown, _ = completion.small_features(state.made("ycbcr"), state.mask, completion=config.completion)
+    kept = completion.copies_features(old, state.features) | (shown > 0)
+    del shown
     size = float(np.sqrt(state.mask.sum()))
     new = place_seams(
         exemplars,
@@ -310,10 +313,10 @@ def _seams(state: State, config: DepthConfig) -> State:
         state.made("ycbcr"),
         smoothness=config.finish.seam_smoothness * size / 100.0,
         spread=config.finish.seam_spread,
-        mask=state.mask & ~on_feature,
+        mask=state.mask & ~kept,
         exemplar_masks=[example.mask for example in state.chosen],
     )
-    state.source = new
+    state.source, state.features = new, None  # label maps: not held through the blend
     state.changed = f"{_changed_pixels(old, new)} pixels take another source"
     return state
 
@@ -340,7 +343,6 @@ def _complete_features(state: State, config: DepthConfig) -> State:
         relief=(state.depth, [example.depth for example in state.chosen]),
         completion=config.completion,
     )
-    state.features = None  # label maps: not held through the blend, the finish's peak
     del features
     log.info("small features completed: %d", completed)
     state.changed = f"{completed} small features copied whole"
@@ -356,6 +358,7 @@ def _outside(state: State, config: DepthConfig) -> State:
     # object's edge towards it, so the reference there is the copy itself.
     mask, source, ycbcr = state.mask, state.made("source"), state.made("ycbcr")
     exemplars = state.made("exemplars")
+    state.features = None  # label maps: not held through the blend, the finish's peak
     count = 0
     for y0 in range(0, mask.shape[0], _ROWS):
         rows = slice(y0, y0 + _ROWS)
@@ -407,12 +410,12 @@ STAGES: tuple[Stage, ...] = (
     Stage("synthesize", _synthesize),
     Stage("collapse", _collapse),
     Stage("copy", _copy, _copies),
-    Stage("seams", _seams, lambda c: c.finish.copies and c.finish.seam_smoothness > 0),
     Stage(
         "complete_features",
         _complete_features,
         lambda c: c.finish.copies and c.finish.complete_features,
     ),
+    Stage("seams", _seams, lambda c: c.finish.copies and c.finish.seam_smoothness > 0),
     Stage("outside", _outside, _copies),
     Stage("blend", _blend, _copies),
     Stage("rgb", _rgb),
