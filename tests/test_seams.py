@@ -36,8 +36,12 @@ def energy(exemplars, source, reference, mask, smoothness=1.0):
         q = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
         pairs = mask[p] & mask[q] & (labels[p] != labels[q]).any(-1)
         # the p-label read at q and the q-label read at p
-        lp_at_q = np.stack([labels[p][..., 0], labels[p][..., 1] + rows[q], labels[p][..., 2] + columns[q]], -1)
-        lq_at_p = np.stack([labels[q][..., 0], labels[q][..., 1] + rows[p], labels[q][..., 2] + columns[p]], -1)
+        lp_at_q = np.stack(
+            [labels[p][..., 0], labels[p][..., 1] + rows[q], labels[p][..., 2] + columns[q]], -1
+        )
+        lq_at_p = np.stack(
+            [labels[q][..., 0], labels[q][..., 1] + rows[p], labels[q][..., 2] + columns[p]], -1
+        )
         a, av = copied[p], valid[p]
         b, bv = colours(exemplars, lq_at_p)
         c, cv = colours(exemplars, lp_at_q)

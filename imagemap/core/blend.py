@@ -207,8 +207,15 @@ def place_seams(
             region = ndimage.maximum_filter(ids[rows, columns] == k + 1, size=2 * reach + 1)
             moves += 1
             moved = _expand(
-                _kernels, (packed, shapes, inside), reference, (label_e, label_y, label_x), movable,
-                (rows, columns), region, alpha, smoothness,
+                _kernels,
+                (packed, shapes, inside),
+                reference,
+                (label_e, label_y, label_x),
+                movable,
+                (rows, columns),
+                region,
+                alpha,
+                smoothness,
             )
             if moved is None:
                 expanded_at[key] = moves
@@ -252,8 +259,20 @@ def _expand(kernels, exemplars, reference, labels, movable, crop, region, alpha,
     rows, columns = crop
     packed, shapes, inside = exemplars
     node, cost0, cost1, first, second, capacity = kernels.expansion_terms(
-        packed, shapes, inside, reference, label_e, label_y, label_x, movable, region,
-        rows.start, columns.start, alpha, float(smoothness), _SEAM_FLOOR,
+        packed,
+        shapes,
+        inside,
+        reference,
+        label_e,
+        label_y,
+        label_x,
+        movable,
+        region,
+        rows.start,
+        columns.start,
+        alpha,
+        float(smoothness),
+        _SEAM_FLOOR,
     )
     n = len(cost0)
     if n == 0:

@@ -666,9 +666,10 @@ def expansion_terms(
     Every object pixel has a label: an exemplar and an offset (source = pixel +
     offset). In the move, each *free* pixel (inside ``region``, a crop whose corner
     is (y0, x0), not labelled ``alpha`` yet, with ``alpha``'s source inside its
-    exemplar's object, ``inside``) keeps its label (x = 0) or takes ``alpha`` (x = 1); all other pixels
-    keep theirs. Costs: the squared distance of the copied colour to ``reference``,
-    plus ``smooth`` times the seam costs (:func:`_seam`). A pair of free neighbours
+    exemplar's object, ``inside``) keeps its label (x = 0) or takes ``alpha``
+    (x = 1); all other pixels keep theirs. Costs: the squared distance of the
+    copied colour to ``reference``, plus ``smooth`` times the seam costs
+    (:func:`_seam`). A pair of free neighbours
     p, q costs E(xp, xq) = a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with
     a = seam(lp, lq), b = seam(lp, alpha), c = seam(alpha, lq); b + c >= a as the seam
     cost is a distance, so the move is a minimum cut (Kolmogorov & Zabih 2004).

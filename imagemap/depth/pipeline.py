@@ -303,7 +303,9 @@ def _seams(state: State, config: DepthConfig) -> State:
     # whole by the stage before, or that the voted map shows, is kept where it is: the
     # rearrangement weighs colours against seams, and a small feature's outline is long
     # for its few pixels of colour (a low-contrast eye ring lost to its seams).
-    shown, _ = completion.small_features(state.made("ycbcr"), state.mask, completion=config.completion)
+    shown, _ = completion.small_features(
+        state.made("ycbcr"), state.mask, completion=config.completion
+    )
     kept = completion.copies_features(old, state.features) | (shown > 0)
     del shown
     size = float(np.sqrt(state.mask.sum()))
