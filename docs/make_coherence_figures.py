@@ -1,8 +1,9 @@
 """The README's coherence pictures (issue #32): python docs/make_coherence_figures.py [OUT_DIR]
 
 - ``coherence.png``: the ellipsoid-fish outside task (``benchmarks/ellipsoid_fish.py``) at
-  200x150, 512^2 and 1024^2, each row truth | 0.1.0's default (positions relative to each
-  object's centroid) | 0.2.0's (registered), with their fragments for 90 % of the object;
+  200x150, 512^2 and 1024^2, each row truth | 0.1.0's matching (positions relative to each
+  object's centroid) | registered, without the seam stage | the default (registered, the
+  copy rearranged by graph cuts), with their fragments for 90 % of the object;
 - ``fish_2048.png``: a generated 2048x1536 fish from eight examples: truth | ours |
   provenance;
 - ``mesh_four_angles.png``: a generated fish mesh textured by the mesh route, from four
@@ -77,8 +78,9 @@ def coherence(out: Path, sizes=((200, 150), (512, 512), (1024, 1024)), height: i
         box = height * 4 // 3
         cells = [_label(_fit(_on_white(truth, mask), height, box), f"truth {width}x{h}")]
         for name, config in (
-            ("0.1.0", PRESETS["fish"].replace_fields(**BEFORE)),
-            ("0.2.0", PRESETS["fish"]),
+            ("centroid", PRESETS["fish"].replace_fields(**BEFORE)),
+            ("no seams", PRESETS["fish"].replace_fields(seam_smoothness=0.0)),
+            ("default", PRESETS["fish"]),
         ):
             result = imagemap.colorize(depth, database, config, seed=0)
             count = fragments(result.source, mask).count_90

@@ -173,8 +173,9 @@ def test_coherence_columns_in_results_and_summary(class_evaluation, tmp_path):
         full = obj.results["full"].metrics
         assert full.fragments_90 > copy.fragments_90 and full.seam_length > copy.seam_length
         assert 0 < full.continuity < 1.5 and 0 < full.midtone_ratio < 5
-    # One example: a part has one palette, or none where it falls in the paste's holes.
-    assert table["copy_nearest"]["parts_one_palette"] > table["full"]["parts_one_palette"]
+    # One example: a part has one palette, or none where it falls in the paste's holes;
+    # the synthesis can do as well, not better.
+    assert table["copy_nearest"]["parts_one_palette"] >= table["full"]["parts_one_palette"]
     assert table["full"]["fragments_90"] > 10  # a patch method: many pieces
 
 
