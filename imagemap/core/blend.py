@@ -165,8 +165,6 @@ def place_seams(
     >>> np.unique(placed[..., 1] - rows).tolist()  # one offset left
     [8]
     """
-    from imagemap.core import kernels as _kernels  # deferred: start-up (numba)
-
     packed, shapes = _packed(exemplars)
     inside = np.zeros(packed.shape[:3], bool)
     for k, exemplar in enumerate(exemplars):
@@ -207,7 +205,6 @@ def place_seams(
             region = ndimage.maximum_filter(ids[rows, columns] == k + 1, size=2 * reach + 1)
             moves += 1
             moved = _expand(
-                _kernels,
                 (packed, shapes, inside),
                 reference,
                 (label_e, label_y, label_x),
@@ -250,10 +247,12 @@ def _label_table(label_e, label_y, label_x, movable):
     return alphas, ids, areas.astype(np.int64), ndimage.find_objects(ids, max_label=len(keys))
 
 
-def _expand(kernels, exemplars, reference, labels, movable, crop, region, alpha, smoothness):
+def _expand(exemplars, reference, labels, movable, crop, region, alpha, smoothness):
     """One alpha-expansion move over ``region`` (inside ``crop``), labels updated in place;
     the pixels that took ``alpha`` (in the crop), or None."""
     import maxflow  # deferred: start-up: only the copy's seams need it
+
+    from imagemap.core import kernels  # deferred: start-up (numba)
 
     label_e, label_y, label_x = labels
     rows, columns = crop

@@ -622,7 +622,10 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief, comp
                 if fit < completion.skipped_relief_fit:
                     continue  # the relief does not say where it goes
             ty, tx = fy - my, fx - mx
-            if not _within(ty, tx, (height, width)) or _copies_feature(source, features, ty, tx):
+            if (
+                not _within(ty, tx, (height, width))
+                or copies_features(source[ty, tx][None], features).any()
+            ):
                 continue
             colour = exemplars[k][fy, fx].mean(0)
             # The ring's pixels at the chosen offset stand for the map's pixels of the
@@ -681,16 +684,6 @@ def copies_features(source: np.ndarray, features: list[tuple[np.ndarray, int]]) 
         sx = np.clip(source[..., 2][at], 0, labels.shape[1] - 1)
         found[at] = labels[sy, sx] > 0
     return found
-
-
-def _copies_feature(source, features, ys, xs) -> bool:
-    """Whether any of the map's pixels (ys, xs) copies a feature of any exemplar."""
-    e, sy, sx = source[ys, xs, 0], source[ys, xs, 1], source[ys, xs, 2]
-    for k, (labels, _) in enumerate(features):
-        at = e == k
-        if (labels[sy[at], sx[at]] > 0).any():
-            return True
-    return False
 
 
 def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):

@@ -298,7 +298,6 @@ def _copy(state: State, config: DepthConfig) -> State:
 def _seams(state: State, config: DepthConfig) -> State:
     old = state.made("source")
     exemplars = state.made("exemplars")
-    state.features = _features(state, config)
     # A small feature (an eye, a brow) that the map copies from an example's, completed
     # whole by the stage before, or that the voted map shows, is kept where it is: the
     # rearrangement weighs colours against seams, and a small feature's outline is long
@@ -306,7 +305,7 @@ def _seams(state: State, config: DepthConfig) -> State:
     shown, _ = completion.small_features(
         state.made("ycbcr"), state.mask, completion=config.completion
     )
-    kept = completion.copies_features(old, state.features) | (shown > 0)
+    kept = completion.copies_features(old, _features(state, config)) | (shown > 0)
     del shown
     size = float(np.sqrt(state.mask.sum()))
     new = place_seams(
@@ -318,7 +317,7 @@ def _seams(state: State, config: DepthConfig) -> State:
         mask=state.mask & ~kept,
         exemplar_masks=[example.mask for example in state.chosen],
     )
-    state.source, state.features = new, None  # label maps: not held through the blend
+    state.source = new
     state.changed = f"{_changed_pixels(old, new)} pixels take another source"
     return state
 
@@ -335,17 +334,15 @@ def _features(state: State, config: DepthConfig) -> list[tuple[np.ndarray, int]]
 
 def _complete_features(state: State, config: DepthConfig) -> State:
     exemplars = state.made("exemplars")
-    features = _features(state, config)
     state.source, completed = completion.complete_features(
         exemplars,
         state.made("source"),
-        features,
+        _features(state, config),
         state.mask,
         [example.mask for example in state.chosen],
         relief=(state.depth, [example.depth for example in state.chosen]),
         completion=config.completion,
     )
-    del features
     log.info("small features completed: %d", completed)
     state.changed = f"{completed} small features copied whole"
     return state
