@@ -746,3 +746,30 @@ def expansion_terms(
                     capacity[m] = max(b + c - a, 0.0)  # >= 0 but for rounding
                     m += 1
     return node, cost0, cost1, first[:m], second[:m], capacity[:m]
+
+
+@njit(cache=True, nogil=True)
+def nearest_host_distance(colours, host, cell_y, cell_x):
+    """Each pixel's smallest colour distance to the host colours of its low-resolution
+    cell (``cell_y[y]``, ``cell_x[x]``) and of the eight cells around it (clipped).
+
+    A pass over the pixels instead of nine full-size gathers of the hosts; float32
+    throughout, as the arrays are.
+    """
+    height, width, channels = colours.shape
+    rows, columns = host.shape[0], host.shape[1]
+    out = np.empty((height, width), np.float32)
+    for y in range(height):
+        for x in range(width):
+            best = np.float32(np.inf)
+            for dy in range(-1, 2):
+                hy = min(max(cell_y[y] + dy, 0), rows - 1)
+                for dx in range(-1, 2):
+                    hx = min(max(cell_x[x] + dx, 0), columns - 1)
+                    s = np.float32(0.0)
+                    for c in range(channels):
+                        d = colours[y, x, c] - host[hy, hx, c]
+                        s += d * d
+                    best = min(best, s)
+            out[y, x] = np.sqrt(best)
+    return out

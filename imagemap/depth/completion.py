@@ -132,13 +132,14 @@ def small_features(
     )
     cell_y = np.minimum((np.arange(colours.shape[0]) * factor).astype(int), host.shape[0] - 1)
     cell_x = np.minimum((np.arange(colours.shape[1]) * factor).astype(int), host.shape[1] - 1)
-    distance = np.full(colours.shape[:2], np.inf, np.float32)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            ys = np.clip(cell_y + dy, 0, host.shape[0] - 1)
-            xs = np.clip(cell_x + dx, 0, host.shape[1] - 1)
-            near = host[ys[:, None], xs[None, :]]
-            np.minimum(distance, np.sqrt(((colours - near) ** 2).sum(-1)), out=distance)
+    from imagemap.core.kernels import nearest_host_distance  # deferred: start-up (numba)
+
+    distance = nearest_host_distance(
+        np.ascontiguousarray(colours, np.float32),
+        np.ascontiguousarray(host, np.float32),
+        cell_y.astype(np.int64),
+        cell_x.astype(np.int64),
+    )
     stands_out = distance >= completion.feature_contrast
     stands_out &= inside
     stands_out = ndimage.binary_fill_holes(stands_out)
