@@ -372,3 +372,31 @@ def test_a_feature_copied_twice_over_itself_is_drawn_once():
     assert 2 < Completion().double_shift * 13
     kept, _ = complete_features([exemplar], ragged, features, mask, [mask])
     np.testing.assert_array_equal(kept[42:48], ragged[42:48])
+
+
+def test_nearest_host_distance_equals_the_nine_gathers():
+    # The kernel must give, bit for bit, the smallest distance to the hosts of a pixel's
+    # cell and of the eight around it (clipped at the borders), as nine gathers would.
+    from imagemap.core.kernels import nearest_host_distance
+
+    rng = np.random.default_rng(3)
+    colours = rng.random((37, 29, 3)).astype(np.float32)
+    host = rng.random((9, 7, 3)).astype(np.float32)
+    cell_y = np.minimum(np.arange(37) // 4, 8)
+    cell_x = np.minimum(np.arange(29) // 4, 6)
+    expected = np.full((37, 29), np.inf, np.float32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            ys = np.clip(cell_y + dy, 0, 8)
+            xs = np.clip(cell_x + dx, 0, 6)
+            gap = np.sqrt(((colours - host[ys[:, None], xs[None, :]]) ** 2).sum(-1))
+            np.minimum(expected, gap, out=expected)
+    found = nearest_host_distance(colours, host, cell_y.astype(np.int64), cell_x.astype(np.int64))
+    assert found.dtype == np.float32
+    np.testing.assert_array_equal(found, expected)
+    # and a pixel equal to a neighbouring cell's host is at distance 0
+    colours[0, 0] = host[1, 1]
+    assert (
+        nearest_host_distance(colours, host, cell_y.astype(np.int64), cell_x.astype(np.int64))[0, 0]
+        == 0
+    )
