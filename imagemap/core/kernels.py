@@ -700,6 +700,25 @@ def expansion_terms(
                 continue
             node[i, j] = n
             n += 1
+    # Each free pixel's gap between its own source's colour and alpha's: between two
+    # free neighbours with one label (most pairs) both of the move's seams are made of
+    # these two gaps, which would otherwise be gathered again for every pair.
+    to_alpha = np.empty(n)
+    for i in range(h):
+        for j in range(w):
+            p = node[i, j]
+            if p >= 0:
+                y, x = y0 + i, x0 + j
+                to_alpha[p] = _colour_gap(
+                    exemplars,
+                    shapes,
+                    label_e[y, x],
+                    y + label_y[y, x],
+                    x + label_x[y, x],
+                    ae,
+                    y + ay,
+                    x + ax,
+                )
     cost0 = np.zeros(n)
     cost1 = np.zeros(n)
     first = np.empty(2 * n, np.int64)
@@ -730,6 +749,16 @@ def expansion_terms(
                     cost1[p] += smooth * _seam(
                         exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor
                     )
+                elif (k == 0 or k == 2) and e == f and oy == fy and ox == fx:
+                    # one label: no seam now, and alpha's seam on either side is the
+                    # same (the same two gaps)
+                    b = smooth * (floor + to_alpha[p] + to_alpha[q])
+                    cost1[p] += b
+                    cost1[q] -= b
+                    first[m] = p
+                    second[m] = q
+                    capacity[m] = max(b + b, 0.0)
+                    m += 1
                 elif k == 0 or k == 2:  # each pair of free pixels once
                     a = smooth * _seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor)
                     b = smooth * _seam(
