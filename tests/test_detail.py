@@ -12,7 +12,7 @@ from scipy import ndimage
 from imagemap import Database, DepthConfig, Example, colorize
 from imagemap.core.blend import coherent_edges, copy_through, seamless_copy
 from imagemap.depth.config import PRESETS, Finish
-from imagemap.depth.guides import level_patch_sizes, pyramid_levels
+from imagemap.depth.guides import level_patch_sizes, pyramid_levels, silhouette_band
 from imagemap.metrics import (
     blur_ratio,
     feature_components,
@@ -559,3 +559,16 @@ def test_example_mappings_refuse_the_old_boolean(blob_database):
     plain, bands = (example_mappings(example, 2, kind) for kind in ("gaussian", "laplacian"))
     assert np.allclose(plain[1].appearance, bands[1].appearance)  # the coarsest level: equal
     assert not np.allclose(plain[0].appearance, bands[0].appearance)
+
+
+@pytest.mark.parametrize("saturation", [1.0, 1.5, 2.0, 3.7, 6.0])
+def test_silhouette_band_equals_the_distance_transforms(saturation):
+    # Below the switch the band is found from the offsets nearer than the saturation,
+    # above it from two distance transforms: both must be the signed distance, clipped.
+    rng = np.random.default_rng(7)
+    for trial in range(5):
+        mask = ndimage.gaussian_filter(rng.random((37 + trial, 45)), 2.5) > 0.5
+        inside = ndimage.distance_transform_edt(mask)
+        outside = ndimage.distance_transform_edt(~mask)
+        expected = np.clip((inside - outside) / saturation, -1, 1).astype(np.float32)
+        np.testing.assert_array_equal(silhouette_band(mask, saturation), expected)

