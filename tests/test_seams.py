@@ -126,3 +126,32 @@ def test_pixels_outside_the_mask_or_without_a_source_are_left_alone():
     np.testing.assert_array_equal(placed[0:4, 0:4], source[0:4, 0:4])
     # inside, the two halves became one copy
     assert len(np.unique(labels_of(placed)[4:, :28, 1])) == 1
+
+
+def test_a_feature_copied_in_pieces_becomes_one_of_its_own_copies():
+    """A dark spot copied half from one example's spot and half from another's (paler
+    ground), inside a ground copied from the first: as a group, the spot may only take
+    its own two labels, so it becomes the first example's spot whole (the second's
+    outline shows its paler ground) and never the ground, even where the voted map
+    missed the spot."""
+    first = np.full((64, 64, 3), 0.7, np.float32)
+    first[40:46, 40:46] = 0.05
+    second = np.full((64, 64, 3), 0.6, np.float32)
+    second[20:26, 20:26] = 0.05
+    source = shifted((32, 32), 0, base=2)
+    source[13:19, 13:19, 1:] += 25  # the first example's spot
+    source[13:19, 16:19, 0] = 1  # its right half from the second's spot
+    source[13:19, 16:19, 1:] -= 20
+    groups = np.zeros((32, 32), int)
+    groups[13:19, 13:19] = 1
+    spot_labels = {tuple(v) for v in labels_of(source)[13:19, 13:19].reshape(-1, 3)}
+    assert len(spot_labels) == 2
+    shown = colours([first, second], source)[0]
+    placed = place_seams([first, second], source, shown, groups=groups)
+    spot = labels_of(placed)[13:19, 13:19].reshape(-1, 3)
+    assert {tuple(v) for v in spot} == {(0, 27, 27)}  # the first example's spot, whole
+    assert colours([first, second], placed)[0][13:19, 13:19].max() < 0.1
+    missed = np.full((32, 32, 3), 0.7)  # a voted map without the spot
+    placed = place_seams([first, second], source, missed, groups=groups)
+    assert {tuple(v) for v in labels_of(placed)[13:19, 13:19].reshape(-1, 3)} <= spot_labels
+    assert colours([first, second], placed)[0][13:19, 13:19].max() < 0.1

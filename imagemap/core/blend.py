@@ -109,6 +109,7 @@ def place_seams(
     sweeps: int = 2,
     mask: np.ndarray | None = None,
     exemplar_masks: list[np.ndarray] | None = None,
+    groups: np.ndarray | None = None,
 ) -> np.ndarray:
     """A source map with fewer, cheaper seams, placed where the sources agree.
 
@@ -145,6 +146,11 @@ def place_seams(
         The exemplars' objects: a pixel only takes a new label whose source lies
         inside one (the exemplars' colours past their outlines are a continuation for
         the windows, not a part to copy). Default: anywhere in the exemplar.
+    groups : ndarray of int, (H, W), optional
+        Pixels of group g > 0 (a small feature, say) only take labels the group
+        used at the start of the sweep: a feature copied in pieces from two
+        examples can become one of its own copies, never a piece of its
+        surroundings. Their seams with the surroundings are weighed like any other.
 
     Returns
     -------
@@ -186,6 +192,7 @@ def place_seams(
     moves = 0
     for _ in range(sweeps):
         alphas, ids, areas, boxes = _label_table(label_e, label_y, label_x, movable)
+        in_groups = _group_labels(label_e, label_y, label_x, groups, movable)
         for k in np.argsort(-areas, kind="stable"):  # largest first, ties in label order
             if areas[k] == 0:  # taken over by the others' moves
                 continue
@@ -204,6 +211,9 @@ def place_seams(
                 continue
             region = ndimage.maximum_filter(ids[rows, columns] == k + 1, size=2 * reach + 1)
             moves += 1
+            if groups is not None:  # a group's pixels only take its own labels
+                grouped = groups[rows, columns]
+                region &= (grouped == 0) | np.isin(grouped, in_groups.get(key, ()))
             moved = _expand(
                 (packed, shapes, inside),
                 reference,
@@ -232,18 +242,44 @@ def place_seams(
 _SEAM_FLOOR = 1e-3
 
 
+def _group_labels(label_e, label_y, label_x, groups, movable):
+    """For each label used inside groups (``groups`` > 0), those groups' numbers."""
+    if groups is None:
+        return {}
+    held = (groups > 0) & movable
+    pairs = np.unique(
+        np.stack([_label_keys(label_e, label_y, label_x, held), groups[held].astype(np.int64)], 1),
+        axis=0,
+    )
+    table: dict[tuple[int, ...], list[int]] = {}
+    for label, group in zip(_label_values(pairs[:, 0]).tolist(), pairs[:, 1].tolist(), strict=True):
+        table.setdefault(tuple(label), []).append(group)
+    return {label: np.array(numbers) for label, numbers in table.items()}
+
+
+def _label_keys(label_e, label_y, label_x, where):
+    """One integer per label of the pixels ``where``: offsets fit in 20 bits whatever the
+    image size (< 2^19 px)."""
+    key = (label_e[where] << 40) | ((label_y[where] + (1 << 19)) << 20)
+    return key | (label_x[where] + (1 << 19))
+
+
+def _label_values(keys):
+    """(exemplar, dy, dx) of each key of :func:`_label_keys`, (n, 3)."""
+    return np.stack(
+        [keys >> 40, ((keys >> 20) & 0xFFFFF) - (1 << 19), (keys & 0xFFFFF) - (1 << 19)], axis=1
+    )
+
+
 def _label_table(label_e, label_y, label_x, movable):
     """The labels in use: (exemplar, dy, dx) of each, a map of their numbers + 1 (0: none),
     their areas and their bounding boxes."""
-    # One integer per label: offsets fit in 20 bits whatever the image size (< 2^19 px).
-    key = (label_e[movable] << 40) | ((label_y[movable] + (1 << 19)) << 20)
-    key |= label_x[movable] + (1 << 19)
-    keys, inverse, areas = np.unique(key, return_inverse=True, return_counts=True)
+    keys, inverse, areas = np.unique(
+        _label_keys(label_e, label_y, label_x, movable), return_inverse=True, return_counts=True
+    )
     ids = np.zeros(movable.shape, np.int64)
     ids[movable] = inverse.ravel() + 1
-    alphas = np.stack(
-        [keys >> 40, ((keys >> 20) & 0xFFFFF) - (1 << 19), (keys & 0xFFFFF) - (1 << 19)], axis=1
-    )
+    alphas = _label_values(keys)
     return alphas, ids, areas.astype(np.int64), ndimage.find_objects(ids, max_label=len(keys))
 
 

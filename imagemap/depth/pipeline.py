@@ -299,9 +299,10 @@ def _seams(state: State, config: DepthConfig) -> State:
     old = state.made("source")
     exemplars = state.made("exemplars")
     # A small feature (an eye, a brow) that the map copies from an example's, completed
-    # whole by the stage before, or that the voted map shows, is kept where it is: the
-    # rearrangement weighs colours against seams, and a small feature's outline is long
-    # for its few pixels of colour (a low-contrast eye ring lost to its seams).
+    # whole by the stage before, or that the voted map shows, only takes labels it already
+    # uses: the rearrangement weighs colours against seams, and a small feature's outline
+    # is long for its few pixels of colour (a low-contrast eye ring lost to its seams). It
+    # may still become one of its own copies: an eye copied in pieces from two examples.
     shown, _ = completion.small_features(
         state.made("ycbcr"), state.mask, completion=config.completion
     )
@@ -314,8 +315,9 @@ def _seams(state: State, config: DepthConfig) -> State:
         state.made("ycbcr"),
         smoothness=config.finish.seam_smoothness * size / 100.0,
         spread=config.finish.seam_spread,
-        mask=state.mask & ~kept,
+        mask=state.mask,
         exemplar_masks=[example.mask for example in state.chosen],
+        groups=ndimage.label(kept & state.mask)[0],
     )
     state.source = new
     state.changed = f"{_changed_pixels(old, new)} pixels take another source"
