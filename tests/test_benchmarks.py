@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -125,9 +126,7 @@ def test_unknown_group_is_an_input_error(bench, tmp_path):
 
 @pytest.mark.slow
 def test_scaling_curves_have_time_and_memory_per_point(bench, tmp_path):
-    settings = bench.replace(
-        bench.QUICK, scaling_sizes=(64,), scaling_m=(1,), scaling_database=(10,)
-    )
+    settings = replace(bench.QUICK, scaling_sizes=(64,), scaling_m=(1,), scaling_database=(10,))
     rows = bench.run_scaling(tmp_path / "data", settings, trace=False)
     cases = [r["case"] for r in rows]
     assert cases == [
