@@ -757,7 +757,7 @@ def expansion_terms(
                     cost1[q] -= b
                     first[m] = p
                     second[m] = q
-                    capacity[m] = max(b + b, 0.0)
+                    capacity[m] = b + b  # both seams' gaps are >= 0: no rounding guard
                     m += 1
                 elif k == 0 or k == 2:  # each pair of free pixels once
                     a = smooth * _seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor)
