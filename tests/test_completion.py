@@ -46,17 +46,59 @@ def test_small_features_are_compact_sharp_and_rare():
     assert (ys.min(), ys.max(), xs.min(), xs.max()) == (20, 23, 20, 33)
 
 
-def test_a_feature_has_one_ground():
+def test_a_feature_ends_at_an_edge_on_one_ground_or_on_two():
     # Two parts meeting at a straight edge (skin and cloth), a dark mark on each
-    # side's own ground and one across the edge: only the two on one ground are features.
+    # side's own ground and one across the edge: each ends at an edge all around, of a
+    # colour found nowhere near it, so all three are features (the one across the edge
+    # since its grounds may be of several colours, as an eye across a fish's bands).
     image = _skin()
     image[:, 60:] = 0.8
     image[30:34, 20:28] = 0.2
     image[60:64, 56:64] = 0.2
     image[90:94, 85:93] = 0.2
     labels, n = small_features(image, np.ones((120, 120), bool))
-    assert n == 2
-    assert labels[31, 23] and labels[91, 88] and not labels[61, 60]
+    assert n == 3
+    assert labels[31, 23] and labels[91, 88] and labels[61, 60]
+
+
+def _banded(size=120, period=16):
+    """Vertical bands, dark and light, 8 px each with soft edges (a fish's bars)."""
+    wave = np.tanh(2.0 * np.sin(2 * np.pi * np.arange(size) / period))
+    image = np.empty((size, size, 1), np.float32)
+    image[...] = (0.475 + 0.125 * wave)[None, :, None]
+    return image
+
+
+def _disc(image, y, x, radius, value):
+    yy, xx = np.mgrid[0 : image.shape[0], 0 : image.shape[1]]
+    image[np.hypot(yy - y, xx - x) <= radius] = value
+
+
+def test_an_eye_across_bands_is_a_feature():
+    # A white disc with a dark pupil across three bands: its ground is two colours, so
+    # the one-ground test refuses it, but it ends at an edge all around and nothing of
+    # its colour is near. (Before grounds of several colours it was no feature, and
+    # a copy could cut it freely: the 2048x1536 fish's eye came out as an orange fleck.)
+    image = _banded(period=12)
+    _disc(image, 60, 60, 8, 0.95)
+    _disc(image, 60, 60, 3, 0.05)
+    labels, n = small_features(image, np.ones((120, 120), bool))
+    assert n == 1
+    assert labels[60, 60] and labels[60, 67] and not labels[60, 70]
+
+
+def test_on_bands_a_colour_found_nearby_is_a_texture_not_a_feature():
+    # Two equal discs, 13 px wide and 11 px apart, on the bands: each has the other's
+    # colour within two of its widths (rare_reach), as a check among checks or a
+    # stripe's piece between others. Looked for within one width only, each is alone.
+    # On one ground (plain skin) the same pair is two features, as two eyes are.
+    everywhere = np.ones((120, 120), bool)
+    for ground, expected in ((_banded(), 0), (_skin(), 2)):
+        image = ground.copy()
+        _disc(image, 60, 40, 6, 0.95)
+        _disc(image, 60, 64, 6, 0.95)
+        assert small_features(image, everywhere)[1] == expected
+        assert small_features(image, everywhere, completion=Completion(rare_reach=1.0))[1] == 2
 
 
 def test_a_brow_touching_a_larger_part_is_a_feature_of_its_own():
@@ -309,6 +351,39 @@ def test_a_skipped_feature_goes_where_its_relief_fits():
     np.testing.assert_array_equal(whole[41:45, 36:48], exemplar[38:42, 34:46])
 
 
+def test_a_cut_feature_goes_onto_its_relief_and_leaves_no_piece_behind():
+    # The map copies the left half of the lips where the exemplar has them; the query's
+    # bump under the lips lies 3 px lower and 5 px further right. Without the reliefs
+    # the lips are completed where the cut copy was; with them, on the bump, and the
+    # half copy's pixels left behind copy skin, not a second piece of the lips.
+    exemplar = _textured_skin_with_lips()
+    features = [small_features(exemplar, np.ones((80, 80), bool))]
+    mask = np.ones((80, 80), bool)
+    yy, xx = np.mgrid[0:80, 0:80]
+
+    def bump(y, x):
+        return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 / 8.0 + (xx - x) ** 2 / 30.0))
+
+    source = _identity(80)
+    source[30:50, 40:60, 2] += 6  # the lips' right half copies skin from further right
+    lips = features[0][0] > 0
+    for relief, (top, left) in (
+        (None, (38, 34)),
+        ((bump(42.5, 44.5), [bump(39.5, 39.5)]), (41, 39)),
+    ):
+        completed_source, completed = complete_features(
+            [exemplar], source, features, mask, [mask], relief=relief
+        )
+        assert completed == 1
+        whole = copy_through([exemplar], completed_source)
+        np.testing.assert_array_equal(
+            whole[top : top + 4, left : left + 12], exemplar[38:42, 34:46]
+        )
+        copies_lips = lips[completed_source[..., 1], completed_source[..., 2]]
+        assert copies_lips.sum() == lips.sum()
+        assert copies_lips[top : top + 4, left : left + 12].all()
+
+
 def test_relief_registration_finds_a_moved_relief_with_full_correlation():
     # The query's relief is the exemplar's moved by (3, -2); searched from 2 px off in
     # each direction, the registration finds the move, with a correlation of nearly 1, over a
@@ -326,6 +401,23 @@ def test_relief_registration_finds_a_moved_relief_with_full_correlation():
     )
     assert (dy, dx) == (3, -2)
     assert fit > 0.999
+
+
+def test_relief_registration_sees_a_bump_beside_the_outline_not_the_outline():
+    # The exemplar's bump lies well inside its object; the query's, 4 px from its
+    # outline (depth 0 beyond). The step down to the background is no relief: the
+    # registration still finds the bump.
+    yy, xx = np.mgrid[0:90, 0:90]
+
+    def bump(y, x):
+        return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 + (xx - x) ** 2) / 18.0)
+
+    exemplar_depth, query_depth = bump(40, 40), bump(40, 56)
+    query_depth[:, 66:] = 0.0
+    region = np.hypot(yy[:21, :21] - 10, xx[:21, :21] - 10) <= 8
+    dy, dx, fit = completion._register(query_depth, exemplar_depth, region, 30, 30, 0, -12, reach=8)
+    assert (dy, dx) == (0, -16)
+    assert fit > 0.95
 
 
 def test_fft_correlation_matches_scipy_signal():

@@ -19,7 +19,10 @@ iris belongs to its eye), that are
   stripe's corner cut by the outline);
 - on one ground, and ending at an edge: the pixels just outside are of one
   colour and differ from the feature's boundary (not a blush, whose colour fades
-  over its width, nor a shirt's corner cut by a neckline);
+  over its width, nor a shirt's corner cut by a neckline); or, on a ground of
+  several colours (an eye across a fish's bands, a spot among veins), ending at
+  an edge all around and of a colour rare within ``rare_reach`` of its widths
+  (not a check among checks, nor a stripe's piece between others);
 - rare: at most ``max_repeats`` of one colour (not a shirt's squares or a
   fish's spots, which the copy draws as texture).
 
@@ -28,6 +31,10 @@ map that copy it. Where they lie together (one instance) and cover between
 ``partial_share`` and ``complete_share`` of it, the whole feature, with a rim of
 its surroundings, is copied at the mean offset of those pixels (the most complete
 copies first): the feature appears once, whole, where the cut copy had put it.
+Given the reliefs, the offset is then moved, within half the feature's width, to
+where the feature's own relief fits the query's best, where that fit reaches
+``relief_fit`` (an eye goes on the eye's bulge; the cut copy's pixels left behind
+copy the feature's surroundings at the new offset, not a stray piece of it).
 Not where the rim would not match what the map shows there (a feature is
 completed on its own surroundings, never pasted over another part), and not
 beside a whole feature of the same colour (a piece of a second brow above the
@@ -38,7 +45,7 @@ around the example's eye, at offsets near one another, and fills the eye's place
 with plain skin from elsewhere (a large map's finer levels wear an eye down this
 way). Where the map copies ``skipped_ring_share`` of a feature's ring and nothing
 of it, the feature is completed too, at the offset where its relief fits the
-query's depth best (``skipped_relief_fit``), under the same tests, and only where
+query's depth best (``relief_fit``), under the same tests, and only where
 the map shows nothing there yet that stands out from the ring
 (``skipped_place_shown``): the copy may have drawn an eye from pixels that no
 example's feature detection found.
@@ -299,13 +306,20 @@ def _euler_numbers(pieces, m):
 
 
 def _stands_alone(colours, mask, labels, i, box, span, completion, grounds=1):
-    """Whether component i is a feature on one ground: the pixels a short way
-    outside it (an eighth of its width, at least 2 px) are of one colour (at
-    least ``surround_share`` of them within ``feature_contrast`` of their
-    median), and its boundary differs from them by half the feature contrast.
-    Lips, eyes and brows on skin do. A blush, whose colour fades out over its
-    width, and a piece of a part cut by another (a shirt's corner at a neckline,
-    skin on one side and cloth on the other) do not."""
+    """Whether component i is a feature that stands alone on its ground.
+
+    On one ground: the pixels a short way outside it (an eighth of its width, at
+    least 2 px) are of one colour (at least ``surround_share`` of them within
+    ``feature_contrast`` of their median), and its boundary differs from them by half
+    the feature contrast. Lips, eyes and brows on skin do. A blush, whose colour fades
+    out over its width, and a piece of a part cut by another (a shirt's corner at a
+    neckline, skin on one side and cloth on the other) do not.
+
+    On a ground of several colours (an eye across a fish's bands, a spot among a
+    leaf's veins): it ends at an edge all around (:func:`_ends_at_edge`) and its colour
+    is rare around it (:func:`_rare_around`). A check of a shirt, a piece of a stripe
+    between two others or of a part cut by another ends at edges too, but its colour
+    goes on nearby."""
     r = max(2, int(round(span / 8)))
     y0, x0 = max(box[0].start - r - 1, 0), max(box[1].start - r - 1, 0)
     y1, x1 = box[0].stop + r + 1, box[1].stop + r + 1
@@ -328,10 +342,55 @@ def _stands_alone(colours, mask, labels, i, box, span, completion, grounds=1):
         # that part as its second ground.
         rest = ground[~on_ground]
         on_ground |= np.sqrt(((ground - np.median(rest, axis=0)) ** 2).sum(-1)) < contrast
-    if on_ground.mean() < completion.surround_share:
-        return False
-    step = here[edge].mean(0) - ground.mean(0)
-    return bool(np.sqrt((step**2).sum()) >= contrast / 2)
+    if on_ground.mean() >= completion.surround_share:
+        step = here[edge].mean(0) - ground.mean(0)
+        return bool(np.sqrt((step**2).sum()) >= contrast / 2)
+    return _ends_at_edge(here, edge, outside, r, completion) and _rare_around(
+        colours, mask, labels, i, box, span, here[edge].mean(0), completion
+    )
+
+
+def _ends_at_edge(colours, edge, ring, r, completion) -> bool:
+    """Whether at least ``surround_share`` of the ``ring``'s pixels differ by half the
+    feature contrast from the feature's boundary (``edge``) nearest them: it ends at an
+    edge, whatever lies beyond. Both sides are local means along the boundary and along
+    the ring (a Gaussian of half the ring's distance, normalized over each), so that
+    grain does not count."""
+    edge_colour = _local_mean(colours, edge, r / 2)
+    ring_colour = _local_mean(colours, ring, r / 2)
+    _, (ny, nx) = ndimage.distance_transform_edt(~edge, return_indices=True)
+    ry, rx = np.nonzero(ring)
+    step = np.sqrt(((ring_colour[ry, rx] - edge_colour[ny[ry, rx], nx[ry, rx]]) ** 2).sum(-1))
+    return bool((step >= completion.feature_contrast / 2).mean() >= completion.surround_share)
+
+
+def _rare_around(colours, mask, labels, i, box, span, colour, completion) -> bool:
+    """Whether, within ``rare_reach`` of its widths around component i, fewer object
+    pixels than its own are within ``feature_contrast`` of ``colour`` (its boundary's
+    mean): no second piece of it nearby, as there is beside a check or a stripe's piece."""
+    reach = int(np.ceil(completion.rare_reach * span))
+    y0, x0 = max(box[0].start - reach, 0), max(box[1].start - reach, 0)
+    y1, x1 = box[0].stop + reach, box[1].stop + reach
+    own = labels[y0:y1, x0:x1] == i
+    around = mask[y0:y1, x0:x1] & ~ndimage.binary_dilation(own, iterations=2)
+    near = np.sqrt(((colours[y0:y1, x0:x1][around] - colour) ** 2).sum(-1)) < (
+        completion.feature_contrast
+    )
+    return int(near.sum()) < int(own.sum())
+
+
+def _local_mean(colours, where, sigma):
+    """Each pixel's mean colour over the pixels of ``where`` near it (a normalized
+    Gaussian of ``sigma``); meaningful on ``where``."""
+    weight = ndimage.gaussian_filter(where.astype(np.float64), sigma)
+    total = np.stack(
+        [
+            ndimage.gaussian_filter(np.where(where, colours[..., c], 0.0), sigma)
+            for c in range(colours.shape[-1])
+        ],
+        -1,
+    )
+    return total / np.maximum(weight, 1e-12)[..., None]
 
 
 class _Instance(NamedTuple):
@@ -348,6 +407,13 @@ class _Instance(NamedTuple):
     covered: int  # how many of its pixels the map's pixels copy
     colour: np.ndarray  # its mean colour
     offset: tuple[int, int] | None = None  # where to copy it (a skipped one), else the mean
+
+
+def _inside(ys: np.ndarray, xs: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per pixel (ys, xs): whether it lies in ``mask``'s array and on it."""
+    ok = (ys >= 0) & (xs >= 0) & (ys < mask.shape[0]) & (xs < mask.shape[1])
+    ok[ok] = mask[ys[ok], xs[ok]]
+    return ok
 
 
 def _within(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]) -> bool:
@@ -439,11 +505,17 @@ def complete_features(
         # pixels are its ring's at the chosen offset) passed its own ring-share test.
         if item.offset is None and len(ys) < completion.partial_share * size:
             continue
+        moved = False
         if item.offset is not None:
             dy, dx = item.offset
         else:
             dy = int(np.rint(np.mean(source[ys, xs, 1] - ys)))
             dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
+            if relief is not None:
+                fitted = _fitted_offset(
+                    relief, k, features[k][0], exemplar_masks[k], item, dy, dx, completion
+                )
+                moved, (dy, dx) = fitted != (dy, dx), fitted
         ty, tx = item.fy - dy, item.fx - dx
         if not _within(ty, tx, (height, width)) or not inside[ty, tx].all():
             continue
@@ -489,6 +561,15 @@ def complete_features(
                 continue
         source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
         taken[ry, rx] = True
+        if moved:
+            # The cut copy's pixels that the relief moved the feature away from would
+            # draw a stray piece of it beside the whole one: they copy the feature's
+            # surroundings at its new offset instead.
+            left = ~taken[ys, xs]
+            ly, lx = ys[left], xs[left]
+            ok = _inside(ly + dy, lx + dx, mask_k)
+            ly, lx = ly[ok], lx[ok]
+            source[ly, lx] = np.stack([np.full_like(ly, k), ly + dy, lx + dx], axis=-1)
         drawn[ty, tx] = len(colours)
         colours.append(item.colour)
         completed += 1
@@ -566,6 +647,28 @@ def _feature_pixels(labels, box, f):
     return fy, fx, span, max(span // 2, 1)
 
 
+def _fitted_offset(relief, k, labels, mask, item, dy, dx, completion) -> tuple[int, int]:
+    """The offset within half its width of (dy, dx) at which the relief of feature
+    ``item.f`` of exemplar k (its own pixels: the ground around it is another object's)
+    fits the query's best (:func:`_register`), where that fit reaches
+    ``relief_fit``; else (dy, dx). An eye goes on the eye's bulge, a painted spot
+    where the cut copy put it."""
+    fy, fx, reach = item.fy, item.fx, max(item.span // 2, 1)
+    y0, x0 = max(int(fy.min()) - 1, 0), max(int(fx.min()) - 1, 0)
+    y1, x1 = min(int(fy.max()) + 2, labels.shape[0]), min(int(fx.max()) + 2, labels.shape[1])
+    region = (labels[y0:y1, x0:x1] == item.f) & mask[y0:y1, x0:x1]
+    fit_y, fit_x, fit = _register(relief[0], relief[1][k], region, y0, x0, dy, dx, reach)
+    log.debug(
+        "feature %d of exemplar %d: relief fit %.2f, moved by %d, %d",
+        item.f,
+        k,
+        fit,
+        fit_y - dy,
+        fit_x - dx,
+    )
+    return (fit_y, fit_x) if fit >= completion.relief_fit else (dy, dx)
+
+
 def _skipped_instances(source, features, exemplars, exemplar_masks, relief, completion):
     """Features whose surroundings the map copies around one place, without them: an
     eye's ring of skin copied around a hole that other offsets filled with plain skin.
@@ -577,7 +680,7 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief, comp
     query's depth and the exemplars' depths) the offset is then the one, within half
     the feature's width, at which the exemplar's relief of the feature and its ring
     correlates best with the query's (an eye goes on the eye's bulge), and the
-    feature is left out unless that correlation reaches ``skipped_relief_fit``
+    feature is left out unless that correlation reaches ``relief_fit``
     (the relief must say where it goes). Where no pixel
     the feature would cover at that offset copies a feature of any exemplar, the
     feature is an instance with nothing of it covered: :func:`complete_features`
@@ -620,7 +723,7 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief, comp
                 my, mx, fit = _register(
                     relief[0], relief[1][k], feature | ring, y0, x0, my, mx, reach
                 )
-                if fit < completion.skipped_relief_fit:
+                if fit < completion.relief_fit:
                     continue  # the relief does not say where it goes
             ty, tx = fy - my, fx - mx
             if (
@@ -691,8 +794,9 @@ def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
     """The offset within ``reach`` of (dy, dx) at which the exemplar's relief over
     ``region`` (a mask over a box at y0, x0 of the exemplar) correlates best with the
     query's, and that correlation: normalized cross-correlation over the region's
-    pixels of the depths' detail (minus a Gaussian of the box's width), so that the
-    objects' overall depth and scale do not count (-1 where the search would leave the
+    pixels of the depths' detail (minus a Gaussian of the box's width, taken over the
+    object only), so that the objects' overall depth and scale and their outlines do
+    not count (-1 where the search would leave the
     query or the exemplar). Every offset at once, as three FFT correlations (masked
     normalized cross-correlation)."""
     h, w = region.shape
@@ -700,10 +804,15 @@ def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
     pad = int(4 * sigma) + 1  # the Gaussian's own truncation: as if filtered whole
 
     def detail(depth, top, left, height, width):
-        # The depth's detail over a box, filtered over the box and a margin only.
+        # The depth's detail over a box, filtered over the box and a margin only, and
+        # over the object only (background depth is 0): an eye next to the outline is
+        # found by its bulge, not by the step down to the background.
         b0, b1 = max(top - pad, 0), max(left - pad, 0)
         patch = np.asarray(depth[b0 : top + height + pad, b1 : left + width + pad], np.float64)
-        patch = patch - ndimage.gaussian_filter(patch, sigma)
+        inside = (patch > 0).astype(np.float64)
+        smooth = ndimage.gaussian_filter(patch * inside, sigma)
+        patch = patch - smooth / np.maximum(ndimage.gaussian_filter(inside, sigma), 1e-12)
+        patch *= inside
         return patch[top - b0 : top - b0 + height, left - b1 : left - b1 + width]
 
     qy0, qx0 = y0 - dy - reach, x0 - dx - reach

@@ -414,8 +414,15 @@ class Completion:
     max_repeats: int = 4
     #: The share of the pixels around a feature that must be of one colour (its ground):
     #: not a blush, nor a shirt's corner cut by a neckline (one put an orange glow into
-    #: busts_003's V-neck at 4x).
+    #: busts_003's V-neck at 4x). On a ground of several colours (an eye across a fish's
+    #: bands), the share of them that must step away from the feature's edge instead.
     surround_share: float = 0.8
+    #: A feature on a ground of several colours has no more pixels of its colour than its
+    #: own within this many of its widths around it: not a check of a shirt, nor a piece
+    #: of a stripe between others (at 1 width, pieces of fish_007's tail stripes were
+    #: features; at 2, the 48 generated examples gained 28: 8 eyes, a fish's eye with the
+    #: band around it, a brow, 11 shoes and 7 small pieces of fins, clothes and skin).
+    rare_reach: float = 2.0
     #: The share of those pixels that must lie inside the object: a shirt's stripe cut by
     #: the neckline, completed into a smudge at busts_000's neck at 4x, is no feature.
     inside_share: float = 0.75
@@ -435,8 +442,10 @@ class Completion:
     skipped_ring_share: float = 0.2
     #: Given the reliefs, a skipped feature is completed only where the exemplar's relief
     #: of it and its ring correlates at least this well with the query's at the place
-    #: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7).
-    skipped_relief_fit: float = 0.9
+    #: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7); a cut one is moved
+    #: to where its own relief fits best only where the fit reaches this (the 2048x1536
+    #: fish's eye on the bulge 0.96; painted features have none and stay).
+    relief_fit: float = 0.9
     #: A skipped feature is not completed where this share of its place already stands out
     #: from its surroundings in the map: something is drawn there (it refused a blue-grey
     #: eye over busts_008's own brown one).
@@ -460,7 +469,13 @@ class Completion:
     rim_agreement: float = 0.07
 
     def __post_init__(self) -> None:
-        for name in ("feature_extent", "feature_contrast", "double_shift", "rim_agreement"):
+        for name in (
+            "feature_extent",
+            "feature_contrast",
+            "rare_reach",
+            "double_shift",
+            "rim_agreement",
+        ):
             check_float(name, getattr(self, name), minimum=0.0)
         for name in (
             "surround_share",
@@ -468,7 +483,7 @@ class Completion:
             "complete_share",
             "partial_share",
             "skipped_ring_share",
-            "skipped_relief_fit",
+            "relief_fit",
             "skipped_place_shown",
             "double_main",
         ):
