@@ -73,6 +73,7 @@ from skimage import color
 from skimage.metrics import structural_similarity
 
 from imagemap.align import paste_aligned
+from imagemap.core.blend import smooth_inside
 from imagemap.io import InputError
 
 __all__ = [
@@ -1028,14 +1029,6 @@ def _luminance(image: np.ndarray, channel_axis: int | None) -> np.ndarray:
     return color.rgb2lab(np.clip(image, 0, 1))[..., 0]
 
 
-def _smooth_inside(values: np.ndarray, region: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing of ``values`` over ``region`` only (normalized convolution):
-    background next to the outline does not bleed into the object."""
-    weight = ndimage.gaussian_filter(region.astype(np.float64), sigma)
-    smooth = ndimage.gaussian_filter(np.where(region, values, 0.0), sigma)
-    return np.where(region, smooth / np.maximum(weight, 1e-12), 0.0)
-
-
 def structure_coherence(
     image: np.ndarray,
     mask: np.ndarray,
@@ -1077,7 +1070,7 @@ def structure_coherence(
     1.0
     """
     mask = np.asarray(mask, dtype=bool)
-    luma = _smooth_inside(_luminance(image, channel_axis), mask, derivative_sigma)
+    luma = smooth_inside(_luminance(image, channel_axis), mask, derivative_sigma)
     inner = ndimage.binary_erosion(mask, np.ones((3, 3), bool))  # the Sobel's footprint
     gy = np.where(inner, ndimage.sobel(luma, 0) / 8.0, 0.0)
     gx = np.where(inner, ndimage.sobel(luma, 1) / 8.0, 0.0)
@@ -1222,7 +1215,7 @@ def midtone_fraction(
     0.5
     """
     mask = np.asarray(mask, dtype=bool)
-    luma = _smooth_inside(_luminance(image, channel_axis), mask, smoothing)
+    luma = smooth_inside(_luminance(image, channel_axis), mask, smoothing)
     middle, edges, contrast = _midtones(luma, mask, window)
     count = int(edges.sum())
     return (int(middle.sum()) / count if count else math.nan), edges, contrast

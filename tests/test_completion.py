@@ -285,6 +285,12 @@ def _textured_skin_with_lips(size=80, seed=5):
     return exemplar.astype(np.float32)
 
 
+def _lips_bump(y, x, size=80):
+    """A depth with a bump, wider than tall, centred at (y, x): the relief under lips."""
+    yy, xx = np.mgrid[0:size, 0:size]
+    return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 / 8.0 + (xx - x) ** 2 / 30.0))
+
+
 def test_a_skipped_feature_is_copied_where_its_surroundings_were():
     # The map copies the skin around the lips at offset 0 but fills the lips' place
     # with skin from elsewhere: none of the lips copied, all of their ring.
@@ -334,12 +340,7 @@ def test_a_skipped_feature_goes_where_its_relief_fits():
     exemplar = _textured_skin_with_lips()
     features = [small_features(exemplar, np.ones((80, 80), bool))]
     mask = np.ones((80, 80), bool)
-    yy, xx = np.mgrid[0:80, 0:80]
-
-    def bump(y, x):
-        return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 / 8.0 + (xx - x) ** 2 / 30.0))
-
-    exemplar_depth, query_depth = bump(39.5, 39.5), bump(42.5, 41.5)
+    exemplar_depth, query_depth = _lips_bump(39.5, 39.5), _lips_bump(42.5, 41.5)
     source = _identity(80)
     source[37:46, 33:49, 1] += 25
     relief = (query_depth, [exemplar_depth])
@@ -359,17 +360,12 @@ def test_a_cut_feature_goes_onto_its_relief_and_leaves_no_piece_behind():
     exemplar = _textured_skin_with_lips()
     features = [small_features(exemplar, np.ones((80, 80), bool))]
     mask = np.ones((80, 80), bool)
-    yy, xx = np.mgrid[0:80, 0:80]
-
-    def bump(y, x):
-        return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 / 8.0 + (xx - x) ** 2 / 30.0))
-
     source = _identity(80)
     source[30:50, 40:60, 2] += 6  # the lips' right half copies skin from further right
     lips = features[0][0] > 0
     for relief, (top, left) in (
         (None, (38, 34)),
-        ((bump(42.5, 44.5), [bump(39.5, 39.5)]), (41, 39)),
+        ((_lips_bump(42.5, 44.5), [_lips_bump(39.5, 39.5)]), (41, 39)),
     ):
         completed_source, completed = complete_features(
             [exemplar], source, features, mask, [mask], relief=relief

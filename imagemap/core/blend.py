@@ -42,6 +42,7 @@ __all__ = [
     "fill_background",
     "place_seams",
     "seamless_copy",
+    "smooth_inside",
 ]
 
 
@@ -58,6 +59,27 @@ def fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """
     ny, nx = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
     return image[ny, nx]
+
+
+def smooth_inside(values: np.ndarray, region: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing of ``values`` over ``region`` only (normalized convolution),
+    0 outside it: what lies outside (the background past an outline, another part)
+    does not bleed in. ``values`` is (H, W), or (H, W, C) smoothed per channel.
+
+    Examples
+    --------
+    >>> values = np.array([[0.0, 4.0, 4.0, 9.0]])
+    >>> smooth_inside(values, values == 4.0, 1.0)
+    array([[0., 4., 4., 0.]])
+    """
+    region = np.asarray(region, bool)
+    weight = ndimage.gaussian_filter(region.astype(np.float64), sigma)
+    if values.ndim == region.ndim + 1:
+        weight = weight[..., None]
+        region = region[..., None]
+        sigma = (sigma, sigma, 0.0)  # type: ignore[assignment]  # not across channels
+    smooth = ndimage.gaussian_filter(np.where(region, values, 0.0), sigma)
+    return np.where(region, smooth / np.maximum(weight, 1e-12), 0.0)
 
 
 def coherent_edges(source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -65,7 +65,7 @@ import numpy as np
 from scipy import fft, ndimage, sparse, spatial
 from scipy.sparse import csgraph
 
-from imagemap.core.blend import copy_through, fill_background
+from imagemap.core.blend import copy_through, fill_background, smooth_inside
 from imagemap.depth.config import Completion
 
 __all__ = ["complete_features", "copies_features", "small_features"]
@@ -356,8 +356,8 @@ def _ends_at_edge(colours, edge, ring, r, completion) -> bool:
     edge, whatever lies beyond. Both sides are local means along the boundary and along
     the ring (a Gaussian of half the ring's distance, normalized over each), so that
     grain does not count."""
-    edge_colour = _local_mean(colours, edge, r / 2)
-    ring_colour = _local_mean(colours, ring, r / 2)
+    edge_colour = smooth_inside(colours, edge, r / 2)
+    ring_colour = smooth_inside(colours, ring, r / 2)
     _, (ny, nx) = ndimage.distance_transform_edt(~edge, return_indices=True)
     ry, rx = np.nonzero(ring)
     step = np.sqrt(((ring_colour[ry, rx] - edge_colour[ny[ry, rx], nx[ry, rx]]) ** 2).sum(-1))
@@ -377,20 +377,6 @@ def _rare_around(colours, mask, labels, i, box, span, colour, completion) -> boo
         completion.feature_contrast
     )
     return int(near.sum()) < int(own.sum())
-
-
-def _local_mean(colours, where, sigma):
-    """Each pixel's mean colour over the pixels of ``where`` near it (a normalized
-    Gaussian of ``sigma``); meaningful on ``where``."""
-    weight = ndimage.gaussian_filter(where.astype(np.float64), sigma)
-    total = np.stack(
-        [
-            ndimage.gaussian_filter(np.where(where, colours[..., c], 0.0), sigma)
-            for c in range(colours.shape[-1])
-        ],
-        -1,
-    )
-    return total / np.maximum(weight, 1e-12)[..., None]
 
 
 class _Instance(NamedTuple):
@@ -809,10 +795,8 @@ def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
         # found by its bulge, not by the step down to the background.
         b0, b1 = max(top - pad, 0), max(left - pad, 0)
         patch = np.asarray(depth[b0 : top + height + pad, b1 : left + width + pad], np.float64)
-        inside = (patch > 0).astype(np.float64)
-        smooth = ndimage.gaussian_filter(patch * inside, sigma)
-        patch = patch - smooth / np.maximum(ndimage.gaussian_filter(inside, sigma), 1e-12)
-        patch *= inside
+        inside = patch > 0
+        patch = np.where(inside, patch - smooth_inside(patch, inside, sigma), 0.0)
         return patch[top - b0 : top - b0 + height, left - b1 : left - b1 + width]
 
     qy0, qx0 = y0 - dy - reach, x0 - dx - reach
