@@ -60,8 +60,9 @@ def make_outputs(root: Path) -> dict[str, str]:
         write_class(name, db, count=8, seed=0, holdout=count, quiet=True)
         for query in sorted((db / "holdout").glob("*_depth.png"))[:count]:
             stem = query.name[: -len("_depth.png")]
+            target, provenance = out / f"{stem}.png", out / f"{stem}_prov.png"
             _run(["synthesize", str(query), "--db", str(db), "--preset", name,
-                  "-o", str(out / f"{stem}.png"), "--provenance", str(out / f"{stem}_prov.png")])  # fmt: skip
+                  "-o", str(target), "--provenance", str(provenance)])  # fmt: skip
     for name, count in FOUR_X.items():
         db = root / f"{name}4"
         default = {"fish": (200, 150)}.get(name, (150, 200))
