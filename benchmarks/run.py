@@ -759,24 +759,10 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-STAGES = (
-    "selection",
-    "pyramids",
-    "setup",
-    "pca",
-    "features",
-    "index",
-    "search",
-    "vote",
-    "costs",
-    "collapse",
-)
-
-
 def format_stages(row: dict) -> str:
-    """Markdown table of one case's per-stage seconds (``result.timings``)."""
+    """Markdown table of one case's per-stage seconds (``result.timings``, in stage order)."""
     stages = row.get("stages") or {}
-    names = [s for s in STAGES if s in stages] + [s for s in stages if s not in STAGES]
+    names = list(stages)
     total = sum(stages.values()) or float("nan")
     lines = ["| stage | s | share |", "|---|---:|---:|"]
     for name in names:

@@ -20,12 +20,15 @@ import math
 import numbers
 import os
 import sys
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 # Nothing heavy at import: the command line builds its parser with these types
 # before NumPy is loaded (imagemap --help stays fast).
 from imagemap.errors import InputError
 
 __all__ = [
+    "Check",
     "check_examples",
     "check_float",
     "check_int",
@@ -37,6 +40,8 @@ __all__ = [
     "non_negative_int",
     "parse_size",
     "positive_int",
+    "check_settings",
+    "setting",
 ]
 
 
@@ -199,3 +204,83 @@ def parse_size(text: str) -> tuple[int, int]:
     if width < 16 or height < 16:
         raise argparse.ArgumentTypeError(f"size {text!r} is too small (at least 16x16)")
     return width, height
+
+
+@dataclass(frozen=True)
+class Check:
+    """What a setting's value must be (:func:`setting`): its kind and bounds.
+
+    ``kind`` is ``"float"`` (finite, in [minimum, maximum], below ``below``),
+    ``"floats"`` (a tuple of such), ``"int"``, ``"bool"``, ``"choice"`` (one of
+    ``choices``), ``"odd_width"`` (an odd positive integer: a window's width) or
+    ``"odd_widths"`` (a non-empty tuple of them). ``optional``: None passes too.
+    """
+
+    kind: str = "float"
+    minimum: float | None = None
+    maximum: float | None = None
+    below: float | None = None
+    choices: tuple[str, ...] = ()
+    optional: bool = False
+
+    def __call__(self, name: str, value: Any) -> None:
+        if value is None and self.optional:
+            return
+        if self.kind == "floats":
+            if not isinstance(value, tuple):
+                raise InputError(f"{name}: expected a tuple of numbers, got {value!r}")
+            for item in value:
+                replace(self, kind="float")(name, item)
+        elif self.kind == "float":
+            value = check_float(name, value, minimum=self.minimum, maximum=self.maximum)
+            if self.below is not None and value >= self.below:
+                raise InputError(f"{name}: must be below {self.below:g}, got {value:g}")
+        elif self.kind == "int":
+            check_int(name, value, minimum=self.minimum, maximum=self.maximum)  # type: ignore[arg-type]
+        elif self.kind == "bool":
+            if not _is_bool(value):
+                raise InputError(f"{name}: expected True or False, got {value!r}")
+        elif self.kind == "choice":
+            if value not in self.choices:
+                raise InputError(f"unknown {name} {value!r}; use one of {self.choices}")
+        elif self.kind == "odd_width":
+            if _is_bool(value) or not isinstance(value, int) or value < 1 or value % 2 == 0:
+                raise InputError(f"{name}: must be odd and positive, got {value!r}")
+        elif self.kind == "odd_widths":
+            if (
+                not isinstance(value, tuple)
+                or not value
+                or any(_is_bool(k) or not isinstance(k, int) or k < 1 or k % 2 == 0 for k in value)
+            ):
+                raise InputError(f"{name}: odd positive widths, got {value!r}")
+        else:
+            raise ValueError(f"unknown check kind {self.kind!r}")
+
+
+def setting(default: Any, **check: Any) -> Any:
+    """A dataclass field with its default and the :class:`Check` its value must pass
+    (:func:`check_settings` runs them all): the bounds stand beside the field they bound.
+
+    Examples
+    --------
+    >>> @dataclass(frozen=True)
+    ... class Example:
+    ...     m: int = setting(2, kind="int", minimum=1)
+    ...     def __post_init__(self):
+    ...         check_settings(self)
+    >>> Example(m=0)
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: m: must be at least 1, got 0
+    """
+    if isinstance(default, (list, dict, set)):
+        raise TypeError("setting: use an immutable default (a tuple)")
+    return field(default=default, metadata={"check": Check(**check)})
+
+
+def check_settings(instance: Any) -> None:
+    """Run the :class:`Check` of every field of a dataclass made with :func:`setting`."""
+    for f in fields(instance):
+        check = f.metadata.get("check")
+        if check is not None:
+            check(f.name, getattr(instance, f.name))

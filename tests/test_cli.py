@@ -106,16 +106,16 @@ def _run_one(command, files, tmp_path, argv):
 @pytest.mark.parametrize("command", ["synthesize", "batch"])
 @pytest.mark.parametrize("argv, expected", [([], 0.3), (["--edge-support", "0"], 0.0)])
 def test_edge_support_reaches_the_blend(files, tmp_path, monkeypatch, command, argv, expected):
-    import imagemap.depth.pipeline
+    import imagemap.depth.finish
 
     seen = []
-    original = imagemap.depth.pipeline.seamless_copy
+    original = imagemap.depth.finish.seamless_copy
 
     def recording(*args, **kwargs):
         seen.append(kwargs["edge_support"])
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(imagemap.depth.pipeline, "seamless_copy", recording)
+    monkeypatch.setattr(imagemap.depth.finish, "seamless_copy", recording)
     assert _run_one(command, files, tmp_path, argv) == 0
     assert seen == [expected]
 

@@ -383,12 +383,12 @@ def test_silhouette_band_is_a_clipped_signed_distance():
 
 
 def test_guide_reseed_must_be_a_fraction():
-    from imagemap.core.engine import EngineParams
+    from imagemap.core.engine import uniform_levels
 
     with pytest.raises(ValueError, match="guide_reseed"):
-        EngineParams(guide_reseed=1.5)
+        uniform_levels((7,), guide_reseed=1.5)
     with pytest.raises(ValueError, match="final_reseed"):
-        EngineParams(final_reseed=1.0)
+        uniform_levels((7,), final_reseed=1.0)
 
 
 @pytest.mark.parametrize(

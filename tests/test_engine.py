@@ -7,7 +7,7 @@ import pytest
 from scipy import ndimage
 
 from imagemap import Database, DepthConfig, Example, colorize
-from imagemap.core.engine import EngineParams, Mapping, synthesize
+from imagemap.core.engine import EngineParams, Mapping, synthesize, uniform_levels
 from imagemap.depth.config import PRESETS
 from imagemap.depth.units import query_in_database
 
@@ -98,7 +98,9 @@ def test_same_bytes_at_any_thread_count(blob_database, query_blob, monkeypatch, 
     guide = ndimage.gaussian_filter(rng.random((140, 150, 1)), 2).astype(np.float32)
     exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
     query = Mapping(guide=np.roll(guide, 5, axis=0))  # 140 rows: two PatchMatch bands
-    params = EngineParams(patch_sizes=(5,), guide_weights=(1.0,), appearance_weights=(1.0, 1.0))
+    params = EngineParams(
+        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=(1.0, 1.0)
+    )
     engine_reference = synthesize([query], [[exemplar]], params, seed=1)
     monkeypatch.setattr(_kernels, "n_threads", lambda: threads)
     again = colorize(depth, blob_database, "busts", seed=3)
@@ -127,7 +129,7 @@ def test_many_appearance_bands_and_carried_bands():
     exemplar = Mapping(guide=guide, appearance=appearance)
     query = Mapping(guide=np.roll(guide, 5, axis=0))
     params = EngineParams(
-        patch_sizes=(5,),
+        levels=uniform_levels((5,)),
         guide_weights=(1.0,),
         appearance_weights=(1.0, 0.5, 0, 0, 0, 0),
         backend="exact",
@@ -148,11 +150,11 @@ def test_bad_engine_input():
     exemplar = Mapping(guide=rng.random((20, 20, 2)), appearance=rng.random((20, 20, 3)))
     query = Mapping(guide=rng.random((20, 20, 1)))
     with pytest.raises(ValueError, match="guide bands"):
-        synthesize([query], [[exemplar]], EngineParams(patch_sizes=(5,)))
+        synthesize([query], [[exemplar]], EngineParams(levels=uniform_levels((5,))))
     with pytest.raises(ValueError, match="mask is empty"):
         Mapping(guide=np.zeros((5, 5)), mask=np.zeros((5, 5), bool))
     with pytest.raises(ValueError, match="odd"):
-        EngineParams(patch_sizes=(4,))
+        EngineParams(levels=uniform_levels((4,)))
 
 
 def test_exemplar_costs_steer_the_source(blob_database, query_blob):
@@ -180,7 +182,7 @@ def test_exemplar_costs_steer_the_source(blob_database, query_blob):
     with pytest.raises(ValueError, match="exemplar_costs"):
         rng = np.random.default_rng(0)
         exemplar = Mapping(guide=rng.random((20, 20)), appearance=rng.random((20, 20)))
-        params = EngineParams(patch_sizes=(5,), exemplar_costs=(0.0, 1.0))
+        params = EngineParams(levels=uniform_levels((5,), exemplar_costs=(0.0, 1.0)))
         synthesize([Mapping(guide=rng.random((20, 20)))], [[exemplar]], params)
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from imagemap.core import solver as engine
-from imagemap.core.engine import EngineParams, Mapping, ReleasableLevels, synthesize
+from imagemap.core.engine import EngineParams, Mapping, ReleasableLevels, synthesize, uniform_levels
 from imagemap.core.solver import LevelSolver as _LevelSolver
 from imagemap.core.solver import Timer as _Timer
 from imagemap.core.solver import _pad_crop_into, _pad_into
@@ -68,7 +68,7 @@ def _scene(size=48, seed=0):
 def _solver(quantize: bool, appearance_weights=(1.0, 0.5, 0.5)):
     query, exemplar = _scene()
     params = EngineParams(
-        patch_sizes=(7,),
+        levels=uniform_levels((7,)),
         guide_weights=(1.0, 2.0),
         appearance_weights=appearance_weights,
         position_weight=0.5,
@@ -133,11 +133,10 @@ def test_exemplar_bands_are_stored_once_and_unmatched_bands_are_not_scaled():
 def _traced_peak(quantize: bool) -> int:
     query, exemplar = _scene(160)
     params = EngineParams(
-        patch_sizes=(7,),
+        levels=uniform_levels((7,), max_iterations=2),
         guide_weights=(1.0, 2.0),
         appearance_weights=(1.0, 0.5, 0.5),
         position_weight=0.5,
-        max_iterations=2,
         quantize_features=quantize,
     )
     synthesize([query], [[exemplar]] * 2, params)  # kernels loaded first
@@ -161,7 +160,9 @@ def test_quantized_features_lower_the_peak_by_about_their_saving():
         [exemplar, exemplar],
         7,
         EngineParams(
-            patch_sizes=(7,), guide_weights=(1.0, 2.0), appearance_weights=(1.0, 0.5, 0.5)
+            levels=uniform_levels((7,)),
+            guide_weights=(1.0, 2.0),
+            appearance_weights=(1.0, 0.5, 0.5),
         ),
         np.random.default_rng(0),
         _Timer(),
@@ -230,11 +231,10 @@ def _pyramid_scene(size, seed, n_levels=2):
 
 def _synthesis_peak(levels_type):
     params = EngineParams(
-        patch_sizes=(5, 5),
+        levels=uniform_levels((5, 5), max_iterations=2),
         guide_weights=(1.0, 2.0),
         appearance_weights=(1.0, 0.5, 0.5),
         position_weight=0.5,
-        max_iterations=2,
         init_from_guide=False,  # no exact search at the coarsest level: its block is the peak
     )
     tracemalloc.start()  # before the pyramids are made: their release shows in the peak

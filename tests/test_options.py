@@ -66,7 +66,7 @@ def _assert_reached(config: DepthConfig, options: dict) -> None:
         if setting is not None:
             assert flat[setting] == expected[setting], name
     for key, value in expected.items():
-        if key != "patch_sizes":  # sized for the object by the pyramid stage
+        if key != "patch_sizes":  # sized for the object before the stages
             assert flat[key] == value, key
 
 
@@ -185,10 +185,12 @@ def test_a_stage_left_out_changes_the_map_and_a_copy_of_the_stages_does_not(
 ):
     """STAGES is what colorize runs: the same tuple gives the same bytes; without the
     blend the copy's seams stay hard."""
-    from imagemap.depth.pipeline import STAGES, State, run_pipeline
+    from imagemap.core.stages import run_pipeline
+    from imagemap.depth.guides import sized_config
+    from imagemap.depth.pipeline import STAGES, State
 
     depth, _ = query_blob
-    config = resolve_config("busts")
+    config = sized_config(resolve_config("busts"), depth > 0)
 
     def run(stages):
         state = State(depth=depth, database=blob_database, seed=0, names=None)
@@ -221,6 +223,7 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
     """The registration's, the completion's, the units' and the blend's thresholds are
     handed from the configuration to the functions the stages call (not read from
     module constants)."""
+    import imagemap.depth.finish
     import imagemap.depth.units
 
     pipeline = imagemap.depth.pipeline
@@ -238,7 +241,7 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
     spy(pipeline, "register", "register")
     spy(pipeline.completion, "small_features", "small_features")
     spy(pipeline.completion, "complete_features", "complete_features")
-    spy(pipeline, "seamless_copy", "seamless_copy")
+    spy(imagemap.depth.finish, "seamless_copy", "seamless_copy")
     spy(imagemap.depth.units, "match_scale", "match_scale")
     config = resolve_config("busts").replace_fields(
         work_size=48.0, rim_agreement=0.06, scale_tolerance=1.4, edge_contrast=2.5

@@ -19,7 +19,7 @@ from hypothesis.extra.numpy import arrays
 
 from imagemap import validate
 from imagemap.align import centroid_shift, translate
-from imagemap.core.engine import EngineParams, Mapping, synthesize
+from imagemap.core.engine import EngineParams, Mapping, synthesize, uniform_levels
 from imagemap.core.pyramid import (
     collapse_laplacian,
     expand,
@@ -142,11 +142,10 @@ def test_constant_appearance_votes_to_the_same_constant(h, w, values, backend, s
     exemplar = Mapping(guide=guide, appearance=appearance)
     query = Mapping(guide=np.roll(guide, 2, axis=1))
     params = EngineParams(
-        patch_sizes=(5,),
+        levels=uniform_levels((5,), max_iterations=2),
         backend=backend,
         guide_weights=(1.0,),
         appearance_weights=(1.0,) * len(values),
-        max_iterations=2,
     )
     result = synthesize([query], [[exemplar]], params, seed=seed)
     # Each pixel is a weighted mean of equal values: only weights summing to one keep it.

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from imagemap.core.engine import EngineParams, Mapping
+from imagemap.core.engine import EngineParams, Mapping, uniform_levels
 from imagemap.core.pyramid import (
     collapse_laplacian,
     gaussian_pyramid,
@@ -58,7 +58,7 @@ def test_source_coordinates_propagate_times_two():
     fine = Mapping(guide=rng.random((20, 24, 1)), appearance=rng.random((20, 24, 1)))
     exemplars = [fine, Mapping(guide=rng.random((18, 22, 1)), appearance=rng.random((18, 22, 1)))]
     query = Mapping(guide=rng.random((16, 16, 1)))
-    params = EngineParams(patch_sizes=(3,), backend="exact")
+    params = EngineParams(levels=uniform_levels((3,)), backend="exact")
     solver = LevelSolver(query, exemplars, 3, params, rng, Timer())
     coarse = np.zeros((8, 8, 3), dtype=np.int32)
     coarse[..., 0] = 1

@@ -401,7 +401,12 @@ def texture_optimization(
     result : imagemap.core.engine.EngineResult
         Source map, costs and timings of the engine.
     """
-    from imagemap.core.engine import EngineParams, Mapping, synthesize  # deferred: engine
+    from imagemap.core.engine import (
+        EngineParams,
+        Mapping,
+        synthesize,
+        uniform_levels,
+    )  # deferred: engine
     from imagemap.core.pyramid import gaussian_pyramid  # deferred: engine
 
     kwargs = {"ws": params.ws, "wc": params.wc}
@@ -416,13 +421,12 @@ def texture_optimization(
     weights[:matched] = params.appearance_weight / max(float(spread[0]), 1e-12)
     window = 2 * params.radius + 1
     engine_params = EngineParams(
-        patch_sizes=(window,) * params.levels,
+        levels=uniform_levels((window,) * params.levels, max_iterations=params.max_iterations),
         guide_weights=(1.0,) * sample_guide.shape[2],
         appearance_weights=tuple(float(w) for w in weights),
         position_weight=0.0,
         pca_max_components=params.pca_max_components,
         backend=params.backend,
-        max_iterations=params.max_iterations,
         normalize_bands=False,
         guide_padding="reflect",
         stride=params.stride,

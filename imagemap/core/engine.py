@@ -25,7 +25,7 @@ A single-level guided synthesis: the query guide is a shifted exemplar guide.
 >>> guide = rng.random((32, 32, 1)).astype(np.float32)
 >>> exemplar = Mapping(guide=guide, appearance=guide * 2)
 >>> query = Mapping(guide=np.roll(guide, 3, axis=1))
->>> params = EngineParams(patch_sizes=(5,), backend="exact", guide_weights=(1.0,),
+>>> params = EngineParams(levels=uniform_levels((5,)), backend="exact", guide_weights=(1.0,),
 ...                       appearance_weights=(1.0,))
 >>> result = synthesize([query], [[exemplar]], params)
 >>> result.appearance[0].shape
@@ -43,7 +43,14 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from imagemap.core.mapping import Mapping, ReleasableLevels
-from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS, VOTES, EngineParams, LevelPlan
+from imagemap.core.params import (
+    APPEARANCE_PYRAMIDS,
+    BACKENDS,
+    VOTES,
+    EngineParams,
+    LevelPlan,
+    uniform_levels,
+)
 from imagemap.core.pyramid import collapse_laplacian, expand
 from imagemap.core.solver import FINAL_RESEED_WORST, LevelSolver, Timer, trim_heap
 from imagemap.progress import progress
@@ -58,6 +65,7 @@ __all__ = [
     "Mapping",
     "ReleasableLevels",
     "synthesize",
+    "uniform_levels",
 ]
 
 log = logging.getLogger("imagemap")
@@ -83,10 +91,11 @@ class EngineResult:
         Seconds per stage.
     backend : str
         The search backend that ran.
-    copy_source : ndarray of int32, shape (H, W, 3)
-        Per pixel of the finest level: the exemplar pixel most of its windows agree
-        on (the weighted mode of their estimates' sources; see ``vote="mode"``),
-        for front ends that copy pixels instead of voting them.
+    copy_source : ndarray of int32, shape (H, W, 3), or None
+        With ``vote="copy"`` or ``"mode"``, per pixel of the finest level: the exemplar
+        pixel most of its windows agree on (the weighted mode of their estimates'
+        sources), for front ends that copy pixels instead of voting them; None with
+        ``vote="mean"``.
     """
 
     appearance: list[np.ndarray]
@@ -224,7 +233,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         smallest = min(min(e.shape) for e in exemplars)
         k = min(plan.patch_size, smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
-        level_params = replace(params, exemplar_costs=plan.exemplar_costs)
+        level_params = params
         if plan.position_weight is not None:
             level_params = replace(level_params, position_weight=plan.position_weight)
         query = query_levels[level]
@@ -255,7 +264,18 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             if isinstance(exemplar_levels[e], ReleasableLevels):
                 exemplar_levels[e].release(level)
 
-        solver = LevelSolver(query, exemplars, k, level_params, rng, timer, False, context, release)
+        solver = LevelSolver(
+            query,
+            exemplars,
+            k,
+            level_params,
+            rng,
+            timer,
+            False,
+            context,
+            release,
+            exemplar_costs=plan.exemplar_costs,
+        )
         # The query's bands are packed too: the mapping goes before the features are made.
         del query, exemplars, context, release  # (release holds the context too)
         exemplar_colours = level_colours
@@ -346,9 +366,10 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             )
         coarse_source = solver.dense_source(matches)
     assert solver is not None and matches is not None
+    copy_source = None
     if params.vote == "mode":
         copy_source = coarse_source
-    else:  # the mode of the final matches' sources, for front ends that copy
+    elif params.vote == "copy":  # the mode of the final matches' sources, for the copy
         # The padded estimate is not needed any more (its interior was copied into
         # appearance_levels, unless there is no padding): the mode vote may overwrite it.
         scratch = appearance if solver.r > 0 else appearance.copy()

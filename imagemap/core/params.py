@@ -6,7 +6,7 @@ importing the engine.
 
 Examples
 --------
->>> params = EngineParams(patch_sizes=(7, 9), final_reseed=0.5)
+>>> params = EngineParams(levels=uniform_levels((7, 9), final_reseed=0.5))
 >>> [(plan.patch_size, plan.final_reseed) for plan in params.level_plans(2)]
 [(7, 0.5), (9, 0.0)]
 """
@@ -15,12 +15,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["APPEARANCE_PYRAMIDS", "BACKENDS", "VOTES", "EngineParams", "LevelPlan"]
+from imagemap.validate import check_settings, setting
+
+__all__ = [
+    "APPEARANCE_PYRAMIDS",
+    "BACKENDS",
+    "VOTES",
+    "EngineParams",
+    "LevelPlan",
+    "uniform_levels",
+]
 
 #: Nearest-neighbour searches of the E-step (:mod:`imagemap.core.search`).
 BACKENDS = ("patchmatch", "exact", "pynndescent")
-#: The engine's M-steps: Gaussian-weighted mean, or the weighted mode (a copy).
-VOTES = ("mean", "mode")
+#: How matched windows make the map (:attr:`EngineParams.vote`), the values users type
+#: (``--vote``): the mean M-step and a copy source made from the final matches; the mean
+#: alone; the mode (a copy) inside the iterations too.
+VOTES = ("copy", "mean", "mode")
 #: What the appearance bands of a level are: its Gaussian level or its Laplacian band.
 APPEARANCE_PYRAMIDS = ("gaussian", "laplacian")
 
@@ -73,30 +84,17 @@ class LevelPlan:
         exemplar.
     """
 
-    patch_size: int
-    max_iterations: int = 8
-    exemplar_costs: tuple[float, ...] = ()
-    context_weights: tuple[float, ...] = ()
-    guide_reseed: float = 0.0
-    final_reseed: float = 0.0
-    position_weight: float | None = None
-    final_reseed_any_exemplar: bool = False
+    patch_size: int = setting(7, kind="odd_width")
+    max_iterations: int = setting(8, kind="int", minimum=0)
+    exemplar_costs: tuple[float, ...] = setting((), kind="floats", minimum=0.0)
+    context_weights: tuple[float, ...] = setting((), kind="floats", minimum=0.0)
+    guide_reseed: float = setting(0.0, minimum=0.0, below=1.0)
+    final_reseed: float = setting(0.0, minimum=0.0, below=1.0)
+    position_weight: float | None = setting(None, minimum=0.0, optional=True)
+    final_reseed_any_exemplar: bool = setting(False, kind="bool")
 
     def __post_init__(self) -> None:
-        if self.position_weight is not None and not self.position_weight >= 0:
-            raise ValueError("position_weight must be >= 0")
-        if self.patch_size < 1 or self.patch_size % 2 == 0:
-            raise ValueError(f"patch size must be odd and positive, got {self.patch_size}")
-        if self.max_iterations < 0:
-            raise ValueError("max_iterations must be at least 0")
-        if any(c < 0 for c in self.exemplar_costs):
-            raise ValueError("exemplar_costs must not be negative")
-        if any(w < 0 for w in self.context_weights):
-            raise ValueError("context_weights must not be negative")
-        if not 0 <= self.guide_reseed < 1:
-            raise ValueError("guide_reseed must be in [0, 1)")
-        if not 0 <= self.final_reseed < 1:
-            raise ValueError("final_reseed must be in [0, 1)")
+        check_settings(self)
 
     @property
     def has_context(self) -> bool:
@@ -107,16 +105,14 @@ class LevelPlan:
 class EngineParams:
     """Parameters of the engine (front ends wrap them in their own configurations).
 
-    The per-level fields (``patch_sizes``, ``max_iterations``, ``exemplar_costs``,
-    ``context_weights``, ``guide_reseed``, ``final_reseed``) describe a uniform
-    method: the same at every level. A front end that varies its method from level
-    to level gives ``levels`` instead, one :class:`LevelPlan` per level, finest first
-    (see :meth:`level_plans`).
+    What happens at each level is said by ``levels``, one :class:`LevelPlan` per level,
+    finest first (:func:`uniform_levels` makes the plans of a method that is the same at
+    every level).
 
     Parameters
     ----------
-    patch_sizes : tuple of int
-        Odd window width per pyramid level, finest first.
+    levels : tuple of LevelPlan
+        The plan per level, finest first (at least one per level synthesized).
     guide_weights, appearance_weights : tuple of float
         One weight per band. With ``normalize_bands`` a weight is per standard
         deviation of its band over the exemplars, so weights are unit-free.
@@ -133,8 +129,6 @@ class EngineParams:
         Exemplar windows sampled to learn the PCA basis.
     backend : {"patchmatch", "exact", "pynndescent"}
         Nearest-neighbour search of the E-step.
-    max_iterations : int
-        EM iterations per level at most (uniform plan).
     tolerance : float
         Stop a level when the target decreases by less than this fraction.
     patchmatch_passes : int
@@ -149,28 +143,20 @@ class EngineParams:
         At the coarsest level, start from matches on guide and position only.
     window_sigma : float
         Standard deviation of the Gaussian window, as a fraction of its width.
-    exemplar_costs : tuple of float
-        Uniform plan: the same exemplar costs at every level (see :class:`LevelPlan`).
-    context_weights : tuple of float
-        Uniform plan: context at every level but the coarsest (see :class:`LevelPlan`).
-    guide_reseed : float
-        Uniform plan: at every level the coarser one's matches are propagated to.
-    final_reseed : float
-        Uniform plan: after the finest level's EM.
-    levels : tuple of LevelPlan
-        The plan per level, finest first (empty: the uniform plan above). When
-        given, the per-level fields above are not used.
     appearance_pyramid : {"laplacian", "gaussian"}
         What the appearance levels are: Laplacian bands (a level's colours are the
         sum of it and every coarser level) or Gaussian levels. Only the context uses it.
-    vote : {"mean", "mode"}
+    vote : {"copy", "mean", "mode"}
         The M-step. ``"mean"`` (the paper): every pixel becomes the Gaussian-weighted
         mean of the estimates of the windows that cover it, the exact minimiser of
         the target for fixed matches, which blurs where the estimates disagree.
-        ``"mode"``: every pixel copies the exemplar pixel that most of its windows
-        (Gaussian-weighted) agree on, so the output is made of exemplar pixels and
-        small features survive; a mode M-step that would raise the target is
-        refused (the level then stops), so the target still never increases.
+        ``"copy"``: the same M-step, and from the final matches a copy source
+        (:attr:`EngineResult.copy_source`): every pixel's exemplar pixel that most of
+        its windows (Gaussian-weighted) agree on, for a front end that copies pixels.
+        ``"mode"``: that copy is the M-step of every iteration, so the output is made
+        of exemplar pixels and small features survive; a mode M-step that would raise
+        the target is refused (the level then stops), so the target still never
+        increases.
     quantize_features : bool
         Store the PCA window features as 16-bit integers in one unit per level
         (``_FEATURE_RANGE`` steps cover twice the largest value seen in the PCA
@@ -179,75 +165,65 @@ class EngineParams:
         float window distance, so the target still never increases.
     """
 
-    patch_sizes: tuple[int, ...] = (7, 11, 9)
-    guide_weights: tuple[float, ...] = (1.0,)
-    appearance_weights: tuple[float, ...] = (1.0,)
-    position_weight: float = 0.0
-    pca_fraction: float = 0.2
-    pca_max_components: int | None = None
-    pca_samples: int = 8000
-    backend: str = "patchmatch"
-    max_iterations: int = 8
-    tolerance: float = 2e-3
-    patchmatch_passes: int = 4
-    normalize_bands: bool = True
-    guide_padding: str = "constant"
-    stride: int = 1
-    init_from_guide: bool = True
-    window_sigma: float = 1.0 / 3.0
-    exemplar_costs: tuple[float, ...] = ()
-    context_weights: tuple[float, ...] = ()
-    guide_reseed: float = 0.0
-    final_reseed: float = 0.0
-    levels: tuple[LevelPlan, ...] = ()
-    vote: str = "mean"
-    quantize_features: bool = True
-    appearance_pyramid: str = "laplacian"
+    levels: tuple[LevelPlan, ...] = (LevelPlan(7), LevelPlan(11), LevelPlan(9))
+    guide_weights: tuple[float, ...] = setting((1.0,), kind="floats", minimum=0.0)
+    appearance_weights: tuple[float, ...] = setting((1.0,), kind="floats", minimum=0.0)
+    position_weight: float = setting(0.0, minimum=0.0)
+    pca_fraction: float = setting(0.2, minimum=1e-9, maximum=1.0)
+    pca_max_components: int | None = setting(None, kind="int", minimum=1, optional=True)
+    pca_samples: int = setting(8000, kind="int", minimum=1)
+    backend: str = setting("patchmatch", kind="choice", choices=BACKENDS)
+    tolerance: float = setting(2e-3, minimum=0.0)
+    patchmatch_passes: int = setting(4, kind="int", minimum=1)
+    normalize_bands: bool = setting(True, kind="bool")
+    guide_padding: str = setting("constant", kind="choice", choices=("constant", "reflect", "edge"))
+    stride: int = setting(1, kind="int", minimum=1)
+    init_from_guide: bool = setting(True, kind="bool")
+    window_sigma: float = setting(1.0 / 3.0, minimum=1e-9)
+    vote: str = setting("mean", kind="choice", choices=VOTES)
+    quantize_features: bool = setting(True, kind="bool")
+    appearance_pyramid: str = setting("laplacian", kind="choice", choices=APPEARANCE_PYRAMIDS)
 
     def __post_init__(self) -> None:
-        if self.vote not in VOTES:
-            raise ValueError(f"unknown vote {self.vote!r}; use one of {VOTES}")
-        if any(k < 1 or k % 2 == 0 for k in self.patch_sizes):
-            raise ValueError(f"patch sizes must be odd and positive, got {self.patch_sizes}")
-        if self.backend not in BACKENDS:
-            raise ValueError(f"unknown backend {self.backend!r}; use one of {BACKENDS}")
-        if not 0 < self.pca_fraction <= 1:
-            raise ValueError("pca_fraction must be in (0, 1]")
-        if self.guide_padding not in ("constant", "reflect", "edge"):
-            raise ValueError("guide_padding must be 'constant', 'reflect' or 'edge'")
-        if not 0 <= self.guide_reseed < 1:
-            raise ValueError("guide_reseed must be in [0, 1)")
-        if not 0 <= self.final_reseed < 1:
-            raise ValueError("final_reseed must be in [0, 1)")
-        if self.stride < 1 or self.max_iterations < 0:
-            raise ValueError("stride must be at least 1 and max_iterations at least 0")
-        if self.appearance_pyramid not in APPEARANCE_PYRAMIDS:
-            raise ValueError("appearance_pyramid must be 'laplacian' or 'gaussian'")
-        if any(not isinstance(plan, LevelPlan) for plan in self.levels):
+        check_settings(self)
+        if not self.levels or any(not isinstance(plan, LevelPlan) for plan in self.levels):
             raise ValueError("levels must be LevelPlan objects, finest first")
 
     def level_plans(self, n_levels: int) -> tuple[LevelPlan, ...]:
-        """The plan of each of ``n_levels`` levels, finest first.
+        """The plans of the ``n_levels`` finest levels (an error when there are fewer)."""
+        if len(self.levels) < n_levels:
+            raise ValueError(f"{n_levels} levels need {n_levels} level plans")
+        return tuple(self.levels[:n_levels])
 
-        ``levels`` when given (it must have a plan per level), else the uniform plan
-        of the per-level fields.
-        """
-        if self.levels:
-            if len(self.levels) < n_levels:
-                raise ValueError(f"{n_levels} levels need {n_levels} level plans")
-            return tuple(self.levels[:n_levels])
-        if len(self.patch_sizes) < n_levels:
-            raise ValueError(
-                f"{n_levels} levels need {n_levels} patch sizes, got {self.patch_sizes}"
-            )
-        return tuple(
-            LevelPlan(
-                patch_size=self.patch_sizes[level],
-                max_iterations=self.max_iterations,
-                exemplar_costs=self.exemplar_costs,
-                context_weights=self.context_weights if level < n_levels - 1 else (),
-                guide_reseed=self.guide_reseed,
-                final_reseed=self.final_reseed if level == 0 else 0.0,
-            )
-            for level in range(n_levels)
+
+def uniform_levels(
+    patch_sizes: tuple[int, ...],
+    *,
+    max_iterations: int = 8,
+    exemplar_costs: tuple[float, ...] = (),
+    context_weights: tuple[float, ...] = (),
+    guide_reseed: float = 0.0,
+    final_reseed: float = 0.0,
+) -> tuple[LevelPlan, ...]:
+    """The plans of a method that is the same at every level, finest first.
+
+    One plan per window width of ``patch_sizes``; the context is seen at every level but
+    the coarsest (it has no coarser level), the final reseed runs at the finest only.
+
+    Examples
+    --------
+    >>> [(p.patch_size, p.context_weights) for p in uniform_levels((5, 7), context_weights=(1.0,))]
+    [(5, (1.0,)), (7, ())]
+    """
+    n_levels = len(patch_sizes)
+    return tuple(
+        LevelPlan(
+            patch_size=patch_sizes[level],
+            max_iterations=max_iterations,
+            exemplar_costs=exemplar_costs,
+            context_weights=context_weights if level < n_levels - 1 else (),
+            guide_reseed=guide_reseed,
+            final_reseed=final_reseed if level == 0 else 0.0,
         )
+        for level in range(n_levels)
+    )

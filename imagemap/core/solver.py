@@ -334,6 +334,7 @@ class LevelSolver:
         prepare: bool = True,
         context: tuple[np.ndarray, list[np.ndarray]] | None = None,
         release=None,
+        exemplar_costs: tuple[float, ...] = (),
     ) -> None:
         """Pack the bands of ``query`` and ``exemplars`` (nothing of the mappings is kept),
         then, unless ``prepare`` is False, learn the PCA and make the features
@@ -344,7 +345,8 @@ class LevelSolver:
         packed from where they are, not concatenated into a copy of every guide.
         ``release``: called with an exemplar's index once its bands are packed, so that
         the caller may free its mapping (and context) before the next one is packed;
-        ``exemplars`` (a list) then loses that entry too.
+        ``exemplars`` (a list) then loses that entry too. ``exemplar_costs``: the level
+        plan's additive cost of each exemplar (:class:`~imagemap.core.params.LevelPlan`).
         """
         start = time.perf_counter()
         self.params = params
@@ -442,10 +444,10 @@ class LevelSolver:
         self.band_x = self.cand_x - self.band_origin[self.cand_e, 1]
         self.cand_position = np.concatenate(positions)
         costs = np.zeros(n_ex, dtype=np.float32)
-        if params.exemplar_costs:
-            if len(params.exemplar_costs) != n_ex:
+        if exemplar_costs:
+            if len(exemplar_costs) != n_ex:
                 raise ValueError(f"{n_ex} exemplars need as many exemplar_costs")
-            costs[:] = params.exemplar_costs
+            costs[:] = exemplar_costs
         if np.any(costs < 0):
             raise ValueError("exemplar_costs must not be negative")
         self.cand_bias = costs[self.cand_e]

@@ -31,9 +31,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS
+from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS, VOTES
 from imagemap.errors import InputError
-from imagemap.validate import check_float, check_int
+from imagemap.validate import check_float, check_settings, setting
 
 __all__ = [
     "FINISHES",
@@ -53,9 +53,6 @@ __all__ = [
     "resolve_config",
 ]
 
-#: How matched windows make the map (:attr:`Finish.vote`).
-VOTES = ("copy", "mean", "mode")
-
 
 @dataclass(frozen=True)
 class Selection:
@@ -64,18 +61,17 @@ class Selection:
 
     #: Examples chosen automatically, nearest in centroid-aligned depth (paper, Sec. 2.3;
     #: Table 1: 1 for humans, 2 for busts and fish).
-    m: int = 2
+    m: int = setting(2, kind="int", minimum=1)
     #: A query's depth scale (its object's median depth) within this factor of the
     #: examples' range of scales is used as it is; further away it is brought to their
     #: median scale (:mod:`imagemap.depth.units`). The 36 generated examples (fish,
     #: busts, humans) have median depths 0.514-0.605 (one class spans at most 1.17x);
     #: x0.5 already changed the examples chosen and the map (0.22 mean |RGB| from the
     #: map at x1, fish_000 at 200x150), so the band must stop short of 2x.
-    scale_tolerance: float = 1.5
+    scale_tolerance: float = setting(1.5, minimum=1.0)
 
     def __post_init__(self) -> None:
-        check_int("m", self.m, minimum=1)
-        check_float("scale_tolerance", self.scale_tolerance, minimum=1.0)
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -83,32 +79,26 @@ class Pyramid:
     """How many pyramid levels, and their windows."""
 
     #: Window width per level, fine to coarse, for the paper's 200x150 objects (Table 1).
-    patch_sizes: tuple[int, ...] = (7, 11, 9)
+    patch_sizes: tuple[int, ...] = setting((7, 11, 9), kind="odd_widths")
     #: Add finer levels for large objects so that the coarsest level sees the object as
     #: the paper's does at 200x150; False keeps the preset's levels (still dropping
     #: levels for small objects).
-    grow: bool = True
+    grow: bool = setting(True, kind="bool")
     #: The coarsest level must see the object at least this many windows across: a window
     #: larger than the object matches nothing but the silhouette.
-    min_windows_across: float = 1.25
+    min_windows_across: float = setting(1.25, minimum=0.0)
     #: A level is added while the next coarser one would still see the object this many
     #: windows across (the paper's objects are 2 to 3.5 windows across at its coarsest
     #: level; 3.5 left 4x busts with hair over the brows, docs/presets.md).
-    add_windows_across: float = 3.0
+    add_windows_across: float = setting(3.0, minimum=0.0)
     #: A level whose window spans less than this fraction of the object's size (square
     #: root of its area) sees the coarser levels' colours as context, and the finest level
     #: that spans more draws the small features (at 200x150 the finest window spans
     #: 0.05-0.1: none; at 800x600 the two finest levels of a bust).
-    context_fraction: float = 0.05
+    context_fraction: float = setting(0.05, minimum=0.0)
 
     def __post_init__(self) -> None:
-        if not self.patch_sizes or any(
-            not isinstance(k, int) or k < 1 or k % 2 == 0 for k in self.patch_sizes
-        ):
-            raise InputError(f"patch_sizes: odd positive widths, got {self.patch_sizes}")
-        check_float("min_windows_across", self.min_windows_across, minimum=0.0)
-        check_float("add_windows_across", self.add_windows_across, minimum=0.0)
-        check_float("context_fraction", self.context_fraction, minimum=0.0)
+        check_settings(self)
 
     @property
     def levels(self) -> int:
@@ -130,7 +120,7 @@ class Registration:
     #: more, and a 4x map costs what a 1x one does (0.05-0.2 s per pair). Registering at
     #: 128 px with a 10-point grid did not bring the examples' eyes into place either
     #: (4x fish, docs/presets.md).
-    work_size: float = 64.0
+    work_size: float = setting(64.0, minimum=1.0)
     #: Control points per side of the B-spline grids, coarse to fine (over the query
     #: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
     control_grids: tuple[int, ...] = (4, 5, 7)
@@ -138,39 +128,42 @@ class Registration:
     #: range first, the outline's detail last.
     grid_smoothing: tuple[float, ...] = (2.0, 1.0, 0.5)
     #: Levenberg-Marquardt iterations per grid at most.
-    fit_iterations: int = 12
+    fit_iterations: int = setting(12, kind="int", minimum=0)
     #: Weight of the control points' squared displacement against the mean squared guide
     #: difference: keeps the warp smooth where the guide says nothing (inside a flat body).
-    stiffness: float = 1e-2
+    stiffness: float = setting(1e-2, minimum=0.0)
     #: Pixels of the working grid used for the fit at most (a regular subsample).
-    fit_pixels: int = 3000
+    fit_pixels: int = setting(3000, kind="int", minimum=1)
     #: Weight of the relief's detail in the registration's guide image
     #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges
     #: pull the warp into place (12 busts' macro part transfer 0.779 -> 0.789 at 0.5).
-    registration_relief: float = 0.5
+    registration_relief: float = setting(0.5, minimum=0.0)
     #: The relief's detail is the relative depth less its Gaussian smoothing over this
     #: fraction of the object's size (square root of its area), in units of its 95th
     #: percentile inside the object: a feature's bulge, not the body's curvature.
-    relief_detail_scale: float = 0.03
+    relief_detail_scale: float = setting(0.03, minimum=0.0)
     #: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
     #: image: the outline and the band within a few percent of it lead the fit.
-    outline_reach: float = 0.04
+    outline_reach: float = setting(0.04, minimum=1e-6)
     #: The guide images are made at no more than this many times the working size (the
     #: depth and mask block-averaged first), never at full size: the fit at
     #: ``work_size`` sees nothing finer, and at 2048x1536 the full-size guides (distance
     #: transforms and smoothing of 3 million pixels, four per pair) took 5.0 of the
     #: registration's 5.2 s. Maps up to 4x the default size are unchanged (their factor
     #: is under 2).
-    guide_oversampling: float = 4.0
+    guide_oversampling: float = setting(4.0, minimum=1.0)
     #: The registered positions are the inverse warp evaluated on a grid of about this
     #: many points along the example's longer side (every 4th pixel at least) and
     #: interpolated: the warp is smooth over its 4-7 control intervals. At 2048x1536 a
     #: 4-pixel grid took 4.1 s for two examples; maps up to 1024 pixels across keep it.
-    position_grid: int = 256
+    position_grid: int = setting(256, kind="int", minimum=2)
 
     def __post_init__(self) -> None:
+        check_settings(self)
+        # The grids and their smoothing go together: checked as a pair.
         if (
-            not self.control_grids
+            not isinstance(self.control_grids, tuple)
+            or not self.control_grids
             or any(
                 not isinstance(n, int) or isinstance(n, bool) or n < 4 for n in self.control_grids
             )
@@ -182,14 +175,6 @@ class Registration:
             )
         for sigma in self.grid_smoothing:
             check_float("grid_smoothing", sigma, minimum=0.0)
-        check_float("work_size", self.work_size, minimum=1.0)
-        check_float("guide_oversampling", self.guide_oversampling, minimum=1.0)
-        check_int("position_grid", self.position_grid, minimum=2)
-        check_int("fit_iterations", self.fit_iterations, minimum=0)
-        check_int("fit_pixels", self.fit_pixels, minimum=1)
-        for name in ("stiffness", "registration_relief", "relief_detail_scale"):
-            check_float(name, getattr(self, name), minimum=0.0)
-        check_float("outline_reach", self.outline_reach, minimum=1e-6)
 
 
 @dataclass(frozen=True)
@@ -198,83 +183,68 @@ class Guides:
     standard deviation so that depth in metres, millimetres or [0, 1] gives one result)."""
 
     #: Weight of the depth's Gaussian level.
-    depth_weight: float = 1.0
+    depth_weight: float = setting(1.0, minimum=0.0)
     #: Weight of the depth's detail (Laplacian) band.
-    depth_detail_weight: float = 2.0
+    depth_detail_weight: float = setting(2.0, minimum=0.0)
     #: The detail band in units of its robust spread inside the object, soft-clipped at
     #: this many units (0: raw band): without it the silhouette's jump sets the band's
     #: scale and interior relief (sockets, lips, an eye's bulge) hardly counts.
-    detail_clip: float = 3.0
+    detail_clip: float = setting(3.0, minimum=0.0)
     #: Percentile of |detail| inside the object taken as its unit: the relief that marks
     #: features, not the body's flat stretches, whose tiny values a median would blow up.
-    detail_percentile: float = 95.0
+    detail_percentile: float = setting(95.0, minimum=0.0, maximum=100.0)
     #: Weight of the silhouette band (signed distance to the outline); with it the depth
     #: is continued past the outline, so an eye 3 px from the outline matches the
     #: examples' eyes, not their outlines; 0 keeps the paper's bands.
-    silhouette_weight: float = 0.5
+    silhouette_weight: float = setting(0.5, minimum=0.0)
     #: The silhouette band saturates this many pixels of each level from the outline: it
     #: says "edge here" to a window, not how deep inside it is.
-    silhouette_range: float = 2.0
+    silhouette_range: float = setting(2.0, minimum=0.0)
     #: Smoothing (pixels) of the depth continued past the outline.
-    extension_sigma: float = 2.0
+    extension_sigma: float = setting(2.0, minimum=0.0)
     #: Weight of the position relative to the object's centroid, per RMS radius of the
     #: object (Table 1's relative position; fish 0.5, humans 3).
-    position_weight: float = 1.0
+    position_weight: float = setting(1.0, minimum=0.0)
     #: Register each example onto the query (a smooth non-rigid warp of the whole object,
     #: :mod:`imagemap.depth.register`) and compare positions where the warp puts the
     #: example's pixels, instead of positions relative to each object's centroid: the
     #: copy then follows whole example regions, bent with the object (12 fish at 1x:
     #: 70 fragments for 90 % of the object -> 20, 6 at 4x: 1,488 -> about 50; parts in
     #: one palette 46 % -> 97 %; docs/presets.md). False: the paper's relative position.
-    registration: bool = True
+    registration: bool = setting(True, kind="bool")
     #: The position weight when registered: strong, so that a window leaves the place the
     #: warp gives it only where its relief and colours call for it (4: 26-29 fragments
     #: on 1x fish, 16: 8-12; 12 fish, 12 busts measured).
-    registered_position_weight: float = 16.0
+    registered_position_weight: float = setting(16.0, minimum=0.0)
     #: The object size (square root of its area, pixels of a level) at which
     #: ``registered_position_weight`` holds; at a level where the object is larger the
     #: weight grows with its size, so that a pixel of drift from the warp costs the same
     #: at any resolution (4x fish: 1,488 fragments without, about 50 with).
-    registered_reference_size: float = 100.0
+    registered_reference_size: float = setting(100.0, minimum=0.0)
     #: Factor on the registered position weight at the feature level, where the final
     #: reseed draws the small features by their relief, and at the finer levels of a large
     #: map, which must keep them: the warp places an eye or lips within a few pixels only
     #: (12 busts' eyes 0.69 -> 0.79, lips 0.48 -> 0.61 of their pixels from the same part
     #: at 0.25; at 4x, the full weight at the finer levels erased a third of the fish's
     #: eyes; humans, with no small feature, keep 1).
-    registered_feature_factor: float = 0.25
+    registered_feature_factor: float = setting(0.25, minimum=0.0)
     #: The final reseed may take a feature from any example (the example preference does
     #: not apply to it), while the EM keeps each region's example (12 busts: brows 0.50
     #: -> 0.53 of their pixels from brows).
-    free_final_reseed: bool = True
+    free_final_reseed: bool = setting(True, kind="bool")
     #: Weight of the coarser levels' luminance as an extra guide band (times the Y
     #: weight) at levels finer than ``Pyramid.context_fraction``: a large map's fine
     #: levels keep the eyes, lips and palette the coarser levels chose (Cb and Cr too gave
     #: the same maps for 10 % more memory at 1024^2).
-    context_weight: float = 1.0
+    context_weight: float = setting(1.0, minimum=0.0)
     #: The context's factor at the other levels but the coarsest: weak, so the level's
     #: own band still draws small features while coarser colours decide between examples
     #: whose bands fit alike (200x150 busts with every feature 75 -> 83 %; full weight
     #: lost fish eyes).
-    wide_context_weight: float = 0.25
+    wide_context_weight: float = setting(0.25, minimum=0.0)
 
     def __post_init__(self) -> None:
-        for name in (
-            "depth_weight",
-            "depth_detail_weight",
-            "detail_clip",
-            "silhouette_weight",
-            "silhouette_range",
-            "extension_sigma",
-            "position_weight",
-            "registered_position_weight",
-            "registered_reference_size",
-            "registered_feature_factor",
-            "context_weight",
-            "wide_context_weight",
-        ):
-            check_float(name, getattr(self, name), minimum=0.0)
-        check_float("detail_percentile", self.detail_percentile, minimum=0.0, maximum=100.0)
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -282,57 +252,43 @@ class Matching:
     """The engine's matching: colour bands, search and the EM."""
 
     #: Weight of Y, and of Cb and Cr, per band standard deviation.
-    luma_weight: float = 1.0
-    chroma_weight: float = 0.5
+    luma_weight: float = setting(1.0, minimum=0.0)
+    chroma_weight: float = setting(0.5, minimum=0.0)
     #: Fraction of the PCA basis kept, for guide and colour windows (the paper: a fifth).
-    pca_fraction: float = 0.2
+    pca_fraction: float = setting(0.2, minimum=1e-6, maximum=1.0)
     #: Nearest-neighbour search (patchmatch: fastest; exact: the reference).
-    backend: str = "patchmatch"
+    backend: str = setting("patchmatch", kind="choice", choices=BACKENDS)
     #: EM iterations per level at most, and the relative decrease of the target below
     #: which a level stops.
-    max_iterations: int = 8
-    tolerance: float = 2e-3
+    max_iterations: int = setting(8, kind="int", minimum=0)
+    tolerance: float = setting(2e-3, minimum=0.0)
     #: EM iterations at the levels finer than the feature level: they refine the layout
     #: that level drew (a long EM there wore brows that touch the hair down into it).
-    refine_iterations: int = 2
+    refine_iterations: int = setting(2, kind="int", minimum=1)
     #: "gaussian": each level matches and copies its plain YCbCr colours, so a copied
     #: pixel keeps the colour the coarser levels chose (busts' macro part transfer 0.71 ->
     #: 0.81); "laplacian": the paper's bands, collapsed at the end.
-    appearance_pyramid: str = "gaussian"
+    appearance_pyramid: str = setting("gaussian", kind="choice", choices=APPEARANCE_PYRAMIDS)
     #: Extra window cost per rank of a selected example (the nearest costs nothing): each
     #: region of the object from one example where it fits at all, so that one palette
     #: holds per part (with registration, 30 at every level: 12 fish and 12 busts in one
     #: palette per part in 97 % and 96 % of parts; 3 left 33 % of fish with two palettes
     #: in a part). 0 is the paper's method.
-    example_preference: float = 30.0
+    example_preference: float = setting(30.0, minimum=0.0)
     #: Apply the preference at the feature level and finer too (the final reseed may
     #: still take a feature from another example, see ``Guides.free_final_reseed``).
-    preference_at_finest: bool = True
+    preference_at_finest: bool = setting(True, kind="bool")
     #: Per level, where the propagated matches fit the depth worst, matches on depth and
     #: position alone replace them when they fit in less than this fraction of the
     #: distance (0: off): features only the finer levels resolve are drawn.
-    guide_reseed: float = 0.5
+    guide_reseed: float = setting(0.5, minimum=0.0, below=1.0)
     #: After the feature level's EM, the same for a quarter of the windows, when the new
     #: match also carries as much colour detail (0: off; not with the mean vote): 36
     #: busts drew 91 % of eyes, brows and lips instead of 83 %.
-    final_reseed: float = 0.7
+    final_reseed: float = setting(0.7, minimum=0.0, below=1.0)
 
     def __post_init__(self) -> None:
-        if self.backend not in BACKENDS:
-            raise InputError(f"unknown backend {self.backend!r}; use one of {BACKENDS}")
-        if self.appearance_pyramid not in APPEARANCE_PYRAMIDS:
-            raise InputError(
-                f"unknown appearance_pyramid {self.appearance_pyramid!r}; "
-                f"use one of {APPEARANCE_PYRAMIDS}"
-            )
-        for name in ("luma_weight", "chroma_weight", "tolerance", "example_preference"):
-            check_float(name, getattr(self, name), minimum=0.0)
-        check_float("pca_fraction", self.pca_fraction, minimum=1e-6, maximum=1.0)
-        check_int("max_iterations", self.max_iterations, minimum=0)
-        check_int("refine_iterations", self.refine_iterations, minimum=1)
-        for name in ("guide_reseed", "final_reseed"):
-            if check_float(name, getattr(self, name), minimum=0.0, maximum=1.0) == 1.0:
-                raise InputError(f"{name}: must be below 1 (a fraction of the distance)")
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -343,50 +299,43 @@ class Finish:
     #: seams blended in the gradient domain (crisp); "mean": the paper's M-step (the
     #: Gaussian-weighted mean of the windows: smooth, blurred where they disagree);
     #: "mode": copying inside the EM iterations too.
-    vote: str = "copy"
+    vote: str = setting("copy", kind="choice", choices=VOTES)
     #: Weight of the seam costs, per 100 px of the object's size, when the copy's sources
     #: are rearranged by graph cuts so that a few large copies remain and seams fall
     #: where the sources agree (Kwatra et al. 2003; 0: off). Per size: the colour costs
     #: grow with a copy's area, its seams with its length only, so a fixed weight would
     #: merge less the finer the map. 12 fish: 1.4 lost 1 eye in 12, 0.14 left 13
     #: fragments, 0.4 draws every eye with 14.5 (ICM, before: 20).
-    seam_smoothness: float = 0.4
+    seam_smoothness: float = setting(0.4, minimum=0.0)
     #: How far one move of that rearrangement may spread a copy, in units of the copy's
     #: own size (the square root of its area): a move's cost grows with its reach. On a
     #: 2048x1536 fish 1 / 2 / 3 left 74 / 35 / 31 fragments in 5.2 / 7.7 / 9.8 s.
-    seam_spread: float = 2.0
+    seam_spread: float = setting(2.0, minimum=0.0)
     #: Copy whole every small feature of an example (eye, lips, brow) that the copy cut:
     #: busts with every feature 92 -> 100 % (4x: 67 -> 83 %).
-    complete_features: bool = True
+    complete_features: bool = setting(True, kind="bool")
     #: How far the copy may drift towards the voted colours in the seam blend, as a
     #: fraction of the object's size (8 px for a 200x150 fish, 85 px at 2048^2).
-    blend_scale: float = 0.1
+    blend_scale: float = setting(0.1, minimum=0.0)
     #: Keep a step one pixel sharp where the copy changes source inside one example and
     #: the voted map shows at least this share of it (a sleeve meeting a hand; 0: blend
     #: every seam): blur ratio fish 0.93 -> 0.97, humans 0.88 -> 0.97.
-    edge_support: float = 0.3
+    edge_support: float = setting(0.3, minimum=0.0, maximum=1.0)
     #: A seam's step counts as an edge (for ``edge_support``) when it is at least this many
     #: times as strong as either side's own gradient; weaker steps are texture, continued
     #: by the stronger side (12 objects per class: 3 or 4 instead of 2 moved ΔE00, SSIM
     #: and the blur ratio by at most 0.04, 0.001 and 0).
-    edge_contrast: float = 2.0
+    edge_contrast: float = setting(2.0, minimum=0.0)
     #: ...and when it is at least this large (norm of the YCbCr step, channels in [0, 1]:
     #: about ΔE00 5 for a step in luminance alone). Two offsets of smooth skin differ by a
     #: few hundredths of shading, which passed the contrast test next to smooth sides and
     #: drew a blocky face at 4x; the kept steps fall into two groups, under 0.04 (shading)
     #: and from 0.06 (part edges). With it 4x fish SSIM 0.588 -> 0.597, busts 0.673 ->
     #: 0.677; 0.03 left some tiles, 0.06 and 0.1 looked like 0.05.
-    edge_floor: float = 0.05
+    edge_floor: float = setting(0.05, minimum=0.0)
 
     def __post_init__(self) -> None:
-        if self.vote not in VOTES:
-            raise InputError(f"unknown vote {self.vote!r}; use one of {VOTES}")
-        check_float("seam_smoothness", self.seam_smoothness, minimum=0.0)
-        check_float("seam_spread", self.seam_spread, minimum=0.0)
-        check_float("blend_scale", self.blend_scale, minimum=0.0)
-        check_float("edge_support", self.edge_support, minimum=0.0, maximum=1.0)
-        check_float("edge_contrast", self.edge_contrast, minimum=0.0)
-        check_float("edge_floor", self.edge_floor, minimum=0.0)
+        check_settings(self)
 
     @property
     def copies(self) -> bool:
@@ -404,94 +353,72 @@ class Completion:
     #: A feature is at most this share of the object's size (square root of its area)
     #: across: an eye, lips, a brow; not a stripe, a sleeve or hair (0.15 or 0.25 moved
     #: the macro part transfer by at most 0.011).
-    feature_extent: float = 0.2
+    feature_extent: float = setting(0.2, minimum=0.0)
     #: Its colour stands out from its surroundings' (their median) by at least this much
     #: (YCbCr distance; lips on skin 0.09, an eye 0.3, shading under 0.03; at 0.1 the
     #: busts' lips were no longer features).
-    feature_contrast: float = 0.07
+    feature_contrast: float = setting(0.07, minimum=0.0)
     #: More components of one colour than this are a texture's elements, not features (a
     #: checked shirt's squares were "completed" at 4x without it).
-    max_repeats: int = 4
+    max_repeats: int = setting(4, kind="int", minimum=0)
     #: The share of the pixels around a feature that must be of one colour (its ground):
     #: not a blush, nor a shirt's corner cut by a neckline (one put an orange glow into
     #: busts_003's V-neck at 4x). On a ground of several colours (an eye across a fish's
     #: bands), the share of them that must step away from the feature's edge instead.
-    surround_share: float = 0.8
+    surround_share: float = setting(0.8, minimum=0.0, maximum=1.0)
     #: A feature on a ground of several colours has no more pixels of its colour than its
     #: own within this many of its widths around it: not a check of a shirt, nor a piece
     #: of a stripe between others (at 1 width, pieces of fish_007's tail stripes were
     #: features; at 2, the 48 generated examples gained 28: 8 eyes, a fish's eye with the
     #: band around it, a brow, 11 shoes and 7 small pieces of fins, clothes and skin).
-    rare_reach: float = 2.0
+    rare_reach: float = setting(2.0, minimum=0.0)
     #: The share of those pixels that must lie inside the object: a shirt's stripe cut by
     #: the neckline, completed into a smudge at busts_000's neck at 4x, is no feature.
-    inside_share: float = 0.75
+    inside_share: float = setting(0.75, minimum=0.0, maximum=1.0)
     #: The host colour's median window, in pixels of the resolution it is taken at: the
     #: host varies slowly, and a large window's median is slow.
-    host_window: int = 9
+    host_window: int = setting(9, kind="int", minimum=1)
     #: An instance that copies at least this share of the feature's pixels counts as drawn
     #: whole and is left alone.
-    complete_share: float = 0.8
+    complete_share: float = setting(0.8, minimum=0.0, maximum=1.0)
     #: An instance copying less than this share is a stray fragment, not an attempt to draw
     #: the feature: left alone too (0.2, 0.3 and 0.4 gave the same macro part transfer).
-    partial_share: float = 0.2
+    partial_share: float = setting(0.2, minimum=0.0, maximum=1.0)
     #: A feature none of whose pixels the map copies is still completed where the map
     #: copies at least this share of its ring (the pixels within half its width around it)
     #: at offsets near one another: its surroundings were taken and it was skipped
     #: (busts_003's eye at 4x: 0.31; busts_009's lips: between 0.2 and 0.3).
-    skipped_ring_share: float = 0.2
+    skipped_ring_share: float = setting(0.2, minimum=0.0, maximum=1.0)
     #: Given the reliefs, a skipped feature is completed only where the exemplar's relief
     #: of it and its ring correlates at least this well with the query's at the place
     #: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7); a cut one is moved
     #: to where its own relief fits best only where the fit reaches this (the 2048x1536
     #: fish's eye on the bulge 0.96; painted features have none and stay).
-    relief_fit: float = 0.9
+    relief_fit: float = setting(0.9, minimum=0.0, maximum=1.0)
     #: A skipped feature is not completed where this share of its place already stands out
     #: from its surroundings in the map: something is drawn there (it refused a blue-grey
     #: eye over busts_008's own brown one).
-    skipped_place_shown: float = 0.3
+    skipped_place_shown: float = setting(0.3, minimum=0.0, maximum=1.0)
     #: Two copies of one feature at offsets this share of its width apart (and more than
     #: ``double_tolerance`` px) that copy some of the same pixels draw it twice (an eye
     #: with two pupils, seen at 512x512 on an ellipsoid fish with a large eye).
-    double_shift: float = 0.25
+    double_shift: float = setting(0.25, minimum=0.0)
     #: Offsets within this many pixels of the main copy's belong to it.
-    double_tolerance: int = 2
+    double_tolerance: int = setting(2, kind="int", minimum=0)
     #: A double is redrawn from its main copy only when that copy holds at least this
     #: share of the feature (and under ``complete_share``: a whole copy with a few
     #: displaced pixels is a ragged edge, left to the seams), and the copies overlap in at
     #: least ``partial_share`` of it.
-    double_main: float = 0.5
+    double_main: float = setting(0.5, minimum=0.0, maximum=1.0)
     #: Pixels of surroundings copied with the feature around it.
-    rim: int = 2
+    rim: int = setting(2, kind="int", minimum=0)
     #: The rim's largest mean colour difference (YCbCr) from what the map shows there
     #: (without it an orange glow went into a V-neck; at 0.14 every 4x bust drew every
     #: feature, but a brow's skin rim glowed as a light patch).
-    rim_agreement: float = 0.07
+    rim_agreement: float = setting(0.07, minimum=0.0)
 
     def __post_init__(self) -> None:
-        for name in (
-            "feature_extent",
-            "feature_contrast",
-            "rare_reach",
-            "double_shift",
-            "rim_agreement",
-        ):
-            check_float(name, getattr(self, name), minimum=0.0)
-        for name in (
-            "surround_share",
-            "inside_share",
-            "complete_share",
-            "partial_share",
-            "skipped_ring_share",
-            "relief_fit",
-            "skipped_place_shown",
-            "double_main",
-        ):
-            check_float(name, getattr(self, name), minimum=0.0, maximum=1.0)
-        check_int("max_repeats", self.max_repeats, minimum=0)
-        check_int("host_window", self.host_window, minimum=1)
-        check_int("double_tolerance", self.double_tolerance, minimum=0)
-        check_int("rim", self.rim, minimum=0)
+        check_settings(self)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,8 @@ Examples
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy import ndimage
 from skimage import color
@@ -41,6 +43,8 @@ __all__ = [
     "level_patch_sizes",
     "level_plans",
     "pyramid_levels",
+    "sized_config",
+    "sized_pyramid",
     "to_rgb",
     "to_ycbcr",
 ]
@@ -184,6 +188,19 @@ def sized_pyramid(mask: np.ndarray, pyramid: Pyramid) -> Pyramid:
         add_windows_across=pyramid.add_windows_across,
         context_fraction=pyramid.context_fraction,
     )
+
+
+def sized_config(config: DepthConfig, mask: np.ndarray) -> DepthConfig:
+    """``config`` with its pyramid sized for the object ``mask`` (:func:`sized_pyramid`):
+    the first step of every synthesis, before its stages run.
+
+    Examples
+    --------
+    >>> big = np.zeros((600, 800), bool); big[100:500, 100:700] = True
+    >>> sized_config(DepthConfig(), big).pyramid.levels
+    5
+    """
+    return replace(config, pyramid=sized_pyramid(mask, config.pyramid))
 
 
 def feature_level(mask: np.ndarray, pyramid: Pyramid) -> int:

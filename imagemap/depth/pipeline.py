@@ -1,17 +1,18 @@
 """Depth-map colorization as one explicit pipeline (Hassner & Basri 2006, and what we added).
 
-:func:`colorize` runs :data:`STAGES` in order: each is a function
-``(state, config) -> state`` with a name, a predicate saying whether the
-configuration asks for it, and a line on what it changed (``imagemap synthesize
---verbose`` logs them; ``--report`` writes them). ``docs/design.md`` has a paragraph
-per stage with its paper or reason.
+:func:`colorize` sizes the pyramid for the object (as many levels as its size calls
+for), then runs :data:`STAGES` in order with :func:`imagemap.core.stages.run_pipeline`:
+each is a function ``(state, config) -> state`` with a name, a predicate saying whether
+the configuration asks for it, and a line on what it changed (``imagemap synthesize
+--verbose`` logs them; ``--report`` writes them). The stages from ``collapse`` on are
+the finish every colour synthesis shares (:mod:`imagemap.depth.finish`).
+``docs/design.md`` has a paragraph per stage with its paper or reason.
 
 =====================  ==================================================
 stage                  what it does
 =====================  ==================================================
 ``units``              the query at the examples' depth scale; not an example
 ``select``             the examples: named, or the nearest ``m`` in depth
-``pyramid``            as many levels as the object's size calls for
 ``register``           each example warped onto the query (whole regions)
 ``bands``              guide bands of query and examples, their colour levels
 ``synthesize``         the engine, coarse to fine, by the level plan
@@ -39,16 +40,14 @@ Examples
 >>> result.image.shape, result.example_names
 ((40, 48, 3), ['blob_0', 'blob_2'])
 >>> [stage.name for stage in result.stages][:3]
-['units', 'select', 'pyramid']
+['units', 'select', 'register']
 """
 
 from __future__ import annotations
 
 import logging
 import os
-import time
-from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
@@ -56,25 +55,26 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap.core.blend import copy_through, place_seams, seamless_copy
 from imagemap.core.engine import EngineParams, EngineResult, ReleasableLevels, synthesize
-from imagemap.core.pyramid import collapse_laplacian
+from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
 from imagemap.depth.budget import guard_colorize
 from imagemap.depth.config import OPTIONS, PRESETS, DepthConfig, resolve_config
-from imagemap.depth.guides import (
-    depth_mappings,
-    example_mappings,
-    example_ycbcr,
-    level_plans,
-    sized_pyramid,
-    to_rgb,
+from imagemap.depth.finish import (
+    BLEND,
+    COLLAPSE,
+    COPY,
+    OUTSIDE,
+    RGB,
+    SEAMS,
+    SynthesisState,
+    example_features,
 )
+from imagemap.depth.guides import depth_mappings, example_mappings, level_plans, sized_config
 from imagemap.depth.register import Warp, register, registered_positions
 from imagemap.depth.selection import select_examples
 from imagemap.depth.units import units_stage
-from imagemap.example import Example
 from imagemap.io import InputError, validate_depth
 from imagemap.validate import check_examples, check_seed
 
@@ -83,8 +83,6 @@ __all__ = [
     "STAGES",
     "ColorizeResult",
     "DepthConfig",
-    "Stage",
-    "StageRecord",
     "State",
     "colorize",
     "engine_params",
@@ -94,74 +92,23 @@ __all__ = [
 log = logging.getLogger("imagemap")
 
 
-@dataclass
-class State:
-    """What the stages hand on to each other.
+@dataclass(kw_only=True)
+class State(SynthesisState):
+    """What the depth front end's stages hand on to each other.
 
     The inputs (``depth``, ``database``, ``names``, ``seed``, ``quiet``) are set by
-    :func:`colorize`; each stage fills in what it makes and drops what no later stage
-    needs (the pyramids, the engine's levels), so that they do not add to the peak
-    memory of the stages after it.
+    :func:`colorize`; the mask is the depth's object. The finish's fields are
+    :class:`~imagemap.depth.finish.SynthesisState`'s.
     """
 
     depth: np.ndarray
     database: Database
-    seed: int = 0
-    quiet: bool = True
     names: list[str] | None = None
     mask: np.ndarray = field(init=False)  # the object: depth > 0
-    chosen: list[Example] = field(default_factory=list)
     warps: list[Warp] = field(default_factory=list)  # each example onto the query
-    query_levels: ReleasableLevels | None = None
-    exemplar_levels: list[ReleasableLevels] | None = None
-    engine: EngineResult | None = None
-    ycbcr: np.ndarray | None = None  # the voted map, then the map being finished (YCbCr)
-    exemplars: list[np.ndarray] | None = None  # the examples' colours the copy reads
-    source: np.ndarray | None = None  # (H, W, 3): example, y, x of every pixel
-    features: list[tuple[np.ndarray, int]] | None = None  # the examples' small features
-    image: np.ndarray | None = None
-    changed: str = ""  # what the last stage changed, for the record
 
     def __post_init__(self) -> None:
         self.mask = np.asarray(self.depth) > 0
-
-    def made(self, name: str) -> Any:
-        """The value of ``name`` that an earlier stage made (an error naming it if none did:
-        a stage run out of order)."""
-        value = getattr(self, name)
-        if value is None:
-            raise RuntimeError(f"pipeline: no stage has made {name!r} yet (stage order)")
-        return value
-
-
-@dataclass(frozen=True)
-class Stage:
-    """A named step of the pipeline: ``run(state, config) -> state``, run when
-    ``wanted(config)``."""
-
-    name: str
-    run: Callable[[State, DepthConfig], State]
-    wanted: Callable[[DepthConfig], bool] = lambda config: True
-
-
-@dataclass(frozen=True)
-class StageRecord:
-    """What a stage did in one run: its seconds and a line on what it changed
-    ("off" when the configuration did not ask for it)."""
-
-    name: str
-    seconds: float
-    changed: str
-
-
-def _changed_pixels(old: np.ndarray, new: np.ndarray) -> int:
-    """Pixels whose source differs between two source maps (by blocks of rows)."""
-    if old is new:
-        return 0
-    count = 0
-    for y in range(0, old.shape[0], 256):
-        count += int(np.count_nonzero((old[y : y + 256] != new[y : y + 256]).any(axis=-1)))
-    return count
 
 
 # -- the stages ------------------------------------------------------------------------
@@ -178,11 +125,6 @@ def _select(state: State, config: DepthConfig) -> State:
             n = len(database)
         state.chosen = [database[i] for i in select_examples(state.depth, database, n)]
     state.changed = ", ".join(e.name for e in state.chosen)
-    return state
-
-
-def _pyramid(state: State, config: DepthConfig) -> State:
-    state.changed = f"{config.pyramid.levels} levels: windows {config.pyramid.patch_sizes}"
     return state
 
 
@@ -236,7 +178,7 @@ def engine_params(config: DepthConfig, mask: np.ndarray, n_examples: int) -> Eng
     """
     guides, matching = config.guides, config.matching
     return EngineParams(
-        patch_sizes=config.pyramid.patch_sizes,
+        levels=level_plans(config, mask, n_examples),
         guide_weights=(guides.depth_weight, guides.depth_detail_weight)
         + ((guides.silhouette_weight,) if guides.silhouette_weight else ()),
         appearance_weights=(matching.luma_weight, matching.chroma_weight, matching.chroma_weight),
@@ -245,11 +187,9 @@ def engine_params(config: DepthConfig, mask: np.ndarray, n_examples: int) -> Eng
         ),
         pca_fraction=matching.pca_fraction,
         backend=matching.backend,
-        max_iterations=matching.max_iterations,
         tolerance=matching.tolerance,
         guide_padding="constant",
-        vote="mode" if config.finish.vote == "mode" else "mean",
-        levels=level_plans(config, mask, n_examples),
+        vote=config.finish.vote,
         appearance_pyramid=matching.appearance_pyramid,
     )
 
@@ -268,78 +208,12 @@ def _synthesize(state: State, config: DepthConfig) -> State:
     return state
 
 
-def _collapse(state: State, config: DepthConfig) -> State:
-    engine: EngineResult = state.made("engine")
-    if config.matching.appearance_pyramid == "laplacian":
-        state.ycbcr = collapse_laplacian(engine.appearance)
-    else:
-        state.ycbcr = engine.appearance[0]
-    engine.appearance = None  # type: ignore[assignment]  # collapsed: not held through the finish
-    if not config.finish.copies:
-        state.source = engine.source
-        engine.source = engine.copy_source = None  # type: ignore[assignment]  # handed over
-    state.changed = "voted map"
-    return state
-
-
-def _copy(state: State, config: DepthConfig) -> State:
-    # Every pixel copied from the exemplar pixel its windows agree on. The examples'
-    # colours are made again rather than kept from the pyramids: full-size arrays held
-    # through the synthesis would add to its peak memory, and they cost little to remake.
-    engine: EngineResult = state.made("engine")
-    state.exemplars = [example_ycbcr(example) for example in state.chosen]
-    copied = state.source = engine.copy_source
-    differ = 0 if copied is None else _changed_pixels(engine.source, copied)
-    engine.source = engine.copy_source = None  # type: ignore[assignment]  # handed over
-    state.changed = f"{differ} pixels copied from another source than their window's match"
-    return state
-
-
-def _seams(state: State, config: DepthConfig) -> State:
-    old = state.made("source")
-    exemplars = state.made("exemplars")
-    # A small feature (an eye, a brow) that the map copies from an example's, completed
-    # whole by the stage before, or that the voted map shows, only takes labels it already
-    # uses: the rearrangement weighs colours against seams, and a small feature's outline
-    # is long for its few pixels of colour (a low-contrast eye ring lost to its seams). It
-    # may still become one of its own copies: an eye copied in pieces from two examples.
-    shown, _ = completion.small_features(
-        state.made("ycbcr"), state.mask, completion=config.completion
-    )
-    kept = completion.copies_features(old, _features(state, config)) | (shown > 0)
-    del shown
-    size = float(np.sqrt(state.mask.sum()))
-    new = place_seams(
-        exemplars,
-        old,
-        state.made("ycbcr"),
-        smoothness=config.finish.seam_smoothness * size / 100.0,
-        spread=config.finish.seam_spread,
-        mask=state.mask,
-        exemplar_masks=[example.mask for example in state.chosen],
-        groups=ndimage.label(kept & state.mask)[0],
-    )
-    state.source = new
-    state.changed = f"{_changed_pixels(old, new)} pixels take another source"
-    return state
-
-
-def _features(state: State, config: DepthConfig) -> list[tuple[np.ndarray, int]]:
-    """The chosen examples' small features (:func:`completion.small_features`)."""
-    if state.features is None:
-        state.features = [
-            completion.small_features(exemplar, example.mask, completion=config.completion)
-            for exemplar, example in zip(state.made("exemplars"), state.chosen, strict=True)
-        ]
-    return state.features
-
-
 def _complete_features(state: State, config: DepthConfig) -> State:
     exemplars = state.made("exemplars")
     state.source, completed = completion.complete_features(
         exemplars,
         state.made("source"),
-        _features(state, config),
+        example_features(state, config),
         state.mask,
         [example.mask for example in state.chosen],
         relief=(state.depth, [example.depth for example in state.chosen]),
@@ -350,108 +224,27 @@ def _complete_features(state: State, config: DepthConfig) -> State:
     return state
 
 
-_ROWS = 256  # rows per block where the finish works row by row (no full-size float64 copy)
-
-
-def _outside(state: State, config: DepthConfig) -> State:
-    # Outside the object the voted map is whatever the windows left there (zero where no
-    # window reached: black in YCbCr terms is green); the blend must not pull the
-    # object's edge towards it, so the reference there is the copy itself.
-    mask, source, ycbcr = state.mask, state.made("source"), state.made("ycbcr")
-    exemplars = state.made("exemplars")
-    state.features = None  # label maps: not held through the blend, the finish's peak
-    count = 0
-    for y0 in range(0, mask.shape[0], _ROWS):
-        rows = slice(y0, y0 + _ROWS)
-        outside = ~mask[rows] & (source[rows, :, 0] >= 0)
-        if outside.any():
-            ycbcr[rows][outside] = copy_through(exemplars, source[rows][outside][None])[0]
-            count += int(outside.sum())
-    state.changed = f"{count} pixels outside the object set to the copy"
-    return state
-
-
-def _blend(state: State, config: DepthConfig) -> State:
-    size = float(np.sqrt(state.mask.sum()))
-    scale = max(config.finish.blend_scale * size, 1.0)
-    state.ycbcr = seamless_copy(
-        state.made("exemplars"),
-        state.made("source"),
-        state.made("ycbcr"),
-        scale=scale,
-        edge_support=config.finish.edge_support,
-        edge_contrast=config.finish.edge_contrast,
-        edge_floor=config.finish.edge_floor,
-        mask=state.mask,
-    )
-    state.exemplars = None
-    state.changed = f"seams blended at scale {scale:.1f} px"
-    return state
-
-
-def _rgb(state: State, config: DepthConfig) -> State:
-    image = to_rgb(state.made("ycbcr"))
-    image[~state.mask] = 0.0
-    state.image, state.ycbcr = image, None
-    state.changed = "RGB"
-    return state
-
-
-def _copies(config: DepthConfig) -> bool:
-    return config.finish.copies
-
-
-#: The pipeline, in order.
-STAGES: tuple[Stage, ...] = (
+#: The pipeline, in order: the depth front end's own stages, then the shared finish
+#: (:mod:`imagemap.depth.finish`) with the completion of small features, which reads the
+#: relief, after the copy.
+STAGES: tuple[Stage[State, DepthConfig], ...] = (
     Stage("units", units_stage),  # imagemap/depth/units.py: depth scale, the query itself
     Stage("select", _select),
-    Stage("pyramid", _pyramid),
     Stage("register", _register, lambda c: c.guides.registration),
     Stage("bands", _bands),
     Stage("synthesize", _synthesize),
-    Stage("collapse", _collapse),
-    Stage("copy", _copy, _copies),
+    COLLAPSE,
+    COPY,
     Stage(
         "complete_features",
         _complete_features,
         lambda c: c.finish.copies and c.finish.complete_features,
     ),
-    Stage("seams", _seams, lambda c: c.finish.copies and c.finish.seam_smoothness > 0),
-    Stage("outside", _outside, _copies),
-    Stage("blend", _blend, _copies),
-    Stage("rgb", _rgb),
+    SEAMS,
+    OUTSIDE,
+    BLEND,
+    RGB,
 )
-
-#: Stages whose seconds are reported as ``timings["selection"]``, ``["pyramids"]``; the
-#: engine reports its own; every stage after it counts as ``timings["collapse"]``.
-_TIMING_GROUPS = {
-    "select": "selection",
-    "pyramid": "pyramids",
-    "register": "pyramids",
-    "bands": "pyramids",
-}
-
-
-def run_pipeline(
-    state: State, config: DepthConfig, stages: tuple[Stage, ...] = STAGES
-) -> tuple[State, DepthConfig, list[StageRecord]]:
-    """Run ``stages`` on ``state``; returns the final state, the configuration as run
-    (the ``pyramid`` stage sizes it for the object) and a record per stage."""
-    records = []
-    for stage in stages:
-        if not stage.wanted(config):
-            records.append(StageRecord(stage.name, 0.0, "off"))
-            continue
-        start = time.perf_counter()
-        if stage.name == "pyramid":  # the configuration itself is sized here
-            config = replace(config, pyramid=sized_pyramid(state.mask, config.pyramid))
-        state.changed = ""
-        state = stage.run(state, config)
-        seconds = time.perf_counter() - start
-        records.append(StageRecord(stage.name, seconds, state.changed))
-        log.info("stage %s: %.3f s; %s", stage.name, seconds, state.changed)
-    state.changed = ""
-    return state, config, records
 
 
 _PALETTE = np.array(
@@ -487,13 +280,13 @@ class ColorizeResult:
         The examples used, in the order of the indices of :attr:`source`.
     objective : list of list of float
         Target value per EM iteration, per level (finest first).
-    timings : dict
-        Seconds: ``selection``, ``pyramids``, the engine's own steps, ``collapse``
-        (every stage after the engine).
     config : DepthConfig
         The configuration that ran (its pyramid sized for the object).
     stages : list of StageRecord
-        Per stage of :data:`STAGES`: seconds and what it changed.
+        Per stage that ran: seconds and what it changed.
+    engine_timings : dict
+        The engine's own steps' seconds (``pca``, ``search``, ``vote``...), inside the
+        ``synthesize`` stage's.
     """
 
     image: np.ndarray
@@ -502,9 +295,25 @@ class ColorizeResult:
     cost: np.ndarray
     example_names: list[str]
     objective: list[list[float]]
-    timings: dict[str, float] = field(default_factory=dict)
     config: DepthConfig | None = None
     stages: list[StageRecord] = field(default_factory=list)
+    engine_timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds per stage that ran, the ``synthesize`` stage given as the engine's
+        own steps (``synthesize.pca``, ``synthesize.search``...) and the rest of it."""
+        seconds: dict[str, float] = {}
+        for record in self.stages:
+            if record.changed == "off":
+                continue
+            if record.name == "synthesize" and self.engine_timings:
+                inside = {f"synthesize.{k}": v for k, v in self.engine_timings.items()}
+                seconds.update(inside)
+                seconds["synthesize.other"] = max(record.seconds - sum(inside.values()), 0.0)
+            else:
+                seconds[record.name] = record.seconds
+        return seconds
 
     @property
     def rgba(self) -> np.ndarray:
@@ -543,7 +352,7 @@ class ColorizeResult:
         ]
 
 
-def _check_arguments(depth, database, preset, examples, seed) -> list[str] | None:
+def _check_arguments(depth, database, examples, seed) -> list[str] | None:
     """The arguments :func:`colorize` checks before any work; ``examples`` as a list."""
 
     if isinstance(depth, (str, os.PathLike)):
@@ -556,8 +365,6 @@ def _check_arguments(depth, database, preset, examples, seed) -> list[str] | Non
             "database: expected an imagemap.Database (Database.from_directory(DIR), or "
             f"Database([Example.from_arrays(...), ...])), got {type(database).__name__}"
         )
-    if preset is not None and not isinstance(preset, (str, DepthConfig)):
-        raise InputError(f"preset: expected a preset name or DepthConfig, got {preset!r}")
     names = check_examples(examples)
     check_seed(seed)
     for name in names or ():
@@ -610,26 +417,18 @@ def colorize(
     --------
     See the module's example.
     """
-    names = _check_arguments(depth, database, preset, examples, seed)
+    names = _check_arguments(depth, database, examples, seed)
     config = resolve_config(preset, **options)
     guard_colorize(depth, database, config, examples=names)
     depth = validate_depth(depth)
     if len(database) == 0:
         raise InputError("the database has no examples")
+    # The pyramid sized for the object: as many levels as its size calls for.
+    config = sized_config(config, depth > 0)
+    log.info("pyramid: %d levels, windows %s", config.pyramid.levels, config.pyramid.patch_sizes)
     state = State(depth=depth, database=database, seed=seed, quiet=quiet, names=names)
-    state, config, records = run_pipeline(state, config)
+    state, records = run_pipeline(state, config, STAGES)
     engine: EngineResult = state.made("engine")
-    timings: dict[str, float] = {"selection": 0.0, "pyramids": 0.0}
-    timings.update(engine.timings)
-    timings["collapse"] = 0.0
-    seen_engine = False
-    for record in records:
-        if record.name == "synthesize":
-            seen_engine = True
-        elif record.name in _TIMING_GROUPS:
-            timings[_TIMING_GROUPS[record.name]] += record.seconds
-        elif seen_engine:
-            timings["collapse"] += record.seconds
     return ColorizeResult(
         image=state.made("image"),
         mask=state.mask,
@@ -637,9 +436,9 @@ def colorize(
         cost=engine.cost,
         example_names=[e.name for e in state.chosen],
         objective=engine.objective,
-        timings=timings,
         config=config,
         stages=records,
+        engine_timings=dict(engine.timings),
     )
 
 

@@ -52,18 +52,20 @@ from imagemap.core.blend import copy_through, fill_background
 from imagemap.core.engine import ReleasableLevels, synthesize
 from imagemap.core.mapping import Mapping
 from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
-from imagemap.database import Database
-from imagemap.depth.guides import level_plans, to_ycbcr
-from imagemap.depth.pipeline import (
-    STAGES,
-    ColorizeResult,
-    Stage,
-    State,
-    engine_params,
-    run_pipeline,
+from imagemap.core.stages import Stage, run_pipeline
+from imagemap.depth.finish import (
+    BLEND,
+    COLLAPSE,
+    COPY,
+    OUTSIDE,
+    RGB,
+    SEAMS,
+    Picture,
+    SynthesisState,
 )
+from imagemap.depth.guides import sized_config, to_ycbcr
+from imagemap.depth.pipeline import ColorizeResult, engine_params
 from imagemap.errors import InputError
-from imagemap.example import Example
 from imagemap.mesh.bake import covered_texels, rasterize_uv
 
 __all__ = [
@@ -99,20 +101,12 @@ LAYOUT_MIN_IOU = 0.85
 #: texels is below this, in RMS radii (FLAME against HiFi3D++: 0.08; a HiFi3D++ head
 #: against its layout mirrored, IoU 1.0: 0.78; fish: 0.55-0.79).
 LAYOUT_MAX_DISTANCE = 0.3
-#: The depth front end's stages (:data:`imagemap.depth.pipeline.STAGES`) that the uv-space
-#: synthesis runs as they are, around its own ``select``, ``bands`` and ``synthesize``:
-#: they work on the source map and the colours only. Left out: those that read depth
-#: (the query's depth scale and the query-in-database check, registration, and the
-#: completion of small features, which registers depth relief).
-FINISH_STAGES = (
-    "pyramid",
-    "collapse",
-    "copy",
-    "seams",
-    "outside",
-    "blend",
-    "rgb",
-)
+#: The shared finish (:mod:`imagemap.depth.finish`) that the uv-space synthesis runs after
+#: its own ``select``, ``bands`` and ``synthesize``: it works on the source map and the
+#: colours only. Not run: the depth front end's stages that read depth (the query's depth
+#: scale and the query-in-database check, registration, and the completion of small
+#: features, which registers depth relief).
+FINISH_STAGES = (COLLAPSE, COPY, SEAMS, OUTSIDE, BLEND, RGB)
 #: Guide weights (per band standard deviation): the surface point places a texel on the
 #: object; the normal and curvature say what the surface does there.
 POSITION_WEIGHT = 1.0
@@ -642,20 +636,17 @@ def colorize_uv(
         chosen = [examples[i] for i in order]
     textures = [resize_texture(e.texture, working) for e in chosen]
     pictures = [
-        Example.from_arrays(
-            e.name, np.where(e.maps(working).mask, 0.5, 0.0).astype(np.float32), texture
-        )
+        Picture(e.name, texture, e.maps(working).mask)
         for e, texture in zip(chosen, textures, strict=True)
     ]
     band_weights = guide_weights(*weights)
 
-    def select(state: State, config) -> State:
+    def select(state: SynthesisState, config) -> SynthesisState:
         state.chosen = pictures
         state.changed = ", ".join(e.name for e in pictures)
         return state
 
-    def bands(state: State, config) -> State:
-
+    def bands(state: SynthesisState, config) -> SynthesisState:
         levels, kind = config.pyramid.levels, config.matching.appearance_pyramid
         state.query_levels = ReleasableLevels(
             _uv_mappings(query.guides(*weights), query.mask, levels)
@@ -675,16 +666,13 @@ def colorize_uv(
         state.changed = f"{len(chosen)} examples' surface guides and textures"
         return state
 
-    def engine(state: State, config) -> State:
+    def engine(state: SynthesisState, config) -> SynthesisState:
         params = replace(
             engine_params(config, state.mask, len(pictures)),
             guide_weights=band_weights,
             guide_padding="edge",
-            levels=level_plans(config, state.mask, len(pictures)),
         )
-        query_levels, exemplar_levels = state.query_levels, state.exemplar_levels
-        if query_levels is None or exemplar_levels is None:
-            raise RuntimeError("uv-space synthesis: no surface guides (the bands stage ran?)")
+        query_levels, exemplar_levels = state.made("query_levels"), state.made("exemplar_levels")
         state.query_levels = state.exemplar_levels = None
         state.engine = synthesize(query_levels, exemplar_levels, params, seed=state.seed,
                                   quiet=state.quiet)  # fmt: skip
@@ -693,25 +681,12 @@ def colorize_uv(
         )
         return state
 
-    own = {"select": select, "bands": bands, "synthesize": engine}
-    stages = tuple(
-        Stage(s.name, own[s.name], s.wanted) if s.name in own else s
-        for s in STAGES
-        if s.name in own or s.name in FINISH_STAGES
-    )
-    missing_stages = (set(own) | set(FINISH_STAGES)) - {s.name for s in stages}
-    if missing_stages:  # the depth front end renamed a stage: say so, do not skip it silently
-        raise RuntimeError(f"uv-space synthesis: no pipeline stage {sorted(missing_stages)}")
+    stages = (Stage("select", select), Stage("bands", bands), Stage("synthesize", engine))
     start = time.perf_counter()
-    state = State(
-        depth=np.where(query.mask, 0.5, 0.0).astype(np.float32),
-        database=Database(pictures),
-        seed=seed,
-        quiet=quiet,
-        names=[e.name for e in chosen],
+    ran = sized_config(config, query.mask)
+    state, records = run_pipeline(
+        SynthesisState(mask=query.mask, seed=seed, quiet=quiet), ran, stages + FINISH_STAGES
     )
-    state.mask = query.mask
-    state, ran, records = run_pipeline(state, config, stages)
     working_image, source, engine_result = state.image, state.source, state.engine
     if working_image is None or source is None or engine_result is None:
         raise RuntimeError("uv-space synthesis: the pipeline made no texture (stage order)")
@@ -745,7 +720,7 @@ def colorize_uv(
         cost=cost,
         example_names=[e.name for e in chosen],
         objective=engine_result.objective,
-        timings={"uv_space": seconds},
+        engine_timings=dict(engine_result.timings),
         config=ran,
         stages=records,
     )
