@@ -64,7 +64,7 @@ import numpy as np
 from imagemap.align import aligned_source, paste_aligned
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.database import Database, Example
-from imagemap.depth.config import FINISHES, PRESETS, DepthConfig, resolve_config
+from imagemap.depth.config import METHODS, PRESETS, DepthConfig, resolve_config
 from imagemap.depth.pipeline import colorize
 from imagemap.depth.selection import select_examples
 from imagemap.io import InputError
@@ -92,7 +92,6 @@ from imagemap.report import (  # noqa: F401
 from imagemap.validate import check_int, check_seed
 
 __all__ = [
-    "METHODS",
     "Evaluation",
     "MethodResult",
     "ObjectEvaluation",
@@ -106,17 +105,6 @@ __all__ = [
 ]
 
 log = logging.getLogger("imagemap")
-
-#: Method names, in report order.
-METHODS: tuple[str, ...] = (
-    "full",
-    "copy_nearest",
-    "one_pass",
-    "mean_vote",
-    "no_position",
-    "laplacian",
-    "paper",
-)
 
 
 @dataclass
@@ -247,29 +235,10 @@ def method_params(method: str, config: DepthConfig) -> DepthConfig | None:
     >>> method_params("paper", PRESETS["fish"]).finish.vote
     'mean'
     """
-    if method == "full":
-        return config
-    if method == "copy_nearest":
-        return None
-    if method == "one_pass":
-        # Fig. 1: one scale, windows of the paper's k, depth only, one vote.
-        return config.replace_fields(
-            patch_sizes=config.pyramid.patch_sizes[:1],
-            max_iterations=0,
-            position_weight=0.0,
-            registration=False,
-            vote="mean",
-            grow=False,  # one level: Fig. 1 has no pyramid
-        )
-    if method == "mean_vote":
-        return config.replace_fields(vote="mean")
-    if method == "no_position":
-        return config.replace_fields(position_weight=0.0, registration=False)
-    if method == "laplacian":
-        return config.replace_fields(appearance_pyramid="laplacian")
-    if method == "paper":
-        return config.replace_fields(**FINISHES["paper"])
-    raise InputError(f"unknown method {method!r}; use some of {', '.join(METHODS)}")
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; use some of {', '.join(METHODS)}")
+    make = METHODS[method]
+    return None if make is None else make(config)
 
 
 def _copy_nearest(depth: np.ndarray, others: Database) -> tuple:
@@ -324,7 +293,7 @@ def evaluate_object(
     name: str,
     *,
     preset: str | DepthConfig = "fish",
-    methods: tuple[str, ...] = METHODS,
+    methods: tuple[str, ...] = tuple(METHODS),
     seed: int = 0,
 ) -> ObjectEvaluation:
     """Leave-one-out results of every method on one object of ``database``.
@@ -410,7 +379,7 @@ def leave_one_out(
     database: Database,
     *,
     preset: str | DepthConfig | None = None,
-    methods: tuple[str, ...] | list[str] = METHODS,
+    methods: tuple[str, ...] | list[str] = tuple(METHODS),
     workers: int = 1,
     limit: int | None = None,
     seed: int = 0,

@@ -11,10 +11,10 @@ import pytest
 from data_gen.dataset import write_class
 from imagemap.cli import main
 from imagemap.database import Database
+from imagemap.depth.config import METHODS
 from imagemap.depth.units import query_in_database
 from imagemap.evaluation import (
     CSV_COLUMNS,
-    METHODS,
     check_report,
     evaluate_object,
     leave_one_out,

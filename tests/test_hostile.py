@@ -635,14 +635,15 @@ def test_same_seed_same_bytes_through_the_cli(world, capsys):
 @pytest.mark.parametrize("class_name", ["fish", "busts", "humans"])
 def test_no_nan_or_inf_in_any_method_on_generated_classes(class_name):
     import data_gen
-    from imagemap.evaluation import METHODS, evaluate_object
+    from imagemap.depth.config import METHODS
+    from imagemap.evaluation import evaluate_object
 
     size = (80, 60) if class_name == "fish" else (60, 80)
     instances = [data_gen.make_instance(class_name, i, seed=0, size=size) for i in range(3)]
     database = Database(
         [Example.from_arrays(i.name, i.depth, i.image, labels=i.labels) for i in instances]
     )
-    obj = evaluate_object(database, instances[0].name, preset=class_name, methods=METHODS)
+    obj = evaluate_object(database, instances[0].name, preset=class_name, methods=tuple(METHODS))
     assert set(obj.results) == set(METHODS)
     for method, result in obj.results.items():
         assert np.all(np.isfinite(result.image)), method

@@ -84,8 +84,7 @@ def test_public_names_are_importable_and_lazy_submodules_resolve():
 
 def test_option_choices_match_the_library():
     from imagemap.core.engine import APPEARANCE_PYRAMIDS, BACKENDS
-    from imagemap.depth.config import PRESETS
-    from imagemap.evaluation import METHODS
+    from imagemap.depth.config import METHODS, PRESETS
 
     assert PRESET_NAMES == tuple(sorted(PRESETS))
     assert BACKEND_NAMES == tuple(BACKENDS)

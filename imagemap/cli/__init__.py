@@ -14,8 +14,7 @@ NumPy, SciPy, scikit-image or numba (``imagemap --help`` and every ``COMMAND
 --help`` answer at once); the ``func`` functions import what their command needs.
 The colorization options and presets come from :mod:`imagemap.depth.config`, which
 imports nothing heavy; the choices that live in heavy modules are restated here
-(:data:`PIXELWISE_BACKEND_NAMES`, :data:`METHOD_NAMES`; a test checks them against the
-library).
+(:data:`PIXELWISE_BACKEND_NAMES`; a test checks it against the library).
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ import sys
 
 import imagemap
 from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS
-from imagemap.depth.config import PRESETS
+from imagemap.depth.config import METHODS, PRESETS
 from imagemap.errors import InputError
 
 #: The ``--preset`` choices.
@@ -39,16 +38,8 @@ PRESET_NAMES = tuple(sorted(PRESETS))
 BACKEND_NAMES = BACKENDS
 #: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
-#: ``imagemap.evaluation.METHODS``: the ``imagemap evaluate --methods`` names, in report order.
-METHOD_NAMES = (
-    "full",
-    "copy_nearest",
-    "one_pass",
-    "mean_vote",
-    "no_position",
-    "laplacian",
-    "paper",
-)
+#: The ``imagemap evaluate --methods`` names, in report order.
+METHOD_NAMES = tuple(METHODS)
 #: The ``--appearance-pyramid`` choices.
 APPEARANCE_PYRAMID_NAMES = APPEARANCE_PYRAMIDS
 

@@ -28,6 +28,7 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -37,6 +38,7 @@ from imagemap.validate import check_float, check_settings, setting
 
 __all__ = [
     "FINISHES",
+    "METHODS",
     "OPTIONS",
     "PRESETS",
     "VOTES",
@@ -518,6 +520,34 @@ FINISHES: dict[str, dict[str, Any]] = {
         "appearance_pyramid": "laplacian",
         "complete_features": False,
     },
+}
+
+
+def _one_pass(config: DepthConfig) -> DepthConfig:
+    # Fig. 1: one scale, windows of the paper's k, depth only, one vote.
+    return config.replace_fields(
+        patch_sizes=config.pyramid.patch_sizes[:1],
+        max_iterations=0,
+        position_weight=0.0,
+        registration=False,
+        vote="mean",
+        grow=False,  # one level: Fig. 1 has no pyramid
+    )
+
+
+#: The methods ``imagemap evaluate`` compares, in report order: name -> how its
+#: configuration is made from the class preset (with the run's options); None for a
+#: baseline that synthesizes nothing (``copy_nearest``: the nearest example's map pasted
+#: at the query's centroid). Declared once: the command line, the evaluation and the
+#: report read it.
+METHODS: dict[str, Callable[[DepthConfig], DepthConfig] | None] = {
+    "full": lambda config: config,
+    "copy_nearest": None,
+    "one_pass": _one_pass,
+    "mean_vote": lambda config: config.replace_fields(vote="mean"),
+    "no_position": lambda config: config.replace_fields(position_weight=0.0, registration=False),
+    "laplacian": lambda config: config.replace_fields(appearance_pyramid="laplacian"),
+    "paper": lambda config: config.replace_fields(**FINISHES["paper"]),
 }
 
 
