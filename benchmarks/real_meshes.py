@@ -45,7 +45,7 @@ DEFAULT_OUT = ROOT / "scratch" / "realdata" / "out"
 
 #: The synthesis views of the user's report in #32.
 SYNTHESIS_VIEWS = "front,left,right"
-#: Angles to judge from (azimuth, elevation in degrees, as imagemap.mesh.View): the
+#: Angles to judge from (azimuth, elevation in degrees, as imagemap.scene.View): the
 #: front and a profile (synthesis views) and two raised three-quarter views that no
 #: synthesis view sees straight on: where the per-view syntheses meet.
 EVAL_VIEWS = ((0.0, 0.0), (-40.0, 15.0), (40.0, 15.0), (90.0, 0.0))
@@ -154,7 +154,7 @@ def prepare(source: str | Path, out: str | Path = DEFAULT_DIR) -> list[Path]:
     from PIL import Image
 
     from imagemap.io import InputError
-    from imagemap.mesh.files import export_textured, textured_mesh
+    from imagemap.scene.files import export_textured, textured_mesh
 
     source, out = Path(source), Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -219,7 +219,7 @@ def look_at(
 ) -> Camera:
     """A camera on the ``(azimuth, elevation)`` direction looking at ``centre``.
 
-    Directions as :class:`imagemap.mesh.View` (azimuth about +y from +z, elevation
+    Directions as :class:`imagemap.scene.View` (azimuth about +y from +z, elevation
     towards +y); the bounding sphere (``centre``, ``radius``) fills the picture less
     :data:`FRAME_MARGIN`, or the field of view, whichever is tighter.
 
@@ -367,8 +367,8 @@ class TexturedArrays:
     @classmethod
     def load(cls, path: str | Path) -> TexturedArrays:
         from imagemap.io import InputError
-        from imagemap.mesh.files import load_mesh
-        from imagemap.mesh.views import texture_image
+        from imagemap.scene.files import load_mesh
+        from imagemap.scene.views import texture_image
 
         mesh = load_mesh(path)
         uv = getattr(mesh.visual, "uv", None)
@@ -379,7 +379,7 @@ class TexturedArrays:
 
     @classmethod
     def from_mesh(cls, mesh) -> TexturedArrays:
-        from imagemap.mesh.views import texture_image
+        from imagemap.scene.views import texture_image
 
         return cls(
             np.asarray(mesh.vertices, dtype=np.float64),
@@ -555,7 +555,7 @@ def small_copy(mesh: TexturedArrays, grid: int = 48, texture_size: int = 128) ->
 
 def mesh_files(folder: str | Path) -> list[Path]:
     """The textured meshes of a database folder, sorted by name (as the database sorts)."""
-    from imagemap.mesh.files import is_mesh_path
+    from imagemap.scene.files import is_mesh_path
 
     return sorted(p for p in Path(folder).iterdir() if p.is_file() and is_mesh_path(p))
 
@@ -581,8 +581,8 @@ def first_choice(name: str, folder: Path, view: str = "front") -> str:
     """The example the mesh route's selection picks first for ``name`` held out, at ``view``."""
     from imagemap.database import Database, database_at_view
     from imagemap.depth.pipeline import select_examples
-    from imagemap.mesh.files import load_mesh
-    from imagemap.mesh.views import DEFAULT_SIZE, parse_view, render_mesh
+    from imagemap.scene.files import load_mesh
+    from imagemap.scene.views import DEFAULT_SIZE, parse_view, render_mesh
 
     view = parse_view(view)
     database = database_at_view(Database.from_directory(folder).without(name), view, DEFAULT_SIZE)
@@ -606,7 +606,7 @@ def synthesize(
     """Run the mesh route on ``name`` held out; write ``out/NAME.glb``; (path, MeshResult, s)."""
     from imagemap.database import Database
     from imagemap.mesh import colorize_mesh
-    from imagemap.mesh.files import export_textured, load_mesh
+    from imagemap.scene.files import export_textured, load_mesh
 
     database = Database.from_directory(folder).without(name)
     start = time.perf_counter()
@@ -705,7 +705,7 @@ def evaluate(
 
 
 def _view_labels(views: str) -> set[str]:
-    from imagemap.mesh.views import parse_views
+    from imagemap.scene.views import parse_views
 
     return {str(v) for v in parse_views(views)}
 

@@ -58,7 +58,7 @@ def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_
     """
 
     from data_gen.core import part_roughness
-    from imagemap.mesh import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
+    from imagemap.scene import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
 
     params, _, assembly, pose, mesh = posed_instance(object_class, index, seed)
     vertices, faces, uv, source = uv_atlas(mesh)
@@ -170,7 +170,7 @@ def write_class(
         target = out / "holdout" if index >= count - holdout else out
         write_instance(instance, target)
         if meshes:
-            from imagemap.mesh import export_textured
+            from imagemap.scene import export_textured
 
             textured = instance_mesh(object_class, index, seed=seed)
             export_textured(textured, target / "meshes" / f"{instance.name}.glb")

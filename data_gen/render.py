@@ -1,9 +1,9 @@
-"""Orthographic ray casting: moved to :mod:`imagemap.mesh.raycast` (one renderer for both).
+"""Orthographic ray casting: moved to :mod:`imagemap.scene.raycast` (one renderer for both).
 
 Kept so that ``from data_gen.render import cast_orthographic`` still works.
 """
 
-from imagemap.mesh.raycast import (
+from imagemap.scene.raycast import (
     OrthographicView,
     RayHits,
     cast_orthographic,

@@ -112,8 +112,9 @@ def fish_2048(out: Path, count: int = 9, height: int = 300):
 
 def mesh_four_angles(out: Path, size: int = 240):
     from data_gen.dataset import write_class
-    from imagemap.mesh import colorize_mesh, load_mesh, render_textured
-    from imagemap.mesh.coverage import choose_views
+    from imagemap.mesh import colorize_mesh
+    from imagemap.scene import load_mesh, render_textured
+    from imagemap.scene.coverage import choose_views
 
     with tempfile.TemporaryDirectory() as folder:
         root = Path(folder) / "fish"

@@ -56,8 +56,8 @@ _LAZY = {
     "read_image": "imagemap.io",
     "write_image": "imagemap.io",
     "colorize_mesh": "imagemap.mesh",
-    "export_textured": "imagemap.mesh",
-    "render_mesh": "imagemap.mesh",
+    "export_textured": "imagemap.scene",
+    "render_mesh": "imagemap.scene",
 }
 
 __all__ = [
@@ -89,7 +89,8 @@ if TYPE_CHECKING:  # what type checkers and editors see
     from imagemap.depth.selection import select_examples
     from imagemap.errors import InputError
     from imagemap.io import read_depth, read_image, write_image
-    from imagemap.mesh import colorize_mesh, export_textured, render_mesh
+    from imagemap.mesh import colorize_mesh
+    from imagemap.scene import export_textured, render_mesh
 
     __version__: str
 

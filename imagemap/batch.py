@@ -85,16 +85,6 @@ from imagemap.database import Database, database_at_view, prepare_database
 from imagemap.depth.budget import guard_mesh
 from imagemap.depth.config import DepthConfig, resolve_config
 from imagemap.io import InputError, atomic_path, image_writer, is_temporary_of, read_depth
-from imagemap.mesh import (
-    DEFAULT_SIZE,
-    FRONT,
-    MESH_SUFFIXES,
-    View,
-    export_textured,
-    file_digest,
-    load_mesh,
-    parse_views,
-)
 from imagemap.mesh.colorize import colorize_mesh
 from imagemap.outputs import (
     STAGING_PREFIX,
@@ -106,6 +96,16 @@ from imagemap.outputs import (
     written_companions,
 )
 from imagemap.progress import progress
+from imagemap.scene import (
+    DEFAULT_SIZE,
+    FRONT,
+    MESH_SUFFIXES,
+    View,
+    export_textured,
+    file_digest,
+    load_mesh,
+    parse_views,
+)
 from imagemap.validate import check_float, check_int, check_seed
 
 __all__ = ["BatchOptions", "BatchSummary", "Job", "plan_jobs", "prepare_databases", "run_batch"]
@@ -504,8 +504,8 @@ def _texture_size(mesh, options: BatchOptions) -> int:
     """The texture side the bake will choose for ``mesh`` (``options.texture_size`` if set)."""
     import numpy as np  # deferred: start-up (the parent of a pool never needs it here)
 
-    from imagemap.mesh.bake import texture_size_for  # deferred: start-up (workers only)
-    from imagemap.mesh.views import DEFAULT_MARGIN  # deferred: start-up (workers only)
+    from imagemap.scene.bake import texture_size_for  # deferred: start-up (workers only)
+    from imagemap.scene.views import DEFAULT_MARGIN  # deferred: start-up (workers only)
 
     if options.texture_size:
         return int(options.texture_size)

@@ -18,8 +18,8 @@ from pathlib import Path
 from imagemap.example import Example
 from imagemap.io import InputError
 from imagemap.materials import MAP_KINDS, example_maps
-from imagemap.mesh.examples import MeshExample, mesh_examples
-from imagemap.mesh.views import View
+from imagemap.scene.examples import MeshExample, mesh_examples
+from imagemap.scene.views import View
 
 __all__ = ["Database", "Example", "check_database", "database_at_view", "prepare_database"]
 
@@ -76,7 +76,7 @@ class Database:
         """Open a database directory; with ``strict``, unpaired files are an error.
 
         Textured meshes in it (``NAME.glb``, ``.obj``, ``.ply``...) are examples too,
-        rendered from ``view`` at ``size`` (W, H) on first use (see :mod:`imagemap.mesh`).
+        rendered from ``view`` at ``size`` (W, H) on first use (see :mod:`imagemap.scene`).
         """
         if not isinstance(path, str | os.PathLike) or not str(path):
             raise InputError(f"Database.from_directory: expected a folder, got {path!r}")
@@ -220,7 +220,7 @@ def check_database(
     path : str or path-like
         The database directory.
     view, size : optional
-        How meshes are rendered (defaults: :data:`imagemap.mesh.FRONT`, 200x150).
+        How meshes are rendered (defaults: :data:`imagemap.scene.FRONT`, 200x150).
 
     Returns
     -------

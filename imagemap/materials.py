@@ -62,7 +62,7 @@ __all__ = [
 #: The maps a material set may hold, with their channel counts.
 MAP_KINDS: dict[str, int] = {"normal": 3, "roughness": 1, "metallic": 1, "height": 1, "ao": 1}
 #: What a map says where it says nothing: a flat normal, the export's default
-#: roughness (:data:`imagemap.mesh.files.DEFAULT_ROUGHNESS`), no metal, mid height,
+#: roughness (:data:`imagemap.scene.files.DEFAULT_ROUGHNESS`), no metal, mid height,
 #: nothing occluded.
 NEUTRAL: dict[str, tuple[float, ...]] = {
     "normal": (0.5, 0.5, 1.0),
@@ -154,7 +154,7 @@ def example_maps(example) -> dict[str, np.ndarray]:
     """Every map an example carries (read on first use and cached), by kind.
 
     From arrays given with :func:`with_maps`, a mesh example's material
-    (:meth:`~imagemap.mesh.examples.MeshExample.maps`), or the files
+    (:meth:`~imagemap.scene.examples.MeshExample.maps`), or the files
     ``NAME_KIND.png`` beside ``NAME_image.png``.
 
     Raises
@@ -313,7 +313,7 @@ def view_normals_to_atlas(
     normals : ndarray, (N, 3)
         Unit surface normals (world) at the same points.
     view_rotation : ndarray, (3, 3)
-        :meth:`imagemap.mesh.View.rotation` of the picture's view.
+        :meth:`imagemap.scene.View.rotation` of the picture's view.
     atlas_tangent, atlas_bitangent : ndarray, (N, 3)
         World directions of increasing u and v at the points.
 

@@ -17,7 +17,7 @@ from data_gen.dataset import instance_mesh
 from imagemap.batch import BatchOptions, plan_jobs, run_batch
 from imagemap.cli import main
 from imagemap.io import InputError, read_image, write_image
-from imagemap.mesh import check_textured, export_textured, load_mesh, render_textured
+from imagemap.scene import check_textured, export_textured, load_mesh, render_textured
 
 SIZE = (60, 45)
 OPTIONS = BatchOptions(preset="fish", size=SIZE, texture_size=64)

@@ -22,9 +22,9 @@ import pytest
 import trimesh
 
 from imagemap.blender.package import build_zip
-from imagemap.mesh import project_texture, render_mesh
-from imagemap.mesh.files import export_textured, load_mesh
-from imagemap.mesh.surface import keep_surface
+from imagemap.scene import project_texture, render_mesh
+from imagemap.scene.files import export_textured, load_mesh
+from imagemap.scene.surface import keep_surface
 
 
 def blender_runner() -> list[str] | None:

@@ -13,8 +13,8 @@ import pytest
 import trimesh
 
 from imagemap.io import InputError
-from imagemap.mesh import project_texture, render_mesh
-from imagemap.mesh.files import (
+from imagemap.scene import project_texture, render_mesh
+from imagemap.scene.files import (
     DEFAULT_ROUGHNESS,
     SurfaceMaterial,
     corner_normals,
@@ -24,7 +24,7 @@ from imagemap.mesh.files import (
     textured_mesh,
     unit_scale,
 )
-from imagemap.mesh.surface import keep_surface
+from imagemap.scene.surface import keep_surface
 
 
 def glb_json(path) -> dict:
@@ -160,7 +160,7 @@ def test_the_inputs_own_normals_alpha_mode_and_sides_are_kept(tmp_path):
     corners_in = np.asarray(source.vertex_normals)[source.faces]
     np.testing.assert_allclose(corners_out, corners_in, atol=2e-3)
     # Alpha: the texture's alpha at each face centre's UV is the source's there.
-    from imagemap.mesh.views import sample_image
+    from imagemap.scene.views import sample_image
 
     centre = np.full((len(loaded.faces), 3), 1 / 3)
     uv_out = np.einsum("fk,fkc->fc", centre, loaded.visual.uv[loaded.faces])

@@ -49,7 +49,7 @@ from imagemap.database import Database, Example, check_database
 from imagemap.depth import completion, units
 from imagemap.depth.budget import memory_check
 from imagemap.io import InputError, read_depth, read_image, write_image
-from imagemap.mesh import FRONT, export_textured, textured_mesh
+from imagemap.scene import FRONT, export_textured, textured_mesh
 
 REPO = Path(__file__).resolve().parents[1]
 

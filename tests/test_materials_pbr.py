@@ -123,10 +123,11 @@ def test_mesh_route_bakes_the_roughness_a_mesh_example_carries(tmp_path, monkeyp
     import trimesh
 
     from imagemap.database import database_at_view
-    from imagemap.mesh import bake_views, colorize_mesh, load_mesh
-    from imagemap.mesh.files import export_textured, textured_mesh
+    from imagemap.mesh import colorize_mesh
     from imagemap.mesh.maps import with_mesh_maps
-    from imagemap.mesh.views import parse_views, sample_image
+    from imagemap.scene import bake_views, load_mesh
+    from imagemap.scene.files import export_textured, textured_mesh
+    from imagemap.scene.views import parse_views, sample_image
 
     monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path / "cache"))
     ball = trimesh.creation.icosphere(subdivisions=3)

@@ -8,7 +8,7 @@ import trimesh
 
 from imagemap.database import Database
 from imagemap.io import InputError, read_image, write_image
-from imagemap.mesh import (
+from imagemap.scene import (
     FRONT,
     MeshExample,
     View,
@@ -237,7 +237,7 @@ def test_meshes_in_a_database_are_rendered_once_and_cached(tmp_path, monkeypatch
     assert len(cached) == 1
     # A second open reads the cache: no mesh is loaded.
     monkeypatch.setattr(
-        "imagemap.mesh.examples.load_mesh", lambda path: pytest.fail("rendered again")
+        "imagemap.scene.examples.load_mesh", lambda path: pytest.fail("rendered again")
     )
     again = Database.from_directory(db_dir, view="front", size=(40, 30))["ball"]
     np.testing.assert_array_equal(again.depth, example.depth)

@@ -16,8 +16,6 @@ from scipy import ndimage
 from imagemap.database import Database, database_at_view
 from imagemap.depth.selection import select_examples
 from imagemap.io import InputError
-from imagemap.mesh import bake_views, load_mesh, render_mesh, textured_mesh
-from imagemap.mesh.bake import SEAM_BAND_PIXELS, texture_size_for, view_shares, world_per_uv
 from imagemap.mesh.colorize import colorize_mesh, selection_distances, shared_examples
 from imagemap.mesh.uvspace import (
     LAYOUT_TEST_SIZE,
@@ -27,7 +25,9 @@ from imagemap.mesh.uvspace import (
     shares_layout,
     surface_maps,
 )
-from imagemap.mesh.views import texture_image
+from imagemap.scene import bake_views, load_mesh, render_mesh, textured_mesh
+from imagemap.scene.bake import SEAM_BAND_PIXELS, texture_size_for, view_shares, world_per_uv
+from imagemap.scene.views import texture_image
 
 HEADS = Path(__file__).parent / "data" / "real_meshes"
 RED, GREEN, BLUE = (0.9, 0.1, 0.1), (0.1, 0.8, 0.2), (0.1, 0.2, 0.9)

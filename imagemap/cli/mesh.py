@@ -16,7 +16,7 @@ DEFERRED_IMPORTS = "start-up: building the parser loads no scientific module"
 
 def is_mesh_request(args: argparse.Namespace) -> bool:
     """Whether ``imagemap synthesize`` was given a mesh or asked for a textured mesh."""
-    from imagemap.mesh import TEXTURED_SUFFIXES, is_mesh_path
+    from imagemap.scene import TEXTURED_SUFFIXES, is_mesh_path
 
     return any(is_mesh_path(p) for p in args.depth) or (
         Path(args.output).suffix.lower() in TEXTURED_SUFFIXES
@@ -33,8 +33,8 @@ PLAUSIBLE_METRES = (0.01, 30.0)
 def _render_mesh_examples(database, views, size, quiet: bool) -> None:
     """Render (or read from the cache) every mesh example at every view, each named."""
     from imagemap.database import database_at_view
-    from imagemap.mesh import MeshExample
     from imagemap.progress import progress
+    from imagemap.scene import MeshExample
 
     for view in views:
         examples = [e for e in database_at_view(database, view, size) if isinstance(e, MeshExample)]
@@ -58,8 +58,8 @@ def _mesh_preview(textured, database, first_name: str, size):
     (a mesh example rendered the same way; a picture example as it is)."""
     import numpy as np
 
-    from imagemap.mesh import MeshExample, load_mesh, render_textured
-    from imagemap.mesh.views import parse_view
+    from imagemap.scene import MeshExample, load_mesh, render_textured
+    from imagemap.scene.views import parse_view
 
     example = database[first_name]
     tiles = [render_textured(textured, parse_view(v), size, shaded=True) for v in PREVIEW_VIEWS]
@@ -90,8 +90,8 @@ def how_made(made, views) -> str:
 def _with_view_maps(made, mesh, database, size):
     """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
     from imagemap.database import database_at_view
-    from imagemap.mesh import bake_views, project_texture
     from imagemap.mesh.maps import with_mesh_maps
+    from imagemap.scene import bake_views, project_texture
 
     if getattr(made, "path", "views") != "views" or not made.renders:
         return made.mesh
@@ -119,8 +119,8 @@ def _guard_memory(args: argparse.Namespace, mesh, views) -> None:
     import numpy as np
 
     from imagemap.depth.budget import guard_mesh
-    from imagemap.mesh.bake import texture_size_for
-    from imagemap.mesh.views import DEFAULT_MARGIN
+    from imagemap.scene.bake import texture_size_for
+    from imagemap.scene.views import DEFAULT_MARGIN
 
     size = args.size
     texture = args.texture_size
@@ -145,20 +145,15 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     from imagemap.database import Database
     from imagemap.depth.config import resolve_config
     from imagemap.io import image_writer
-    from imagemap.mesh import (
-        TEXTURED_SUFFIXES,
-        colorize_mesh,
-        export_textured,
-        is_mesh_path,
-        load_mesh,
-    )
+    from imagemap.mesh import colorize_mesh
     from imagemap.mesh.colorize import uv_layout_examples
-    from imagemap.mesh.coverage import (
+    from imagemap.outputs import OutputPlan, exported, write_all, written_companions
+    from imagemap.scene import TEXTURED_SUFFIXES, export_textured, is_mesh_path, load_mesh
+    from imagemap.scene.coverage import (
         choose_views,
     )  # deferred: start-up: the parser loads no scientific module
-    from imagemap.mesh.files import unit_scale
-    from imagemap.mesh.surface import keep_surface
-    from imagemap.outputs import OutputPlan, exported, write_all, written_companions
+    from imagemap.scene.files import unit_scale
+    from imagemap.scene.surface import keep_surface
 
     output = Path(args.output)
     if len(args.depth) > 1:

@@ -97,7 +97,7 @@ def _positive_float(text: str) -> float:
     return value
 
 
-#: Names of --units (metres per unit: imagemap.mesh.files.UNIT_SCALES).
+#: Names of --units (metres per unit: imagemap.scene.files.UNIT_SCALES).
 UNIT_NAMES = ("m", "cm", "mm", "in", "ft")
 
 
@@ -166,10 +166,10 @@ def add_mesh_options(parser: argparse.ArgumentParser, uv_space: bool = False) ->
 
 def views_of(args: argparse.Namespace) -> tuple:
     """The views ``--views`` or ``--view`` name (default: the front)."""
-    from imagemap.mesh import FRONT, parse_view, parse_views  # deferred: start-up (SciPy)
+    from imagemap.scene import FRONT, parse_view, parse_views  # deferred: start-up (SciPy)
 
     if getattr(args, "views", None) == "auto":  # the candidates; the mesh route narrows them
-        from imagemap.mesh.coverage import (
+        from imagemap.scene.coverage import (
             CANDIDATES,
         )  # deferred: start-up: the parser loads no scientific module
 

@@ -10,7 +10,7 @@ Two paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
   ``--uv-space``).
 - **views**: one synthesis per view, all from the same examples (chosen once for the
   object, :func:`shared_examples`), textured by projection (one view) or baked into a
-  UV atlas, each texel from the view that sees it best (:func:`imagemap.mesh.bake.bake_views`).
+  UV atlas, each texel from the view that sees it best (:func:`imagemap.scene.bake.bake_views`).
 """
 
 from __future__ import annotations
@@ -25,9 +25,6 @@ from imagemap.depth.config import resolve_config
 from imagemap.depth.pipeline import colorize
 from imagemap.depth.selection import selection_distances
 from imagemap.io import InputError
-from imagemap.mesh.bake import bake_views, project_texture, view_shares
-from imagemap.mesh.examples import MeshExample
-from imagemap.mesh.files import load_mesh, textured_mesh
 from imagemap.mesh.uvspace import (
     LAYOUT_TEST_SIZE,
     UVExample,
@@ -36,7 +33,10 @@ from imagemap.mesh.uvspace import (
     shares_layout,
     surface_maps,
 )
-from imagemap.mesh.views import (
+from imagemap.scene.bake import bake_views, project_texture, view_shares
+from imagemap.scene.examples import MeshExample
+from imagemap.scene.files import load_mesh, textured_mesh
+from imagemap.scene.views import (
     DEFAULT_SIZE,
     FRONT,
     MeshRender,
@@ -106,7 +106,7 @@ def shared_examples(
     Each view's selection distances (:func:`selection_distances`, the query's depth
     against the examples seen from the same view), per pixel of the object, are summed
     with ``weights``: by default each view's share of the surface it sees best
-    (:func:`imagemap.mesh.bake.view_shares` needs the mesh; without it, equal weights),
+    (:func:`imagemap.scene.bake.view_shares` needs the mesh; without it, equal weights),
     so a view that gives the texture little (a fish seen head-on: 2-4 % of its surface,
     but ten times the flanks' distances) does not choose for it. Ties keep the
     database's order.

@@ -16,9 +16,9 @@ from imagemap.materials import (
     transfer_maps,
     uv_frames,
 )
-from imagemap.mesh.bake import rasterize_uv
-from imagemap.mesh.files import _base_colour_texture, material_of, textured_mesh
-from imagemap.mesh.views import fill_from_nearest
+from imagemap.scene.bake import rasterize_uv
+from imagemap.scene.files import _base_colour_texture, material_of, textured_mesh
+from imagemap.scene.views import fill_from_nearest
 
 __all__ = ["bake_maps", "with_mesh_maps"]
 

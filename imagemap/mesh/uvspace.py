@@ -66,7 +66,7 @@ from imagemap.depth.finish import (
 from imagemap.depth.guides import sized_config, to_ycbcr
 from imagemap.depth.pipeline import ColorizeResult, engine_params
 from imagemap.errors import InputError
-from imagemap.mesh.bake import covered_texels, rasterize_uv
+from imagemap.scene.bake import covered_texels, rasterize_uv
 
 __all__ = [
     "LAYOUT_TEST_SIZE",

@@ -11,8 +11,8 @@ import numpy as np
 from imagemap.example import Example
 from imagemap.io import InputError, read_npz, write_npz
 from imagemap.materials import NEUTRAL, atlas_normals_to_view
-from imagemap.mesh.files import _material_maps, file_digest, is_mesh_path, load_mesh
-from imagemap.mesh.views import (
+from imagemap.scene.files import _material_maps, file_digest, is_mesh_path, load_mesh
+from imagemap.scene.views import (
     DEFAULT_MARGIN,
     DEFAULT_SIZE,
     FRONT,

@@ -11,7 +11,7 @@ What a written mesh carries so that it imports as intended (issue #34):
   :data:`CREASE_DEGREES`, so a UV seam shows no crease and a box keeps its edges.
 - **The input material's** ``alphaMode``, ``alphaCutoff``, ``doubleSided`` and the alpha
   of its base colour (texture alpha sampled at the same surface points), so
-  alpha-masked fins stay fins (:func:`imagemap.mesh.surface.keep_surface`).
+  alpha-masked fins stay fins (:func:`imagemap.scene.surface.keep_surface`).
 - **Units**: glTF is in metres; coordinates are written as the source has them
   unless a scale is given (:data:`UNIT_SCALES`), and the size is stated.
 - **PBR maps** beside the colour: ``normal`` (tangent space, OpenGL +Y), and
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from imagemap.io import InputError, atomic_path
-from imagemap.mesh.views import texture_image
+from imagemap.scene.views import texture_image
 from imagemap.validate import check_mesh
 
 __all__ = [

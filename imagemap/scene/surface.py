@@ -2,16 +2,16 @@
 
 :func:`keep_surface` carries the input's normals (or crease-aware smooth normals),
 the alpha of its base colour and its material's alpha mode, cut-off and sides onto
-the textured result of :func:`~imagemap.mesh.bake.bake_views` or
-:func:`~imagemap.mesh.bake.project_texture` (same faces, same order).
+the textured result of :func:`~imagemap.scene.bake.bake_views` or
+:func:`~imagemap.scene.bake.project_texture` (same faces, same order).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from imagemap.mesh.bake import rasterize_uv
-from imagemap.mesh.files import (
+from imagemap.scene.bake import rasterize_uv
+from imagemap.scene.files import (
     SurfaceMaterial,
     _base_colour_texture,
     _material_maps,
@@ -21,7 +21,7 @@ from imagemap.mesh.files import (
     texture_alpha,
     textured_mesh,
 )
-from imagemap.mesh.views import fill_from_nearest, sample_image
+from imagemap.scene.views import fill_from_nearest, sample_image
 
 __all__ = ["keep_surface"]
 
@@ -30,8 +30,8 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
     """``textured`` with what the artist set on ``source`` kept.
 
     ``textured`` is ``source`` textured anew (the same faces in the same order, as
-    :func:`~imagemap.mesh.bake.bake_views` and
-    :func:`~imagemap.mesh.bake.project_texture` make it). Kept, face by face:
+    :func:`~imagemap.scene.bake.bake_views` and
+    :func:`~imagemap.scene.bake.project_texture` make it). Kept, face by face:
 
     - the normals: ``source``'s own where its file had them, else smooth normals
       with creases over :data:`CREASE_DEGREES` (vertices split where corners differ);
@@ -46,7 +46,7 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
     --------
     >>> import trimesh
     >>> box = trimesh.creation.box()
-    >>> from imagemap.mesh.files import textured_mesh
+    >>> from imagemap.scene.files import textured_mesh
     >>> plain = textured_mesh(box.vertices, box.faces, box.vertices[:, :2] + 0.5,
     ...                       np.full((4, 4, 3), 0.5))
     >>> kept = keep_surface(plain, box)

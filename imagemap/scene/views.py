@@ -5,7 +5,7 @@ Meshes in, textured meshes out: views, depth rendering, UVs, baking and export.
 A mesh (anything trimesh loads: OBJ, PLY, GLB/glTF, STL, OFF) is seen from a
 :class:`View` (azimuth and elevation in degrees; the front, ``0,0``, looks along -z
 as ``data_gen`` does) by the project's one orthographic ray caster
-(:mod:`imagemap.mesh.raycast`): :func:`render_mesh` gives the depth map (planar,
+(:mod:`imagemap.scene.raycast`): :func:`render_mesh` gives the depth map (planar,
 larger = nearer, background 0), and per pixel the hit face and its barycentric
 coordinates.
 
@@ -216,7 +216,7 @@ def render_mesh(
     """
     import trimesh  # deferred: start-up (trimesh)
 
-    from imagemap.mesh.raycast import (  # deferred: start-up (trimesh)
+    from imagemap.scene.raycast import (  # deferred: start-up (trimesh)
         OrthographicView,
         cast_orthographic,
     )

@@ -1,7 +1,7 @@
 """Orthographic ray casting with trimesh: planar depth, hit points and hit faces per pixel.
 
 The one renderer of the project: ``data_gen`` renders its classes with it and
-:mod:`imagemap.mesh` renders meshes given by users (any view is a rotation of the
+:mod:`imagemap.scene` renders meshes given by users (any view is a rotation of the
 mesh followed by this cast along -z).
 
 One ray per pixel centre, all parallel to -z, starting on a plane in front of the

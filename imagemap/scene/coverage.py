@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imagemap.mesh.views import DEFAULT_SIZE, NAMED_VIEWS, View, render_mesh
+from imagemap.scene.views import DEFAULT_SIZE, NAMED_VIEWS, View, render_mesh
 
 __all__ = ["CANDIDATES", "ENOUGH", "MAX_ANGLE_DEGREES", "MIN_GAIN", "choose_views", "seen_area"]
 

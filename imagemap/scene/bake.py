@@ -28,8 +28,8 @@ import numpy as np
 from scipy import ndimage
 
 from imagemap.io import InputError
-from imagemap.mesh.files import textured_mesh
-from imagemap.mesh.views import MeshRender, fill_from_nearest, sample_pixels, texture_image
+from imagemap.scene.files import textured_mesh
+from imagemap.scene.views import MeshRender, fill_from_nearest, sample_pixels, texture_image
 
 __all__ = [
     "bake_views",
@@ -305,7 +305,7 @@ def view_shares(mesh, renders: list[MeshRender]) -> np.ndarray:
     Examples
     --------
     >>> import trimesh
-    >>> from imagemap.mesh.views import render_mesh
+    >>> from imagemap.scene.views import render_mesh
     >>> sphere = trimesh.creation.icosphere(subdivisions=3)
     >>> shares = view_shares(sphere, [render_mesh(sphere, v, (48, 48)) for v in ("front", "back")])
     >>> [round(float(s), 1) for s in shares]
