@@ -1,14 +1,25 @@
-"""Photometric stereo on a real grey sphere (tests/data/psm_gray): the figures of docs/btf.md.
+"""Photometric stereo on a grey sphere under 12 known lights: the figures of docs/btf.md.
 
-The sphere's normals and heights are known from its mask's circle, so every variant is
-scored by the mean angular error of the normals on the mask (degrees) and the RMS error of
-the heights (pixels, after removing the mean). Prints markdown tables.
+By default the sphere is the generated one (:func:`data_gen.photometric.grey_sphere`:
+glossy, with attached and cast shadows, ambient light, noise and 8-bit levels), whose
+normals and heights are known exactly. ``--psm DIR`` runs on psmImages' real "gray" set
+(S. Seitz) instead, which the user fetches (no licence is stated for it, so it is not
+redistributed here; docs/real_data.md): DIR holds ``gray/gray.0.tga`` ..
+``gray/gray.11.tga``, ``gray/gray.mask.tga`` and ``lights.txt``, as psmImages.zip and
+github.com/xiumingzhang/photometric-stereo's ``psmImages`` folder do. Its images are
+reduced as the copy the tests once held was (4 x 4 pixel blocks averaged, the mean of R,
+G, B, 8-bit again: 128 x 85) unless ``--full-size``; its normals and heights follow from
+the mask's circle. Every variant is scored by the mean angular error of the normals on
+the mask (degrees) and the RMS error of the heights (pixels, after removing the mean).
+Prints markdown tables.
 
-    python benchmarks/photometric_sphere.py
+    python benchmarks/photometric_sphere.py [--seed S]
+    python benchmarks/photometric_sphere.py --psm scratch/psmImages [--full-size]
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -24,17 +35,51 @@ from imagemap.btf.photometric import (  # noqa: E402
     photometric_stereo,
     split_alpha,
 )
-from imagemap.btf.photometric_io import read_image_stack, read_lights, read_mask  # noqa: E402
+from imagemap.btf.photometric_io import read_image_stack, read_lights  # noqa: E402
 
-DATA = ROOT / "tests" / "data" / "psm_gray"
 #: Fractions of the sphere's samples clipped by a simulated overexposure.
 CLIPPED_FRACTIONS = (0.05, 0.15, 0.30)
+#: psmImages' pictures are reduced by this factor along each axis (unless --full-size).
+PSM_REDUCTION = 4
 
 
-def load():
-    """Grey images (N, H, W, 1), lights (N, 3), mask (H, W)."""
-    images = read_image_stack([DATA / f"gray.{i}.png" for i in range(12)])
-    return images, read_lights(DATA / "lights.txt"), read_mask(DATA / "mask.png", images.shape[1:3])
+def load_generated(seed: int = 0):
+    """Grey images (N, H, W, 1), lights (N, 3), mask (H, W), true normals and heights."""
+    from data_gen.photometric import grey_sphere
+
+    made = grey_sphere(seed)
+    return made.images[..., None], made.lights, made.mask, made.normals, made.heights
+
+
+def load_psm(folder: Path, reduction: int = PSM_REDUCTION):
+    """psmImages' grey set: images (N, H, W, 1), lights, mask; normals and heights from
+    the mask's circle. ``reduction`` > 1 averages blocks of that side (8-bit again)."""
+    folder = Path(folder)
+    colour = read_image_stack([folder / "gray" / f"gray.{i}.tga" for i in range(12)])
+    # From the files' 8-bit levels in double precision, each channel's blocks averaged
+    # before the channels (the order the reduced copy was made in: float32, or the other
+    # order, moves a mean across a rounding boundary in 490-1,116 of its 130,560 samples).
+    levels = np.round(colour[..., :3].astype(np.float64) * 255.0) / 255.0
+    mask_image = read_image_stack([folder / "gray" / "gray.mask.tga"])[0, ..., :3].mean(-1)
+    n, h, w = levels.shape[:3]
+    h, w = h // reduction * reduction, w // reduction * reduction
+
+    def blocks(a):  # (..., H, W, C) -> block means
+        shape = (*a.shape[:-3], h // reduction, reduction, w // reduction, reduction, a.shape[-1])
+        return a[..., :h, :w, :].reshape(shape).mean(axis=(-4, -2))
+
+    grey = blocks(levels).mean(axis=-1)  # the sphere is grey: R, G, B differ by 0.005
+    if reduction > 1:
+        grey = np.round(grey * 255.0) / 255.0
+    mask = blocks(mask_image[..., None])[..., 0] >= 0.5  # at least half inside the mask
+    truth, depth = sphere(mask)
+    return (
+        grey[..., None].astype(np.float32),
+        read_lights(folder / "lights.txt"),
+        mask,
+        truth,
+        depth,
+    )
 
 
 def sphere(mask):
@@ -63,9 +108,20 @@ def overexpose(images, mask, fraction):
     return np.round(np.clip(images * gain, 0.0, 1.0) * 255.0) / 255.0
 
 
-def main() -> None:
-    images, lights, mask = load()
-    truth, depth = sphere(mask)
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seed", type=int, default=0, help="the generated sphere's seed")
+    parser.add_argument("--psm", type=Path, help="a psmImages folder (gray/, lights.txt)")
+    parser.add_argument("--full-size", action="store_true", help="psmImages unreduced")
+    args = parser.parse_args(argv)
+    if args.psm is not None:
+        reduction = 1 if args.full_size else PSM_REDUCTION
+        images, lights, mask, truth, depth = load_psm(args.psm, reduction)
+        label = "real"
+    else:
+        images, lights, mask, truth, depth = load_generated(args.seed)
+        label = "generated"
+    print(f"{label} sphere: {mask.shape[1]} x {mask.shape[0]}, {int(mask.sum())} px on it\n")
     cut = {"min_intensity": SHADOW_LEVEL, "max_intensity": SATURATION_LEVEL}
 
     print("| input | normals' mean error (deg) |\n|---|---:|")
@@ -90,6 +146,9 @@ def main() -> None:
     rows["RGBA, alpha as the mask (now)"] = photometric_stereo(
         colour, lights, mask=alpha_mask, **cut
     )
+    rows["grey, the lights read with y down (the wrong frame)"] = photometric_stereo(
+        grey, lights * [1.0, -1.0, 1.0], mask=mask, **cut
+    )
     for name, (normals, _) in rows.items():
         print(f"| {name} | {angular_error(normals, truth, mask):.2f} |")
 
@@ -107,7 +166,7 @@ def main() -> None:
     # the model holds, what the cut-off can do.
     shading = np.clip(np.einsum("hwc,nc->nhw", truth, lights), 0.0, None) * mask
     lambertian = np.round(0.6 * shading * 255.0) / 255.0
-    for label, source in (("real", grey), ("Lambertian", lambertian)):
+    for name, source in ((label, grey), ("Lambertian", lambertian)):
         reference, _ = photometric_stereo(source, lights, mask=mask)
         for fraction in CLIPPED_FRACTIONS:
             clipped = overexpose(source, mask, fraction)
@@ -115,7 +174,7 @@ def main() -> None:
             kept, _ = photometric_stereo(clipped, lights, mask=mask)
             dropped, _ = photometric_stereo(clipped, lights, mask=mask, **cut)
             print(
-                f"| {label} {fraction:.0%} | {affected.sum()} of {mask.sum()} | "
+                f"| {name} {fraction:.0%} | {affected.sum()} of {mask.sum()} | "
                 f"{angular_error(reference, truth, affected):.2f} | "
                 f"{angular_error(kept, truth, affected):.2f} | "
                 f"{angular_error(dropped, truth, affected):.2f} | "

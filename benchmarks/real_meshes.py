@@ -18,9 +18,13 @@ example for that object-view). Where the meshes share a UV layout the textures a
 compared texel by texel over the atlas' used texels (:func:`uv_errors`).
 
 The data: ``prepare`` builds the class from a copy of the FFHQ-UV repository
-(github.com/csbhr/FFHQ-UV, MIT licence; see docs/real_data.md): four textured heads
-in the HiFi3D++ UV layout, three with their own HiFi3D++ shapes, one on the FLAME head
-that the repository gives HiFi3D UVs.
+(github.com/csbhr/FFHQ-UV) that the user fetches: four textured heads in the HiFi3D++ UV
+layout, three with their own HiFi3D++ shapes, one on the FLAME head that the repository
+gives HiFi3D UVs. The repository's code is MIT, but its textures derive from FFHQ (CC
+BY-NC-SA 4.0) and its meshes from the research-only HiFi3D++ model: the prepared class
+stays in the git-ignored ``scratch/`` and nothing of it is committed (docs/real_data.md).
+The tests run the benchmark on generated heads in one layout instead
+(:func:`data_gen.heads.write_shared_layout_heads`).
 
     python benchmarks/real_meshes.py prepare --source SRC [--out DIR]
     python benchmarks/real_meshes.py run [DIR] [--views front,left,right] [--preset busts]
@@ -39,7 +43,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The prepared class (made by ``prepare``; git-ignored scratch, never committed).
+#: The prepared class (made by ``prepare``; git-ignored scratch, never committed: the
+#: textures' and meshes' terms do not allow it, see docs/real_data.md).
 DEFAULT_DIR = ROOT / "scratch" / "realdata" / "faces"
 DEFAULT_OUT = ROOT / "scratch" / "realdata" / "out"
 
@@ -180,7 +185,9 @@ def prepare(source: str | Path, out: str | Path = DEFAULT_DIR) -> list[Path]:
     )
     (out / "SOURCE.txt").write_text(
         f"Built by benchmarks/real_meshes.py prepare from github.com/csbhr/FFHQ-UV at commit "
-        f"{FFHQ_UV_COMMIT} (MIT licence, Copyright (c) 2022 Haoran Bai).\n"
+        f"{FFHQ_UV_COMMIT} (code MIT, Copyright (c) 2022 Haoran Bai; the textures derive "
+        "from FFHQ, CC BY-NC-SA 4.0, the meshes from HiFi3D++, research use only: do not "
+        "redistribute).\n"
         + "".join(
             f"{n}: {' + '.join(p for p in parts if p)}\n" for n, parts in FFHQ_UV_OBJECTS.items()
         )  # fmt: skip
@@ -517,7 +524,8 @@ def small_copy(mesh: TexturedArrays, grid: int = 48, texture_size: int = 128) ->
     Each lattice node at a covered texel centre becomes a vertex at its surface point
     (keeping that UV), each lattice cell of four such nodes two triangles; cells that
     cross a gap between charts are dropped. Meshes that share a UV layout stay in one
-    layout. The texture is shrunk to ``texture_size``. For small committed test data.
+    layout. The texture is shrunk to ``texture_size``. For small local test copies (none
+    is committed: the tests use generated heads, :mod:`data_gen.heads`).
 
     Examples
     --------

@@ -58,3 +58,35 @@ def blob_database():
 def query_blob():
     depth = blob(centre=(24, 32), radii=(15, 25), bumps=0.02, seed=9)
     return depth, painted(depth, PALETTE)
+
+
+@pytest.fixture(scope="session")
+def shared_heads(tmp_path_factory):
+    """A folder of two textured heads in one UV layout, ``head_00.glb`` and ``head_01.glb``.
+
+    Generated (:func:`data_gen.heads.write_shared_layout_heads`, seed 0): the stand-in for
+    the FFHQ-UV heads the tests used before, whose licence did not allow committing them.
+    The same faces and UVs, two shapes, two people's textures (mean |RGB| 42 apart over
+    the used texels).
+    """
+    from data_gen.heads import write_shared_layout_heads
+
+    folder = tmp_path_factory.mktemp("shared_heads")
+    write_shared_layout_heads(folder, count=2, seed=0)
+    return folder
+
+
+@pytest.fixture(scope="session")
+def grey_sphere_files(tmp_path_factory):
+    """A folder holding a photometric-stereo set as psmImages lays one out: ``gray.0.png``
+    .. ``gray.11.png``, ``mask.png`` and ``lights.txt`` (a count line, then vectors).
+
+    Generated (:func:`data_gen.photometric.write_grey_sphere`, seed 0): a glossy grey
+    sphere with attached and cast shadows, ambient light, noise, 8-bit levels and a few
+    clipped highlights; the stand-in for psmImages' grey sphere, which has no licence.
+    """
+    from data_gen.photometric import write_grey_sphere
+
+    folder = tmp_path_factory.mktemp("grey_sphere")
+    write_grey_sphere(folder, seed=0)
+    return folder

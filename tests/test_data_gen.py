@@ -9,6 +9,7 @@ import types
 import numpy as np
 import pytest
 import trimesh
+from scipy import ndimage
 
 import data_gen
 from data_gen.__main__ import main as data_gen_main
@@ -190,3 +191,126 @@ def test_unknown_class_is_refused():
 
     with pytest.raises(InputError, match="class"):
         data_gen.make_instance("whales", 0)
+
+
+# -- heads in one UV layout (data_gen.heads: the stand-in for the FFHQ-UV heads) -------------
+
+
+def test_heads_share_one_layout_and_are_different_people():
+    from data_gen.heads import shared_layout_heads
+    from imagemap.mesh.bake import covered_texels
+    from imagemap.mesh.views import texture_image
+
+    for seed in (0, 1, 2):
+        heads = shared_layout_heads(3, seed=seed)
+        first = heads[0]
+        used = covered_texels(first.visual.uv, first.faces, 128)
+        for other in heads[1:]:
+            assert np.array_equal(other.faces, first.faces)
+            assert np.array_equal(other.visual.uv, first.visual.uv)
+            # Other shapes (a vertex moves by 0.07-0.24 units on a 3-unit head: heads 1
+            # and 2 against head 0, seeds 0-11) ...
+            assert np.abs(other.vertices - first.vertices).max() > 0.05
+            # ... and other people: the textures differ by 17.5-102 of 255 (the same
+            # heads; the skin tones of any two of the first three heads are 0.24 of the
+            # ramp apart at least, of the first two 0.38).
+            difference = np.abs(texture_image(other)[used] - texture_image(first)[used]).mean()
+            assert difference * 255 > 10, (seed, difference * 255)
+
+
+def test_heads_are_one_surface_cut_at_the_back():
+    from data_gen.heads import shared_layout_heads
+
+    head = shared_layout_heads(1, seed=5)[0]
+    uv, vertices = head.visual.uv, head.vertices
+    # Welded by position, the surface's only border is the neck's open end (48 edges, one
+    # loop): the layout's slit along the back of the head and the crown's fan are cuts of
+    # the UVs, not holes.
+    welded = trimesh.Trimesh(vertices, head.faces, process=False)
+    welded.merge_vertices(merge_tex=True, merge_norm=True)
+    edges = welded.edges_sorted
+    border = edges[trimesh.grouping.group_rows(edges, require_count=1)]
+    assert len(border) == 48 and len(np.unique(border)) == 48
+    assert np.ptp(welded.vertices[np.unique(border), 1]) < 1e-9  # a horizontal cut
+    assert welded.vertices[np.unique(border), 1].max() < vertices[:, 1].min() + 1e-9
+    # The chart's left and right borders are the same points, at the back (z < 0).
+    left = np.isclose(uv[:, 0], uv[:, 0].min())
+    right = np.isclose(uv[:, 0], uv[:, 0].max())
+    order_l, order_r = np.argsort(uv[left, 1]), np.argsort(uv[right, 1])
+    np.testing.assert_array_equal(vertices[left][order_l], vertices[right][order_r])
+    assert (vertices[left][:, 2] < 0).all()
+    # A head: taller than deep, deeper than wide; the nose's tip the frontmost point, on
+    # the midline and below the middle of the head.
+    extent = np.ptp(vertices, axis=0)
+    assert extent[1] > extent[2] > extent[0]
+    tip = vertices[np.argmax(vertices[:, 2])]
+    assert abs(tip[0]) < 0.02 * extent[0] and tip[1] < np.median(vertices[:, 1])
+
+
+def test_heads_are_the_same_bytes_for_a_seed(tmp_path):
+    from data_gen.heads import write_shared_layout_heads
+
+    first = write_shared_layout_heads(tmp_path / "a", count=2, seed=3)
+    again = write_shared_layout_heads(tmp_path / "b", count=3, seed=3)
+    other = write_shared_layout_heads(tmp_path / "c", count=2, seed=4)
+    assert [p.name for p in first] == ["head_00.glb", "head_01.glb"]
+    # Head i does not depend on the count (the third head of ``again`` is left over).
+    for a, b, c in zip(first, again[:2], other, strict=True):
+        assert a.read_bytes() == b.read_bytes() and a.read_bytes() != c.read_bytes()
+
+
+# -- the grey sphere under 12 lights (data_gen.photometric: the stand-in for psmImages') ----
+
+
+def test_grey_sphere_files_hold_the_generated_set(tmp_path):
+    from data_gen.photometric import grey_sphere, light_directions, write_grey_sphere
+    from imagemap.btf.photometric_io import read_image_stack, read_lights, read_mask
+
+    paths = write_grey_sphere(tmp_path / "a", seed=0)
+    again = write_grey_sphere(tmp_path / "b", seed=0)
+    assert [p.read_bytes() for p in paths] == [p.read_bytes() for p in again]
+    sphere = grey_sphere(seed=0)
+    images = read_image_stack(paths[:12])[..., 0]
+    np.testing.assert_array_equal(images, sphere.images)
+    np.testing.assert_array_equal(read_mask(paths[12], images.shape[1:]), sphere.mask)
+    lights = read_lights(paths[13])  # the count line, then one vector per line
+    np.testing.assert_allclose(lights, light_directions(), atol=1e-6)
+    # Within 40 degrees of the view axis, all around it.
+    assert np.degrees(np.arccos(lights[:, 2])).max() < 40.01  # (6 decimals in the file)
+    assert np.ptp(np.degrees(np.arctan2(lights[:, 1], lights[:, 0]))) > 300
+
+
+def test_grey_sphere_has_what_real_captures_have():
+    from data_gen.photometric import grey_sphere
+
+    sphere = grey_sphere(seed=0)
+    images, lights, mask, normals = sphere.images, sphere.lights, sphere.mask, sphere.normals
+    # The mask is the sphere's disc: its area that of a 27 px radius (2,290 px).
+    assert abs(mask.sum() - np.pi * 27.0**2) < 30
+    # A highlight at the half vector of each light (the frame is x right, y up): the
+    # brightest pixel of each image has the normal of light + view (measured: within 2.0
+    # degrees; with y flipped 4.6-39).
+    half = lights + [0.0, 0.0, 1.0]
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    for image, h in zip(images, half, strict=True):
+        smooth = ndimage.uniform_filter(np.where(mask, image, 0.0), 3)
+        peak = np.unravel_index(np.argmax(smooth), smooth.shape)
+        assert np.degrees(np.arccos(np.clip(normals[peak] @ h, -1, 1))) < 3.0
+    # A few clipped highlights: some images reach full scale, on a few pixels only
+    # (measured: 5 of 12 images, 2-5 pixels each).
+    clipped = (images >= 1.0).sum(axis=(1, 2))
+    assert 2 <= (clipped > 0).sum() <= 8 and clipped.max() <= 10
+    # Attached shadows: where a light grazes behind the surface (n.l < -0.2) only the
+    # ambient and bounced light remain, a few levels above black, not 0 (median 3).
+    shade = np.einsum("hwc,nc->nhw", normals, lights)
+    dark = images[(shade < -0.2) & mask[None]] * 255
+    assert dark.size > 100 and 0 < np.median(dark) < 8
+    # 8-bit levels, and noise: on the lit sphere away from the highlights, a pixel's
+    # difference from its 3 x 3 mean is 2.6 levels (RMS; the shading is smooth there).
+    assert np.array_equal(images * 255, np.round(images * 255))
+    residual = images - ndimage.uniform_filter(images, (1, 3, 3))
+    inner = ndimage.binary_erosion(mask, iterations=3)
+    glossy = np.einsum("hwc,nc->nhw", normals, half) > 0.97
+    lit = (shade > 0.5) & inner[None] & ~glossy
+    noise = np.std(residual[lit]) * 255
+    assert 1.5 < noise < 4.0, noise

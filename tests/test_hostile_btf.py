@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from data_gen.photometric import write_grey_sphere
 from imagemap.btf import compress
 from imagemap.btf.constraints import scanner_response
 from imagemap.btf.extrapolate import constraint_images
@@ -24,7 +25,6 @@ from imagemap.btf.ubo2014 import write_ubo2014
 from imagemap.cli import main
 from imagemap.io import read_image, write_image
 
-PSM = Path(__file__).parent / "data" / "psm_gray"
 LIGHTS = np.array([[0, 0], [22, 0], [22, 90], [22, 180], [22, 270], [60, 45]], np.float32)
 VIEWS = np.array([[0, 0], [30, 90]], np.float32)
 
@@ -56,7 +56,8 @@ def _sample(name: str, size: int, seed: int = 1):
 @pytest.fixture(scope="module")
 def world(tmp_path_factory):
     """Valid inputs of every BTF command, made once: a 16x16 wallpaper sample and its model,
-    a cloth sample, four 48 px scans, a UBO2014 file, the photometric set (copied)."""
+    a cloth sample, four 48 px scans, a UBO2014 file, a photometric set (a generated grey
+    sphere, 128 x 85)."""
     root = tmp_path_factory.mktemp("hostile_btf")
     matrix, reference = _sample("wallpaper", 48)
     cols = (np.arange(16, 32)[:, None] * 48 + np.arange(16, 32)).ravel()
@@ -86,7 +87,7 @@ def world(tmp_path_factory):
         view_dirs=VIEWS,
     )
     photometric = root / "psm"
-    shutil.copytree(PSM, photometric)
+    write_grey_sphere(photometric, seed=0)  # generated, psmImages' layout
     return {"root": root, "scans": [str(p) for p in scans], "psm": photometric}
 
 

@@ -1,4 +1,9 @@
-"""benchmarks/real_meshes.py on its small committed subset: rasterizer, database, baselines."""
+"""benchmarks/real_meshes.py on generated stand-in heads: rasterizer, database, baselines.
+
+The benchmark's real heads (FFHQ-UV) are fetched by the user and never committed (their
+textures derive from FFHQ, CC BY-NC-SA 4.0: docs/real_data.md); the tests run it on two
+heads generated in one UV layout (``shared_heads`` in conftest.py, data_gen/heads.py).
+"""
 
 from __future__ import annotations
 
@@ -12,7 +17,6 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "real_meshes.py"
-SUBSET = Path(__file__).resolve().parent / "data" / "real_meshes"
 
 pytestmark = pytest.mark.skipif(not SCRIPT.is_file(), reason="no benchmarks/ checkout")
 
@@ -100,21 +104,22 @@ def test_nearer_surface_hides_the_farther_one(rm):
         assert image[round(corner[1][0]), round(corner[0][0])].tolist() == [0.0, 0.0, 0.0]
 
 
-def test_subset_is_a_database_with_one_uv_layout(rm):
+def test_heads_are_a_database_with_one_uv_layout(rm, shared_heads):
     from imagemap.database import Database
 
-    database = Database.from_directory(SUBSET)
-    assert database.names == ["ffhq_teaser1", "ffhq_teaser3"]
-    front = database["ffhq_teaser1"]
+    database = Database.from_directory(shared_heads)
+    assert database.names == ["head_00", "head_01"]
+    front = database["head_00"]
+    # Measured: the head covers 0.24 of the front view, its mean colour 0.52.
     assert front.depth.shape == (150, 200) and (front.depth > 0).mean() > 0.2
     assert front.image[front.depth > 0].mean() > 0.2  # textured, not black
-    meshes = [rm.TexturedArrays.load(p) for p in rm.mesh_files(SUBSET)]
+    meshes = [rm.TexturedArrays.load(p) for p in rm.mesh_files(shared_heads)]
     assert np.array_equal(meshes[0].uv, meshes[1].uv)
     assert np.array_equal(meshes[0].faces, meshes[1].faces)
 
 
-def test_paste_of_an_object_onto_itself_has_no_error(rm):
-    truth, other = (rm.TexturedArrays.load(p) for p in rm.mesh_files(SUBSET))
+def test_paste_of_an_object_onto_itself_has_no_error(rm, shared_heads):
+    truth, other = (rm.TexturedArrays.load(p) for p in rm.mesh_files(shared_heads))
     centre, radius = truth.bounding_sphere()
     camera = rm.look_at(-40, 15, centre, radius, size=160)
     truth_image, mask = rm.render(truth, camera)
@@ -124,15 +129,16 @@ def test_paste_of_an_object_onto_itself_has_no_error(rm):
                                                               "crisp": 1.0}  # fmt: skip
     other_paste, _ = rm.render(truth.with_texture(other.texture), camera)
     errors = rm.image_errors(other_paste, truth_image, mask)
-    assert errors["rgb"] > 3.0 and errors["de00"] > 1.0  # two people differ
+    # Two people differ: measured 43.9 (|RGB|) and 16.4 (dE00) here, 41.8 texel by texel.
+    assert errors["rgb"] > 3.0 and errors["de00"] > 1.0
     assert rm.uv_errors(truth.texture, truth.texture, truth.uv, truth.faces, 64)["rgb"] == 0.0
     assert rm.uv_errors(other.texture, truth.texture, truth.uv, truth.faces, 64)["rgb"] > 3.0
 
 
-def test_used_texels_exclude_the_atlas_padding(rm):
-    truth = rm.TexturedArrays.load(rm.mesh_files(SUBSET)[0])
+def test_used_texels_exclude_the_atlas_padding(rm, shared_heads):
+    truth = rm.TexturedArrays.load(rm.mesh_files(shared_heads)[0])
     used = rm.used_texels(truth.uv, truth.faces, 64)
-    assert 0.3 < used.mean() < 0.95
+    assert 0.3 < used.mean() < 0.95  # measured 0.86
     # Paint only unused texels: the UV measure does not see it.
     painted = rm.texture_at(truth.texture, 64).copy()
     painted[~used] = 1.0 - painted[~used]
@@ -141,28 +147,28 @@ def test_used_texels_exclude_the_atlas_padding(rm):
     assert rm.uv_errors(painted, truth.texture, truth.uv, truth.faces, 64)["rgb"] > 50.0
 
 
-def test_first_choice_is_the_only_other_example(rm):
-    assert rm.first_choice("ffhq_teaser1", SUBSET) == "ffhq_teaser3"
+def test_first_choice_is_the_only_other_example(rm, shared_heads):
+    assert rm.first_choice("head_00", shared_heads) == "head_01"
 
 
-def test_bad_folders_stop_before_any_synthesis(rm, tmp_path):
+def test_bad_folders_stop_before_any_synthesis(rm, shared_heads, tmp_path):
     from imagemap.io import InputError
 
     with pytest.raises(InputError, match="not a folder"):
         rm.evaluate(tmp_path / "missing", tmp_path)
     (tmp_path / "one").mkdir()
-    (tmp_path / "one" / "a.glb").write_bytes((SUBSET / "ffhq_teaser1.glb").read_bytes())
+    (tmp_path / "one" / "a.glb").write_bytes((shared_heads / "head_00.glb").read_bytes())
     with pytest.raises(InputError, match="at least two"):
         rm.evaluate(tmp_path / "one", tmp_path)
     with pytest.raises(InputError, match="no mesh named nobody"):
-        rm.evaluate(SUBSET, tmp_path, only=["nobody"])
+        rm.evaluate(shared_heads, tmp_path, only=["nobody"])
     assert rm.main(["run", str(tmp_path / "one"), "--out", str(tmp_path / "out")]) == 2
     assert not list((tmp_path / "out").glob("*.glb"))
 
 
 @pytest.mark.slow
-def test_leave_one_out_on_the_subset(rm, tmp_path):
-    report = rm.evaluate(SUBSET, tmp_path, views="front,left,right", size=96)
+def test_leave_one_out_on_the_heads(rm, shared_heads, tmp_path):
+    report = rm.evaluate(shared_heads, tmp_path, views="front,left,right", size=96)
     assert len(report["rows"]) == 2 * len(rm.EVAL_VIEWS) and report["shared_uv"]
     for row in report["rows"]:
         assert row["mask_iou"] > 0.98  # the result keeps the query's geometry

@@ -38,8 +38,8 @@ __all__ = [
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 
 #: Shadow cut-off of photographs (fraction of full scale): samples at or below it are
-#: sensor black, not shading, and are dropped. On the real grey sphere (tests/data/psm_gray,
-#: 12 lights; benchmarks/photometric_sphere.py) the mean angular error is 5.50 degrees at
+#: sensor black, not shading, and are dropped. On psmImages' real grey sphere (quarter size,
+#: 12 lights; benchmarks/photometric_sphere.py --psm DIR) the mean error is 5.50 degrees at
 #: 2/255, 5.63 at 0, 5.65 at 5/255, 5.91 at 10/255.
 SHADOW_LEVEL = 2.0 / 255.0
 
