@@ -305,19 +305,19 @@ def shared_layout_heads(
     Returns
     -------
     list of trimesh.Trimesh
-        Textured meshes (:func:`imagemap.mesh.textured_mesh`), y up, the face towards +z,
+        Textured meshes (:func:`imagemap.scene.textured_mesh`), y up, the face towards +z,
         about 1.3 :data:`HEAD_HEIGHT` tall with the neck.
 
     Examples
     --------
-    >>> from imagemap.mesh.views import texture_image
+    >>> from imagemap.scene.views import texture_image
     >>> heads = shared_layout_heads(2, seed=0, texture_size=64)
     >>> [len(h.vertices) for h in heads], texture_image(heads[0]).shape
     ([2057, 2057], (64, 64, 3))
     >>> bool((heads[0].visual.uv == heads[1].visual.uv).all())
     True
     """
-    from imagemap.mesh import textured_mesh
+    from imagemap.scene import textured_mesh
 
     rows, cols = (int(n) for n in grid)
     if rows < 4 or cols < 8 or count < 0 or texture_size < 8:
@@ -352,7 +352,7 @@ def write_shared_layout_heads(
     >>> [p.name for p in paths]
     ['head_00.glb', 'head_01.glb']
     """
-    from imagemap.mesh.files import export_textured
+    from imagemap.scene.files import export_textured
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

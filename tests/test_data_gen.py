@@ -198,8 +198,8 @@ def test_unknown_class_is_refused():
 
 def test_heads_share_one_layout_and_are_different_people():
     from data_gen.heads import shared_layout_heads
-    from imagemap.mesh.bake import covered_texels
-    from imagemap.mesh.views import texture_image
+    from imagemap.scene.bake import covered_texels
+    from imagemap.scene.views import texture_image
 
     for seed in (0, 1, 2):
         heads = shared_layout_heads(3, seed=seed)
