@@ -69,6 +69,9 @@ class Task:
         its contrast), applied to the truth, ours and the baselines alike.
     closeups : dict of str to (slice, slice)
         Named crops written as truth | ours close-ups.
+    provenance : callable, optional
+        ``provenance(source, mask) -> dict`` of figures from our source map (which
+        example each region came from).
     """
 
     examples: list
@@ -77,6 +80,7 @@ class Task:
     region: np.ndarray
     features: Callable[[np.ndarray, np.ndarray], dict]
     closeups: dict = field(default_factory=dict)
+    provenance: Callable[[np.ndarray, np.ndarray], dict] | None = None
 
 
 def psnr(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
@@ -176,6 +180,8 @@ def measure(image, task: Task, mask, source=None) -> dict:
     if source is not None:
         split = fragments(source, mask)
         figures["fragments_90"], figures["fragment_share"] = split.count_90, split.mean_share
+        if task.provenance is not None:
+            figures.update(task.provenance(source, mask))
     figures.update(task.features(image, mask))
     return figures
 
