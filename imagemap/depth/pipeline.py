@@ -56,9 +56,11 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap.core.blend import copy_through, place_seams, seamless_copy
+from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineParams, EngineResult, ReleasableLevels, synthesize
+from imagemap.core.poisson import seamless_copy
 from imagemap.core.pyramid import collapse_laplacian
+from imagemap.core.seams import place_seams
 from imagemap.database import Database
 from imagemap.depth import completion
 from imagemap.depth.budget import guard_colorize
