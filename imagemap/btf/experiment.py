@@ -59,7 +59,8 @@ from imagemap.btf.extrapolate import (
     texture_optimization,
     tile,
 )
-from imagemap.btf.materials import MATERIALS, ground_truth
+from imagemap.btf.materials import MATERIALS
+from imagemap.btf.rendering import ground_truth
 from imagemap.io import InputError, atomic_path, write_image
 from imagemap.outputs import check_output_directory
 
