@@ -8,7 +8,8 @@ from scipy import ndimage
 from skimage.registration import phase_cross_correlation
 from skimage.transform import rotate
 
-from imagemap.btf.registration import orient_to_sample, register_scans
+from imagemap.btf.orientation import orient_to_sample
+from imagemap.btf.registration import register_scans
 from imagemap.io import InputError
 
 SIZE, CROP = 160, 112
