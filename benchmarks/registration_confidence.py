@@ -23,8 +23,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from imagemap.btf.materials import MATERIALS, make_material, render_btf_matrix  # noqa: E402
+from imagemap.btf.materials import MATERIALS, make_material  # noqa: E402
 from imagemap.btf.registration import register_scans  # noqa: E402
+from imagemap.btf.rendering import render_btf_matrix  # noqa: E402
 from imagemap.errors import InputError  # noqa: E402
 
 SIZE, CROP = 160, 112

@@ -665,7 +665,8 @@ def run_quality(data_dir: Path, settings: Settings, backend: str) -> dict:
     """Leave-one-out mean CIEDE2000 of the full method on a small fish class."""
     from imagemap import Database
     from imagemap.depth.config import PRESETS
-    from imagemap.evaluation import leave_one_out, summarize
+    from imagemap.evaluation import leave_one_out
+    from imagemap.report import summarize
 
     class_dir = fish_class(data_dir, settings.quality_size, count=settings.quality_count, holdout=0)
     database = Database.from_directory(class_dir)

@@ -1,4 +1,5 @@
-"""Procedural ground-truth BTF materials: :mod:`imagemap.btf.materials`, re-exported.
+"""Procedural ground-truth BTF materials: :mod:`imagemap.btf.materials` and
+:mod:`imagemap.btf.rendering`, re-exported.
 
 ``imagemap btf experiment`` renders them at run time, so they live in ``imagemap`` (which
 never imports ``data_gen``); this module keeps the data generator's name for them.
@@ -18,11 +19,13 @@ from imagemap.btf.materials import (
     HARD_MATERIALS,
     MATERIALS,
     Material,
+    make_material,
+    scan_configuration,
+)
+from imagemap.btf.rendering import (
     default_sampling,
     ground_truth,
-    make_material,
     render_btf_matrix,
-    scan_configuration,
     shadow_mask,
     view_hits,
 )

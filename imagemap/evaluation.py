@@ -27,8 +27,7 @@ part of the method is worth:
 
 Objects are independent and run in a process pool; an object whose synthesis
 fails is reported (:attr:`Evaluation.failed`) and the others go on. The report
-files are written by :mod:`imagemap.report` (``write_report`` is also importable
-from here). The faulty verdict uses the
+files are written by :mod:`imagemap.report`. The faulty verdict uses the
 class reference of :func:`imagemap.metrics.class_reference` (medians of the
 metrics of members' maps pasted onto each other), computed once per class from
 the whole database.
@@ -45,6 +44,7 @@ Example
 -------
 >>> from imagemap.database import Database
 >>> db = Database.from_directory("fish_db")  # doctest: +SKIP
+>>> from imagemap.report import write_report
 >>> evaluation = leave_one_out(db, preset="fish", workers=2)  # doctest: +SKIP
 >>> write_report(evaluation, "report/")  # doctest: +SKIP
 """
@@ -79,29 +79,16 @@ from imagemap.metrics import (
     source_labels,
 )
 from imagemap.progress import progress
-
-# The report moved to imagemap.report; these names stay importable from here.
-from imagemap.report import (  # noqa: F401
-    CSV_COLUMNS,
-    SUMMARY_COLUMNS,
-    check_report,
-    summarize,
-    summary_markdown,
-    write_report,
-)
 from imagemap.validate import check_int, check_seed
 
 __all__ = [
     "Evaluation",
     "MethodResult",
     "ObjectEvaluation",
-    "check_report",
     "class_of",
     "evaluate_object",
     "leave_one_out",
     "method_params",
-    "summarize",
-    "write_report",
 ]
 
 log = logging.getLogger("imagemap")
@@ -423,6 +410,7 @@ def leave_one_out(
 
     Example
     -------
+    >>> from imagemap.report import summarize
     >>> evaluation = leave_one_out(db, workers=2, limit=4)  # doctest: +SKIP
     >>> summarize(evaluation)["fish"]["full"]["ciede2000"]  # doctest: +SKIP
     """

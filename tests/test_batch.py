@@ -89,13 +89,13 @@ def test_dask_local_cluster_of_two_workers_gives_the_same_bytes(fish, pool_run, 
 
 def test_a_changed_engine_redoes_finished_objects(fish, pool_run, monkeypatch):
     # Resuming after an upgrade must not mix two engines' maps in one output folder.
-    import imagemap.batch
-    from imagemap.batch import is_complete
+    import imagemap.batch.plan
+    from imagemap.batch.work import is_complete
 
     out, _ = pool_run
     jobs = plan_jobs(fish / "queries", out, OPTIONS)
     assert len(jobs) == 4 and all(is_complete(job, OPTIONS) for job in jobs)
-    monkeypatch.setattr(imagemap.batch, "engine_digest", lambda: "another engine")
+    monkeypatch.setattr(imagemap.batch.plan, "engine_digest", lambda: "another engine")
     assert not any(is_complete(job, OPTIONS) for job in jobs)
 
 
@@ -119,7 +119,7 @@ def test_stop_mid_batch_then_resume(fish, tmp_path):
     # Other options are other outputs: nothing is skipped.
     other = BatchOptions(preset="fish", size=SIZE, texture_size=64, seed=1)
     assert plan_jobs(fish / "queries", tmp_path, other)
-    from imagemap.batch import is_complete
+    from imagemap.batch.work import is_complete
 
     assert not any(is_complete(j, other) for j in plan_jobs(fish / "queries", tmp_path, other))
 

@@ -174,7 +174,8 @@ def test_neighbourhood_stacking_hand_computed():
 @pytest.fixture(scope="module")
 def tiny_experiment():
     """A 64x64 leather ground truth (891 rows), its k=100 compression, a 24x24 sample."""
-    from imagemap.btf.materials import default_sampling, make_material, render_btf_matrix
+    from imagemap.btf.materials import make_material
+    from imagemap.btf.rendering import default_sampling, render_btf_matrix
 
     lights, views = default_sampling()
     material = make_material("leather", size=64, seed=1)

@@ -21,7 +21,8 @@ RESPONSE = ScannerResponse((0.02, 0.0, 0.01), (1.25, 1.1, 0.95), (1.6, 1.8, 2.05
 def files(tmp_path_factory):
     """A 48x48 wallpaper reference BTF, a 16x16 sample of it, scans through RESPONSE, a chart."""
     from data_gen.chart import scan_chart
-    from imagemap.btf.materials import make_material, render_btf_matrix
+    from imagemap.btf.materials import make_material
+    from imagemap.btf.rendering import render_btf_matrix
 
     folder = tmp_path_factory.mktemp("btf_cli")
     lights = np.array([[0, 0], [22, 0], [22, 90], [22, 180], [22, 270], [60, 45]], np.float32)

@@ -8,7 +8,8 @@ from scipy import ndimage
 from skimage.registration import phase_cross_correlation
 from skimage.transform import rotate
 
-from imagemap.btf.registration import orient_to_sample, register_scans
+from imagemap.btf.orientation import orient_to_sample
+from imagemap.btf.registration import register_scans
 from imagemap.io import InputError
 
 SIZE, CROP = 160, 112
@@ -16,7 +17,8 @@ SIZE, CROP = 160, 112
 
 def _constraint_images(name: str) -> list[np.ndarray]:
     """The material's four top-view images, light theta 22 at azimuths 0..270."""
-    from imagemap.btf.materials import make_material, render_btf_matrix
+    from imagemap.btf.materials import make_material
+    from imagemap.btf.rendering import render_btf_matrix
 
     material = make_material(name, size=SIZE, seed=2)
     lights = np.array([[22.0, a] for a in (0, 90, 180, 270)], np.float32)
@@ -96,7 +98,8 @@ def test_four_copies_of_one_scan_are_refused(cloth):
 def test_the_sample_tells_which_scan_is_which_on_an_anisotropic_material():
     from imagemap.btf import compress
     from imagemap.btf.extrapolate import constraint_images
-    from imagemap.btf.materials import make_material, render_btf_matrix
+    from imagemap.btf.materials import make_material
+    from imagemap.btf.rendering import render_btf_matrix
 
     lights = np.array([[0, 0], [22, 0], [22, 90], [22, 180], [22, 270]], np.float32)
     views = np.array([[0, 0]], np.float32)
@@ -119,8 +122,9 @@ def test_the_sample_tells_which_scan_is_which_on_an_anisotropic_material():
 def test_a_scan_of_another_material_is_flagged(cloth, caplog):
     """The registration's confidence: correct alignments score 20 and more (measured
     20.7-187 on the four materials), a scan of another material a few (1.5-13.5)."""
-    from imagemap.btf.materials import make_material, render_btf_matrix
+    from imagemap.btf.materials import make_material
     from imagemap.btf.registration import MIN_CONFIDENCE
+    from imagemap.btf.rendering import render_btf_matrix
 
     order, angles = [2, 0, 3, 1], [0.0, 3.0, -2.5, 1.5]
     shifts = [(0.0, 0.0), (-2.5, 4.0), (3.0, -1.5), (1.0, 3.5)]

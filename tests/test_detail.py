@@ -10,7 +10,8 @@ import pytest
 from scipy import ndimage
 
 from imagemap import Database, DepthConfig, Example, colorize
-from imagemap.core.blend import coherent_edges, copy_through, seamless_copy
+from imagemap.core.blend import coherent_edges, copy_through
+from imagemap.core.poisson import seamless_copy
 from imagemap.depth.config import PRESETS, Finish
 from imagemap.depth.guides import level_patch_sizes, pyramid_levels, silhouette_band
 from imagemap.metrics import (

@@ -13,16 +13,9 @@ from imagemap.cli import main
 from imagemap.database import Database
 from imagemap.depth.config import METHODS
 from imagemap.depth.units import query_in_database
-from imagemap.evaluation import (
-    CSV_COLUMNS,
-    check_report,
-    evaluate_object,
-    leave_one_out,
-    method_params,
-    summarize,
-    write_report,
-)
+from imagemap.evaluation import evaluate_object, leave_one_out, method_params
 from imagemap.io import InputError
+from imagemap.report import CSV_COLUMNS, check_report, summarize, write_report
 
 #: The small generated class of the default tests: fish, 6 objects, 80x60, seed 0.
 CLASS, COUNT, SIZE, SEED = "fish", 6, (80, 60), 0

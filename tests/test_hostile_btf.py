@@ -20,7 +20,8 @@ from data_gen.photometric import write_grey_sphere
 from imagemap.btf import compress
 from imagemap.btf.constraints import scanner_response
 from imagemap.btf.extrapolate import constraint_images
-from imagemap.btf.materials import make_material, render_btf_matrix
+from imagemap.btf.materials import make_material
+from imagemap.btf.rendering import render_btf_matrix
 from imagemap.btf.ubo2014 import write_ubo2014
 from imagemap.cli import main
 from imagemap.io import read_image, write_image

@@ -40,7 +40,9 @@ from test_hostile import (
 )
 
 import imagemap
-import imagemap.batch
+import imagemap.batch.cluster
+import imagemap.batch.pool
+import imagemap.batch.work
 import imagemap.depth.pipeline
 import imagemap.mesh
 import imagemap.mesh.colorize
@@ -114,7 +116,7 @@ def no_work(monkeypatch):
     monkeypatch.setattr(imagemap.depth.pipeline, "colorize", refuse)
     monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
     monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
-    monkeypatch.setattr(imagemap.batch, "process_job", refuse)
+    monkeypatch.setattr(imagemap.batch.work, "process_job", refuse)
 
 
 def mesh_synth(w, source, *extra):
@@ -490,7 +492,7 @@ def test_a_scheduler_that_does_not_answer_is_refused_in_time(
 ):
     pytest.importorskip("distributed")
     port = request.getfixturevalue(server)
-    monkeypatch.setattr(imagemap.batch, "CONNECT_SECONDS", 1.0)
+    monkeypatch.setattr(imagemap.batch.cluster, "CONNECT_SECONDS", 1.0)
     start = time.monotonic()
     argv = _batch(world, world["holdout"], world["root"] / "out")
     run_refused(world, capsys, [*argv, "--scheduler", f"tcp://127.0.0.1:{port}"], ["--scheduler"])
@@ -783,7 +785,7 @@ def test_random_shapes_go_through_the_whole_pipeline(kind, h, w, seed, preset, e
 
 
 def test_ctrl_c_writes_the_report_and_says_how_to_resume(world, capsys, monkeypatch):
-    real = imagemap.batch.process_job
+    real = imagemap.batch.work.process_job
     calls = []
 
     def second_interrupts(job, *args):
@@ -792,14 +794,14 @@ def test_ctrl_c_writes_the_report_and_says_how_to_resume(world, capsys, monkeypa
             raise KeyboardInterrupt
         return real(job, *args)
 
-    monkeypatch.setattr(imagemap.batch, "process_job", second_interrupts)
+    monkeypatch.setattr(imagemap.batch.work, "process_job", second_interrupts)
     out = world["root"] / "out"
     code, message = cli(_batch(world, world["holdout"], out, "--preset", "fish"), capsys)
     assert code == 130
     assert "run the same command again to resume" in message
     report = json.loads((out / "batch_report.json").read_text())
     assert report["interrupted"] is True and report["done"] == 1
-    monkeypatch.setattr(imagemap.batch, "process_job", real)
+    monkeypatch.setattr(imagemap.batch.work, "process_job", real)
     code, message = cli(_batch(world, world["holdout"], out, "--preset", "fish"), capsys)
     report = json.loads((out / "batch_report.json").read_text())
     assert code == 0 and (report["done"], report["skipped"]) == (1, 1), message
@@ -814,7 +816,7 @@ def test_workers_beyond_the_cores_are_capped_and_said(world, caplog):
             one, world["db"], world["root"] / "out", BatchOptions(preset="fish"), workers=10_000
         )
     assert summary.done == 1 and "--workers 10000" in caplog.text and "cores" in caplog.text
-    assert imagemap.batch._usable_workers(10_000, 50) == min(os.cpu_count() or 1, 50)
+    assert imagemap.batch.pool._usable_workers(10_000, 50) == min(os.cpu_count() or 1, 50)
 
 
 def test_the_lock_is_released_when_a_batch_ends(world):

@@ -7,15 +7,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 from imagemap.btf.experiment import MATERIAL_SOURCES
-from imagemap.btf.materials import (
-    EASY_MATERIALS,
-    HARD_MATERIALS,
-    Material,
-    default_sampling,
-    make_material,
-    render_btf_matrix,
-    view_hits,
-)
+from imagemap.btf.materials import EASY_MATERIALS, HARD_MATERIALS, Material, make_material
+from imagemap.btf.rendering import default_sampling, render_btf_matrix, view_hits
 
 LIGHTS, VIEWS = default_sampling()
 

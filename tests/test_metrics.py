@@ -10,6 +10,7 @@ import pytest
 from scipy import ndimage
 from skimage import color
 
+from imagemap.align import paste_aligned
 from imagemap.database import Example
 from imagemap.io import InputError
 from imagemap.metrics import (
@@ -21,7 +22,6 @@ from imagemap.metrics import (
     image_metrics,
     luminance_ssim,
     part_accuracy,
-    paste_aligned,
 )
 
 RED, BLUE, GREEN = (0.85, 0.15, 0.1), (0.1, 0.2, 0.8), (0.2, 0.7, 0.25)

@@ -9,7 +9,8 @@ from scipy import fft, ndimage
 
 from imagemap import Database, Example, select_examples
 from imagemap.align import centroid_shift, translate
-from imagemap.core.blend import copy_through, seamless_copy
+from imagemap.core.blend import copy_through
+from imagemap.core.poisson import seamless_copy
 
 
 def _direct_ranking(depth, database):

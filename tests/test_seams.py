@@ -1,10 +1,10 @@
-"""The copy's seams: labels rearranged by alpha-expansion graph cuts (core/blend.place_seams)."""
+"""The copy's seams: labels rearranged by alpha-expansion graph cuts (core/seams.place_seams)."""
 
 import numpy as np
 
-from imagemap.core.blend import place_seams
+from imagemap.core.seams import place_seams
 
-FLOOR = 1e-3  # core.blend._SEAM_FLOOR
+FLOOR = 1e-3  # core.seams._SEAM_FLOOR
 
 
 def labels_of(source):

@@ -1,5 +1,7 @@
 """The cross-device paper's Table 2 on procedural ground-truth materials.
 
+One module for one job: one experiment, from its material sources to its table and pictures.
+
 For every material: render the full BTF (``size`` x ``size``, e.g. 33 lights x 9
 views, RGB) through its *material source*, compress it (k = 100) as the reference
 S'; cut
@@ -59,7 +61,8 @@ from imagemap.btf.extrapolate import (
     texture_optimization,
     tile,
 )
-from imagemap.btf.materials import MATERIALS, ground_truth
+from imagemap.btf.materials import MATERIALS
+from imagemap.btf.rendering import ground_truth
 from imagemap.io import InputError, atomic_path, write_image
 from imagemap.outputs import check_output_directory
 

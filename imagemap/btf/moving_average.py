@@ -1,5 +1,7 @@
 """The moving-average BTF model (Havlicek & Haindl, papers/moving-average-btf-model.txt).
 
+One module for one job: one model, its fit, file, synthesis and size (signals: ``ma_signal``).
+
 A parametric, stochastic alternative to example-based BTF enlargement:
 
 1. range map of the material by over-determined photometric stereo on the top view

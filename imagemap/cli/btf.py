@@ -212,7 +212,7 @@ def _extrapolate(args: argparse.Namespace) -> int:
         scans = registration.images
         if args.find_order:
             from imagemap.btf.extrapolate import constraint_images, prepare_scans
-            from imagemap.btf.registration import apply_orientation, orient_to_sample
+            from imagemap.btf.orientation import apply_orientation, orient_to_sample
 
             sample_images = constraint_images(sample)
             prepared = prepare_scans(scans, sample_images, response=response)

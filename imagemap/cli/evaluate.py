@@ -79,8 +79,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_evaluate(args: argparse.Namespace) -> int:
     from imagemap.database import Database
-    from imagemap.evaluation import METHODS, check_report, leave_one_out, summarize, write_report
+    from imagemap.evaluation import METHODS, leave_one_out
     from imagemap.outputs import check_output_directory, resolve
+    from imagemap.report import check_report, summarize, write_report
 
     options = config_options(args)
     resolve_config(args.preset, **options)  # a bad option or combination stops here

@@ -1,5 +1,7 @@
 """Numba kernels for the loops that cannot be vectorized.
 
+One module for one job: a collection of numba kernels and the thread pool that runs them.
+
 All kernels are deterministic for any number of threads: random numbers come
 from a counter-based hash of (seed, pixel, pass, trial), never from a shared
 generator, and parallel work is split into fixed bands of rows whose members

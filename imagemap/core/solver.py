@@ -1,5 +1,7 @@
 """One pyramid level of the engine: packed bands, PCA features, E-step and M-step.
 
+One module for one job: the solver class :class:`LevelSolver` and the helpers it is made of.
+
 :class:`LevelSolver` holds everything the EM iterations of one level need; the
 loop over levels and iterations is :func:`imagemap.core.engine.synthesize`.
 """

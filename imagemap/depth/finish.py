@@ -26,9 +26,11 @@ from typing import Any, Protocol
 import numpy as np
 from scipy import ndimage
 
-from imagemap.core.blend import copy_through, place_seams, seamless_copy
+from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineResult, ReleasableLevels
+from imagemap.core.poisson import seamless_copy
 from imagemap.core.pyramid import collapse_laplacian
+from imagemap.core.seams import place_seams
 from imagemap.core.stages import Stage
 from imagemap.depth import completion
 from imagemap.depth.config import DepthConfig

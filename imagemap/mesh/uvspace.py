@@ -22,7 +22,7 @@ windows at a chart's border see surface-like values. The mask is the used texels
 The engine (:func:`imagemap.core.engine.synthesize`) runs at a working size of at
 most :data:`WORKING_SIZE` texels; the depth front end's finish then copies each texel
 from the example texel its windows agree on and places and blends the seams
-(:func:`imagemap.core.blend.place_seams`, :func:`~imagemap.core.blend.seamless_copy`).
+(:func:`imagemap.core.seams.place_seams`, :func:`~imagemap.core.poisson.seamless_copy`).
 The texture is made at the output size by copying every output texel from its
 example's full-resolution texture through the working source map (a source texel is
 refined into the output texel's sub-position), plus the blend's smooth correction: so
