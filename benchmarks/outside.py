@@ -270,7 +270,16 @@ def main(
         ours = np.clip(result.image, 0, 1)
         nearest = database[imagemap.select_examples(task.depth, database, 1)[0]]
         copied = bbox_copy(nearest.image, nearest.mask, mask)
-        maps = {"ours": (ours, result.source, seconds), "bbox copy": (copied, None, 0.0)}
+        from imagemap.depth.pipeline import warp_nearest
+
+        start = time.perf_counter()
+        warped = warp_nearest(task.depth, database, preset=args.preset, seed=args.seed, **options)
+        maps = {
+            "ours": (ours, result.source, seconds),
+            "warp_nearest": (np.clip(warped.image, 0, 1), warped.source,
+                             time.perf_counter() - start),
+            "bbox copy": (copied, None, 0.0),
+        }  # fmt: skip
         if ebsynth:
             start = time.perf_counter()
             maps["ebsynth"] = (run_ebsynth(ebsynth, nearest, task.depth), None, 0.0)

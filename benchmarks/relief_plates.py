@@ -35,20 +35,24 @@ from skimage import color
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # outside.py beside this script
 
 #: Groove half-width and depth, as fractions of the object's half height and of the dome.
-GROOVE_WIDTH = 0.035
+GROOVE_WIDTH = 0.017
 GROOVE_DEPTH = 0.08
+#: Plate seeds: a hexagonal grid of this spacing (object half heights), each seed moved
+#: by up to this share of the spacing.
+PLATE_SPACING = 0.55
+PLATE_JITTER = 0.25
 
 EXAMPLES = [
-    dict(a=0.42, b=0.38, cx=0.50, cy=0.50, plates=9, seed=11,
+    dict(a=0.42, b=0.38, cx=0.50, cy=0.50, seed=11,
          plate=((0.78, 0.62, 0.38), (0.62, 0.44, 0.24)), seam=(0.16, 0.10, 0.06)),
-    dict(a=0.40, b=0.40, cx=0.51, cy=0.49, plates=8, seed=12,
+    dict(a=0.40, b=0.40, cx=0.51, cy=0.49, seed=12,
          plate=((0.60, 0.70, 0.40), (0.40, 0.52, 0.26)), seam=(0.10, 0.14, 0.08)),
 ]  # fmt: skip
-QUERY = dict(a=0.41, b=0.37, cx=0.49, cy=0.51, plates=9, seed=13,
+QUERY = dict(a=0.41, b=0.37, cx=0.49, cy=0.51, seed=13,
              plate=((0.76, 0.60, 0.36), (0.60, 0.42, 0.22)), seam=(0.15, 0.10, 0.06))  # fmt: skip
 
 
-def shell(width, height, *, a, b, cx, cy, plates, seed, plate, seam):
+def shell(width, height, *, a, b, cx, cy, seed, plate, seam):
     """Depth (0 outside), RGB map and the groove-centre pixels of one plated shell."""
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:height, 0:width].astype(np.float64)
@@ -56,12 +60,19 @@ def shell(width, height, *, a, b, cx, cy, plates, seed, plate, seam):
     u, v = (xx - cx * width) / (a * width), (yy - cy * height) / unit
     inside = u**2 + v**2 < 1
     dome = np.sqrt(np.clip(1 - u**2 - v**2, 0, 1))
-    # Plate seeds: a jittered ring around a centre plate, in object units.
-    angles = np.sort(rng.uniform(0, 2 * np.pi, plates - 1))
-    radii = rng.uniform(0.45, 0.8, plates - 1)
-    seeds = np.concatenate(
-        [[[0.0, 0.0]], np.stack([radii * np.cos(angles), radii * np.sin(angles)], 1)]
-    ) + rng.normal(0, 0.05, (plates, 2))
+    # Plate seeds: a jittered hexagonal grid over the ellipse (object units, x scaled by
+    # the aspect so that plates are about round in the image), its phase per object.
+    aspect = a * width / unit
+    spacing = PLATE_SPACING
+    rows = np.arange(-3, 4) * spacing * np.sqrt(3) / 2
+    grid = np.array(
+        [(x + (0.5 * spacing if k % 2 else 0.0), y) for k, y in enumerate(rows)
+         for x in np.arange(-4, 5) * spacing]
+    ) + rng.uniform(-0.5, 0.5, 2) * spacing  # fmt: skip
+    grid = grid + rng.uniform(-PLATE_JITTER, PLATE_JITTER, grid.shape) * spacing
+    grid[:, 0] /= aspect
+    seeds = grid[np.hypot(grid[:, 0], grid[:, 1]) < 0.92]
+    plates = len(seeds)
     # Distance to each seed in pixels (isotropic in the image, so grooves have one width).
     px = cx * width + seeds[:, 0] * a * width
     py = cy * height + seeds[:, 1] * unit

@@ -65,7 +65,7 @@ from imagemap.align import aligned_source, paste_aligned
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.database import Database, Example
 from imagemap.depth.config import METHODS, PRESETS, DepthConfig, resolve_config
-from imagemap.depth.pipeline import colorize
+from imagemap.depth.pipeline import colorize, warp_nearest
 from imagemap.depth.selection import select_examples
 from imagemap.io import InputError
 from imagemap.metrics import (
@@ -319,7 +319,11 @@ def evaluate_object(
         start = time.perf_counter()
         engine_params = method_params(method, params)
         provenance, legend = None, []
-        if engine_params is None:
+        if method == "warp_nearest":
+            warped = warp_nearest(depth, others, preset=params, seed=seed, quiet=True)
+            image, source, used = warped.image, warped.source, warped.example_names
+            provenance, legend = warped.provenance, warped.legend
+        elif engine_params is None:
             image, source, used = _copy_nearest(depth, others)
         else:
             colorized = colorize(depth, others, preset=engine_params, seed=seed, quiet=True)

@@ -82,8 +82,15 @@ def test_a_slow_drift_stays_one_fragment_and_a_jump_does_not():
     _, columns = np.indices(SHAPE)
     source[..., 2] = 2 * columns  # stretched copy: offset grows 1 px per pixel
     assert fragments(source, np.ones(SHAPE, bool)).count == 1
-    source[..., 2] = 3 * columns  # offset grows 2 px per pixel: every column its own piece
-    assert fragments(source, np.ones(SHAPE, bool)).count == SHAPE[1]
+    # A copy through a scale or a turn steps by its own usual step: one piece...
+    source[..., 2] = 3 * columns
+    assert fragments(source, np.ones(SHAPE, bool)).count == 1
+    # ...and a jump to another place of the example within it starts another.
+    source[:, SHAPE[1] // 2 :, 2] += 10
+    assert fragments(source, np.ones(SHAPE, bool)).count == 2
+    # Mirrored (the columns read backwards): one piece too.
+    source[..., 2] = SHAPE[1] - 1 - columns
+    assert fragments(source, np.ones(SHAPE, bool)).count == 1
 
 
 def test_copy_nearest_source_is_one_fragment_whatever_its_holes():

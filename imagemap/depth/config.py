@@ -58,19 +58,26 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Selection:
-    """Which examples the synthesis uses, and the query brought to their depth scale
-    (the ``units`` and ``select`` stages)."""
+    """Which examples the synthesis uses, and where the query lies against them (the
+    ``select`` and ``pose`` stages, :mod:`imagemap.depth.pose`)."""
 
-    #: Examples chosen automatically, nearest in centroid-aligned depth (paper, Sec. 2.3;
-    #: Table 1: 1 for humans, 2 for busts and fish).
+    #: Examples chosen automatically, nearest in shape (paper, Sec. 2.3; Table 1: 1 for
+    #: humans, 2 for busts and fish).
     m: int = setting(2, kind="int", minimum=1)
-    #: A query's depth scale (its object's median depth) within this factor of the
-    #: examples' range of scales is used as it is; further away it is brought to their
-    #: median scale (:mod:`imagemap.depth.units`). The 36 generated examples (fish,
-    #: busts, humans) have median depths 0.514-0.605 (one class spans at most 1.17x);
-    #: x0.5 already changed the examples chosen and the map (0.22 mean |RGB| from the
-    #: map at x1, fish_000 at 200x150), so the band must stop short of 2x.
-    scale_tolerance: float = setting(1.5, minimum=1.0)
+    #: Try every example mirrored too (the fit decides): a fish facing the other way
+    #: than its examples is made from them mirrored. Off for a class that is not
+    #: mirror-symmetric (writing on a label, a heart on the left).
+    mirror: bool = setting(True, kind="bool")
+    #: Degrees between the turns of the query tried over (-90, 90] (then bisected to
+    #: half a degree): the object's moments give its axis only up to a half turn and
+    #: not at all for a round object, so the turn is searched, not read off.
+    pose_angle_step: float = setting(7.5, minimum=0.5, maximum=45.0)
+    #: Cells across the units-free grid objects are compared on, and the share of the
+    #: object's size (square root of its area) one grid spans: the grid must hold a long
+    #: object turned any way (a fish is up to 2.5 sizes long), and its cells be coarser
+    #: than a pixel of a small map. 48 cells of 3.5 sizes: 0.07 size a cell.
+    pose_grid: int = setting(48, kind="int", minimum=8)
+    pose_span: float = setting(3.5, minimum=1.0)
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -159,6 +166,15 @@ class Registration:
     #: interpolated: the warp is smooth over its 4-7 control intervals. At 2048x1536 a
     #: 4-pixel grid took 4.1 s for two examples; maps up to 1024 pixels across keep it.
     position_grid: int = setting(256, kind="int", minimum=2)
+    #: The relief's flow after the smooth warp (TV-L1's data weight, on relief detail in
+    #: units of three robust spreads; 0: off): the example's grooves, ridges and bumps
+    #: land on the query's own. On #42's plates (320x240) the example grooves within
+    #: 1.5 px of the query's: F1 0.14 after the smooth warp, 0.56 / 0.82 / 0.86 at 15 /
+    #: 40 / 100.
+    flow_attachment: float = setting(100.0, minimum=0.0)
+    #: The flow is computed with the object about this many pixels across (block
+    #: averages of larger maps): a groove of 1 % of the object is still 2-3 pixels wide.
+    flow_size: float = setting(256.0, minimum=16.0)
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -538,11 +554,13 @@ def _one_pass(config: DepthConfig) -> DepthConfig:
 #: The methods ``imagemap evaluate`` compares, in report order: name -> how its
 #: configuration is made from the class preset (with the run's options); None for a
 #: baseline that synthesizes nothing (``copy_nearest``: the nearest example's map pasted
-#: at the query's centroid). Declared once: the command line, the evaluation and the
-#: report read it.
+#: at the query's centroid; ``warp_nearest``: the first-choice example posed and warped
+#: onto the query as the method does, copied whole). Declared once: the command line,
+#: the evaluation and the report read it.
 METHODS: dict[str, Callable[[DepthConfig], DepthConfig] | None] = {
     "full": lambda config: config,
     "copy_nearest": None,
+    "warp_nearest": None,
     "one_pass": _one_pass,
     "mean_vote": lambda config: config.replace_fields(vote="mean"),
     "no_position": lambda config: config.replace_fields(position_weight=0.0, registration=False),

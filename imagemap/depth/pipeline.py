@@ -55,7 +55,8 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap.core.engine import EngineParams, EngineResult, ReleasableLevels, synthesize
+from imagemap.core.blend import copy_through
+from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
@@ -71,22 +72,39 @@ from imagemap.depth.finish import (
     SynthesisState,
     example_features,
 )
-from imagemap.depth.guides import depth_mappings, example_mappings, level_plans, sized_config
+from imagemap.depth.guides import (
+    depth_mappings,
+    example_mappings,
+    example_ycbcr,
+    level_plans,
+    sized_config,
+)
+from imagemap.depth.pose import (
+    CanonicalFrame,
+    Pose,
+    canonical_frame,
+    mirrored_example,
+    resample_depth,
+    unpose,
+    unpose_nearest,
+)
 from imagemap.depth.register import Warp, register, registered_positions
-from imagemap.depth.selection import select_examples
-from imagemap.depth.units import units_stage
+from imagemap.depth.selection import poses_against, select_examples, select_with_poses
+from imagemap.depth.units import depth_scale, exclude_query, scale_of
 from imagemap.io import InputError, validate_depth
 from imagemap.validate import check_examples, check_seed
 
 __all__ = [
     "PRESETS",
     "STAGES",
+    "WARP_NEAREST_STAGES",
     "ColorizeResult",
     "DepthConfig",
     "State",
     "colorize",
     "engine_params",
     "select_examples",
+    "warp_nearest",
 ]
 
 log = logging.getLogger("imagemap")
@@ -101,13 +119,19 @@ class State(SynthesisState):
     :class:`~imagemap.depth.finish.SynthesisState`'s.
     """
 
-    depth: np.ndarray
+    depth: np.ndarray  # the query's depth; from the pose stage on, in the canonical frame
     database: Database
     names: list[str] | None = None
     mask: np.ndarray = field(init=False)  # the object: depth > 0
+    query_depth: np.ndarray = field(init=False)  # the query's depth as given
+    poses: list[Pose] = field(default_factory=list)  # the query against each example
+    frame: CanonicalFrame | None = None  # where the synthesis runs
+    mirrored: list[bool] = field(default_factory=list)  # chosen[i] is the example mirrored
+    angles: list[float] = field(default_factory=list)  # each example's turn from the frame
     warps: list[Warp] = field(default_factory=list)  # each example onto the query
 
     def __post_init__(self) -> None:
+        self.query_depth = self.depth
         self.mask = np.asarray(self.depth) > 0
 
 
@@ -115,30 +139,77 @@ class State(SynthesisState):
 
 
 def _select(state: State, config: DepthConfig) -> State:
-    database = state.database
+    # The query itself is no example of its own; then the nearest in shape, at any pose.
+    state.database, note = exclude_query(state.database, state.names, state.depth)
+    database, selection = state.database, config.selection
     if state.names:
-        state.chosen = [database[name] for name in state.names]
+        chosen = [database[name] for name in state.names]
+        state.poses = poses_against(state.depth, chosen, selection)
     else:
-        n = config.selection.m
+        n = selection.m
         if n > len(database):
             log.warning("m=%d but the database has %d examples: using all", n, len(database))
             n = len(database)
-        state.chosen = [database[i] for i in select_examples(state.depth, database, n)]
-    state.changed = ", ".join(e.name for e in state.chosen)
+        indices, state.poses = select_with_poses(state.depth, database, n, selection)
+        chosen = [database[i] for i in indices]
+    state.chosen = chosen
+    state.changed = "; ".join(filter(None, [note, ", ".join(e.name for e in chosen)]))
+    return state
+
+
+def _relative_angle(pose: Pose, first: Pose, mirrored: bool) -> float:
+    """The turn (degrees) from the canonical frame (``first``'s example) to ``pose``'s
+    example, that example mirrored when ``mirrored``."""
+    matrix = pose.linear @ np.linalg.inv(first.linear)
+    if mirrored:
+        matrix = np.diag([1.0, -1.0]) @ matrix
+    return float(np.degrees(np.arctan2(matrix[1, 0], matrix[0, 0])))
+
+
+def _pose(state: State, config: DepthConfig) -> State:
+    # The synthesis runs in the first example's frame: the query turned, scaled and
+    # mirrored as that example lies, at its depth scale; an example that lies mirrored
+    # against it is used mirrored (exactly: its columns reversed).
+    first = state.poses[0]
+    size = float(np.sqrt(state.chosen[0].mask.sum()))
+    # Room around the object for the coarsest level's windows (about a third of the
+    # object wide: Pyramid.add_windows_across) and the depth continued past the outline.
+    margin = size / (2.0 * config.pyramid.add_windows_across) + 2 * config.guides.extension_sigma
+    frame = canonical_frame(state.mask, first, margin)
+    depth = resample_depth(state.query_depth, frame)
+    # Depth units never count: always the chosen examples' median depth scale.
+    factor = float(np.median([scale_of(e) for e in state.chosen])) / depth_scale(depth)
+    state.depth = (depth.astype(np.float64) * factor).astype(np.float32)
+    state.mask = state.depth > 0
+    state.frame = frame
+    state.mirrored = [pose.mirrored != first.mirrored for pose in state.poses]
+    state.angles = [
+        _relative_angle(pose, first, flip)
+        for pose, flip in zip(state.poses, state.mirrored, strict=True)
+    ]
+    state.chosen = [
+        mirrored_example(e) if flip else e
+        for e, flip in zip(state.chosen, state.mirrored, strict=True)
+    ]
+    state.changed = (
+        f"turned {first.angle:.1f} deg, scaled x{first.scale:.3f}"
+        f"{', mirrored' if first.mirrored else ''}; depth x{factor:.4g}; "
+        f"{sum(state.mirrored)} examples used mirrored"
+    )
     return state
 
 
 def _register(state: State, config: DepthConfig) -> State:
     state.warps = [
-        register(state.depth, example.depth, registration=config.registration)
-        for example in state.chosen
+        register(state.depth, example.depth, registration=config.registration, angle=angle)
+        for example, angle in zip(state.chosen, state.angles, strict=True)
     ]
     state.changed = f"{len(state.warps)} examples warped onto the query"
     return state
 
 
 def _bands(state: State, config: DepthConfig) -> State:
-    levels = config.pyramid.levels
+    levels = sized_config(config, state.mask).pyramid.levels
     query_positions: list[np.ndarray] | None = None
     example_positions: list[list[np.ndarray] | None] = [None] * len(state.chosen)
     if state.warps:
@@ -195,7 +266,7 @@ def engine_params(config: DepthConfig, mask: np.ndarray, n_examples: int) -> Eng
 
 
 def _synthesize(state: State, config: DepthConfig) -> State:
-    params = engine_params(config, state.mask, len(state.chosen))
+    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
     query, exemplars = state.made("query_levels"), state.made("exemplar_levels")
     # The pyramids are the engine's now (it frees each level once packed): not held here.
     state.query_levels = state.exemplar_levels = None
@@ -224,12 +295,53 @@ def _complete_features(state: State, config: DepthConfig) -> State:
     return state
 
 
+def _unpose(state: State, config: DepthConfig) -> State:
+    # The map back in the query's frame, and every source in its example's own pixels.
+    frame: CanonicalFrame = state.made("frame")
+    ycbcr, source = unpose(
+        frame,
+        state.query_depth > 0,
+        state.made("ycbcr"),
+        state.made("source"),
+        state.exemplars,
+        canonical_mask=state.mask,
+    )
+    for index, (example, flip) in enumerate(zip(state.chosen, state.mirrored, strict=True)):
+        if flip:  # a mirrored example's column x is its own column width - 1 - x
+            mine = source[..., 0] == index
+            source[..., 2][mine] = example.mask.shape[1] - 1 - source[..., 2][mine]
+    if state.engine is not None:
+        state.engine.cost = unpose_nearest(frame, state.query_depth.shape, state.engine.cost)
+    state.ycbcr, state.source, state.exemplars = ycbcr, source, None
+    state.depth, state.mask = state.query_depth, state.query_depth > 0
+    state.changed = f"back in the query's frame ({state.mask.shape[1]}x{state.mask.shape[0]})"
+    return state
+
+
+def _warp_copy(state: State, config: DepthConfig) -> State:
+    # warp_nearest: every pixel copied from the first example where its warp puts it
+    # (an example pixel outside that example's object: its nearest object pixel's).
+    example, warp = state.chosen[0], state.warps[0]
+    ys, xs = np.mgrid[0 : state.mask.shape[0], 0 : state.mask.shape[1]].astype(np.float64)
+    ey, ex = warp.forward(ys, xs)
+    height, width = example.mask.shape
+    iy = np.clip(np.rint(ey), 0, height - 1).astype(np.int64)
+    ix = np.clip(np.rint(ex), 0, width - 1).astype(np.int64)
+    _, (ny, nx) = ndimage.distance_transform_edt(~example.mask, return_indices=True)
+    source = np.stack([np.zeros_like(iy), ny[iy, ix], nx[iy, ix]], axis=-1).astype(np.int32)
+    state.exemplars = [example_ycbcr(example)]
+    state.source = source
+    state.ycbcr = copy_through(state.exemplars, source).astype(np.float32)
+    state.changed = f"{int(state.mask.sum())} pixels copied from {example.name}"
+    return state
+
+
 #: The pipeline, in order: the depth front end's own stages, then the shared finish
 #: (:mod:`imagemap.depth.finish`) with the completion of small features, which reads the
 #: relief, after the copy.
 STAGES: tuple[Stage[State, DepthConfig], ...] = (
-    Stage("units", units_stage),  # imagemap/depth/units.py: depth scale, the query itself
     Stage("select", _select),
+    Stage("pose", _pose),
     Stage("register", _register, lambda c: c.guides.registration),
     Stage("bands", _bands),
     Stage("synthesize", _synthesize),
@@ -243,6 +355,18 @@ STAGES: tuple[Stage[State, DepthConfig], ...] = (
     SEAMS,
     OUTSIDE,
     BLEND,
+    Stage("unpose", _unpose),
+    RGB,
+)
+
+#: The ``warp_nearest`` baseline's stages: the first example posed and warped onto the
+#: query as the method does, and copied whole (no synthesis).
+WARP_NEAREST_STAGES: tuple[Stage[State, DepthConfig], ...] = (
+    Stage("select", _select),
+    Stage("pose", _pose),
+    Stage("register", _register),
+    Stage("warp_copy", _warp_copy),
+    Stage("unpose", _unpose),
     RGB,
 )
 
@@ -287,6 +411,9 @@ class ColorizeResult:
     engine_timings : dict
         The engine's own steps' seconds (``pca``, ``search``, ``vote``...), inside the
         ``synthesize`` stage's.
+    poses : list of Pose
+        Where the query lies against each example (turn, scale, mirrored;
+        :mod:`imagemap.depth.pose`).
     """
 
     image: np.ndarray
@@ -298,6 +425,7 @@ class ColorizeResult:
     config: DepthConfig | None = None
     stages: list[StageRecord] = field(default_factory=list)
     engine_timings: dict[str, float] = field(default_factory=dict)
+    poses: list[Pose] = field(default_factory=list)
 
     @property
     def timings(self) -> dict[str, float]:
@@ -423,23 +551,56 @@ def colorize(
     depth = validate_depth(depth)
     if len(database) == 0:
         raise InputError("the database has no examples")
-    # The pyramid sized for the object: as many levels as its size calls for.
-    config = sized_config(config, depth > 0)
-    log.info("pyramid: %d levels, windows %s", config.pyramid.levels, config.pyramid.patch_sizes)
+    return _run(depth, database, config, STAGES, names, seed, quiet)
+
+
+def _run(depth, database, config, stages, names, seed, quiet) -> ColorizeResult:
     state = State(depth=depth, database=database, seed=seed, quiet=quiet, names=names)
-    state, records = run_pipeline(state, config, STAGES)
-    engine: EngineResult = state.made("engine")
+    state, records = run_pipeline(state, config, stages)
+    frame: CanonicalFrame = state.made("frame")
+    # The configuration as it ran: its pyramid sized for the object in the synthesis'
+    # frame (as many levels as its size calls for).
+    config = sized_config(config, resample_depth(state.query_depth, frame) > 0)
+    engine = state.engine
     return ColorizeResult(
         image=state.made("image"),
         mask=state.mask,
         source=state.made("source"),
-        cost=engine.cost,
+        cost=engine.cost if engine else np.full(state.mask.shape, np.nan, np.float32),
         example_names=[e.name for e in state.chosen],
-        objective=engine.objective,
+        objective=engine.objective if engine else [],
         config=config,
         stages=records,
-        engine_timings=dict(engine.timings),
+        engine_timings=dict(engine.timings) if engine else {},
+        poses=list(state.poses),
     )
+
+
+def warp_nearest(
+    depth: np.ndarray,
+    database: Database,
+    preset: str | DepthConfig | None = "busts",
+    *,
+    examples: list[str] | None = None,
+    seed: int = 0,
+    quiet: bool = True,
+    **options: Any,
+) -> ColorizeResult:
+    """The baseline the method must beat: the first-choice example posed and warped
+    onto the query as :func:`colorize` does it (:data:`WARP_NEAREST_STAGES`), then copied
+    whole, without any synthesis. Arguments as :func:`colorize`.
+
+    Examples
+    --------
+    See the module's example (``warp_nearest`` in place of ``colorize``).
+    """
+    names = _check_arguments(depth, database, examples, seed)
+    config = resolve_config(preset, **options).replace_fields(m=1)
+    depth = validate_depth(depth)
+    if len(database) == 0:
+        raise InputError("the database has no examples")
+    return _run(depth, database, config, WARP_NEAREST_STAGES, names[:1] if names else None,
+                seed, quiet)  # fmt: skip
 
 
 colorize.__doc__ = (colorize.__doc__ or "").replace(

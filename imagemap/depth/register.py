@@ -32,7 +32,7 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -40,7 +40,7 @@ from threadpoolctl import threadpool_limits
 
 from imagemap.depth.config import Registration
 
-__all__ = ["Warp", "register", "registered_positions", "registration_guide"]
+__all__ = ["Warp", "register", "registered_positions", "registration_guide", "relief_detail"]
 
 #: The defaults of every setting of the fit (a :class:`DepthConfig`'s ``registration``).
 _REGISTRATION = Registration()
@@ -124,24 +124,36 @@ class Warp:
     """A query-to-example map: ``forward(y, x)`` gives the example coordinates of query
     pixel coordinates (any resolution: coordinates are in pixels of the full images).
 
+    ``example = example_centre + linear @ (p + d(p) - query_centre)`` with
+    ``p = query + flow(query)``.
+
     Attributes
     ----------
-    query_centre, example_centre, scale : ndarray (2,)
-        The affine part: ``example = example_centre + scale * (query + d - query_centre)``.
+    query_centre, example_centre : ndarray (2,)
+    linear : ndarray (2, 2)
+        The affine part on (y, x) offsets: a turn and the objects' spreads along their
+        own axes.
     box : tuple of float
         The control grid's extent in query pixels (y0, y1, x0, x1).
     coefficients : ndarray (2, n * n)
         The B-spline displacement ``d`` (query pixels) per control point.
     n : int
         Control points per side.
+    flow : ndarray (2, h, w), optional
+        The relief's flow (query pixels) on a grid of ``flow_step`` query pixels a cell:
+        where the query's own relief (a groove, a bump) lies against the example's once
+        the smooth warp has brought them together.
+    flow_step : float
     """
 
     query_centre: np.ndarray
     example_centre: np.ndarray
-    scale: np.ndarray
+    linear: np.ndarray
     box: tuple[float, float, float, float]
     coefficients: np.ndarray
     n: int
+    flow: np.ndarray | None = None
+    flow_step: float = 1.0
 
     def displacement(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The B-spline displacement (query pixels) at query coordinates."""
@@ -151,32 +163,72 @@ class Warp:
             basis @ self.coefficients[1]
         ).reshape(shape)
 
-    def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Example coordinates (y, x) of query coordinates."""
-        dy, dx = self.displacement(ys, xs)
+    def relief_flow(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The relief's flow (query pixels) at query coordinates (0 without one)."""
+        if self.flow is None:
+            return np.zeros(np.shape(ys)), np.zeros(np.shape(xs))
+        step = self.flow_step  # flow-grid pixel j is query coordinate (j + 0.5) * step - 0.5
+        at = [(np.asarray(ys) + 0.5) / step - 0.5, (np.asarray(xs) + 0.5) / step - 0.5]
         return (
-            self.example_centre[0] + self.scale[0] * (ys + dy - self.query_centre[0]),
-            self.example_centre[1] + self.scale[1] * (xs + dx - self.query_centre[1]),
+            ndimage.map_coordinates(self.flow[0], at, order=1, mode="nearest"),
+            ndimage.map_coordinates(self.flow[1], at, order=1, mode="nearest"),
         )
 
+    def smooth_forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Example coordinates of query coordinates by the smooth warp alone (no flow)."""
+        dy, dx = self.displacement(ys, xs)
+        oy = np.asarray(ys) + dy - self.query_centre[0]
+        ox = np.asarray(xs) + dx - self.query_centre[1]
+        return (
+            self.example_centre[0] + self.linear[0, 0] * oy + self.linear[0, 1] * ox,
+            self.example_centre[1] + self.linear[1, 0] * oy + self.linear[1, 1] * ox,
+        )
+
+    def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Example coordinates (y, x) of query coordinates."""
+        fy, fx = self.relief_flow(ys, xs)
+        return self.smooth_forward(np.asarray(ys) + fy, np.asarray(xs) + fx)
+
     def inverse(self, ys: np.ndarray, xs: np.ndarray, iterations: int = 12) -> tuple:
-        """Query coordinates of example coordinates (fixed-point iteration: the displacement
-        is smooth and small against the object)."""
-        ty = self.query_centre[0] + (ys - self.example_centre[0]) / self.scale[0]
-        tx = self.query_centre[1] + (xs - self.example_centre[1]) / self.scale[1]
+        """Query coordinates of example coordinates (fixed-point iterations: the
+        displacement and the flow are small against the object)."""
+        inverse = np.linalg.inv(self.linear)
+        oy, ox = np.asarray(ys) - self.example_centre[0], np.asarray(xs) - self.example_centre[1]
+        ty = self.query_centre[0] + inverse[0, 0] * oy + inverse[0, 1] * ox
+        tx = self.query_centre[1] + inverse[1, 0] * oy + inverse[1, 1] * ox
         qy, qx = ty.copy(), tx.copy()
         for _ in range(iterations):
             dy, dx = self.displacement(qy, qx)
             qy, qx = ty - dy, tx - dx
+        if self.flow is None:
+            return qy, qx
+        py, px = qy, qx  # the smooth warp's point; the query's is p - flow(query)
+        for _ in range(iterations):
+            fy, fx = self.relief_flow(qy, qx)
+            qy, qx = py - fy, px - fx
         return qy, qx
 
 
-def _fit(fixed, moving, fixed_mask, moving_mask, registration: Registration) -> Warp:
+def _affine(fixed_mask, moving_mask, angle: float) -> tuple:
+    """Centres and the affine part: the query's offsets turned by ``angle`` degrees (the
+    objects' pose), then stretched by the ratio of the objects' spreads along the axes."""
+    query_centre, _ = _moments(fixed_mask)
+    example_centre, example_spread = _moments(moving_mask)
+    theta = np.deg2rad(angle)
+    rotation = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    ys, xs = np.nonzero(fixed_mask)
+    turned = rotation @ np.stack([ys - query_centre[0], xs - query_centre[1]])
+    query_spread = np.maximum(turned.std(axis=1), 1e-3)
+    return query_centre, example_centre, np.diag(example_spread / query_spread) @ rotation
+
+
+def _fit(
+    fixed, moving, fixed_mask, moving_mask, registration: Registration, angle: float = 0.0
+) -> Warp:
     """The warp of ``moving`` onto ``fixed`` (same working resolution), fitted coarse to
     fine by Levenberg-Marquardt over ``registration``'s control grids."""
-    query_centre, query_spread = _moments(fixed_mask)
-    example_centre, example_spread = _moments(moving_mask)
-    scale = example_spread / query_spread
+    query_centre, example_centre, linear = _affine(fixed_mask, moving_mask, angle)
+    scale = np.sqrt(abs(np.linalg.det(linear)))
     region = ndimage.binary_dilation(fixed_mask, iterations=3)
     ys, xs = np.nonzero(region)
     step = max(1, int(np.ceil(len(ys) / registration.fit_pixels)))
@@ -187,7 +239,7 @@ def _fit(fixed, moving, fixed_mask, moving_mask, registration: Registration) -> 
     n = registration.control_grids[0]
     for n, sigma in zip(registration.control_grids, registration.grid_smoothing, strict=True):
         target = ndimage.gaussian_filter(fixed, sigma)[ys.astype(int), xs.astype(int)]
-        image = ndimage.gaussian_filter(moving, sigma * float(scale.mean()))
+        image = ndimage.gaussian_filter(moving, sigma * float(scale))
         grad_y, grad_x = np.gradient(image)
         basis = _tensor_basis(ys, xs, box, n)
         if displacement is None:
@@ -197,16 +249,20 @@ def _fit(fixed, moving, fixed_mask, moving_mask, registration: Registration) -> 
         penalty = registration.stiffness * len(ys) / (n * n)
 
         def residual(c, basis=basis, image=image, target=target, penalty=penalty):
-            wy = example_centre[0] + scale[0] * (ys + basis @ c[0] - query_centre[0])
-            wx = example_centre[1] + scale[1] * (xs + basis @ c[1] - query_centre[1])
+            oy, ox = ys + basis @ c[0] - query_centre[0], xs + basis @ c[1] - query_centre[1]
+            wy = example_centre[0] + linear[0, 0] * oy + linear[0, 1] * ox
+            wx = example_centre[1] + linear[1, 0] * oy + linear[1, 1] * ox
             r = ndimage.map_coordinates(image, [wy, wx], order=1, mode="nearest") - target
             return r, wy, wx, float(r @ r + penalty * np.sum(c * c))
 
         r, wy, wx, energy = residual(coefficients)
         damping = 1e-3
         for _ in range(registration.fit_iterations):
-            gy = ndimage.map_coordinates(grad_y, [wy, wx], order=1, mode="nearest") * scale[0]
-            gx = ndimage.map_coordinates(grad_x, [wy, wx], order=1, mode="nearest") * scale[1]
+            iy = ndimage.map_coordinates(grad_y, [wy, wx], order=1, mode="nearest")
+            ix = ndimage.map_coordinates(grad_x, [wy, wx], order=1, mode="nearest")
+            # The image's gradient carried back through the affine part (chain rule).
+            gy = iy * linear[0, 0] + ix * linear[1, 0]
+            gx = iy * linear[0, 1] + ix * linear[1, 1]
             jacobian = np.concatenate([gy[:, None] * basis, gx[:, None] * basis], axis=1)
             hessian = jacobian.T @ jacobian + penalty * np.eye(2 * n * n)
             gradient = jacobian.T @ r + penalty * coefficients.ravel()
@@ -224,7 +280,7 @@ def _fit(fixed, moving, fixed_mask, moving_mask, registration: Registration) -> 
             if not improved:
                 break
         displacement = np.stack([basis @ coefficients[0], basis @ coefficients[1]])
-    return Warp(query_centre, example_centre, scale, box, coefficients, n)
+    return Warp(query_centre, example_centre, linear, box, coefficients, n)
 
 
 def register(
@@ -232,16 +288,21 @@ def register(
     example_depth: np.ndarray,
     *,
     registration: Registration = _REGISTRATION,
+    angle: float = 0.0,
 ) -> Warp:
-    """The smooth warp from the query's object onto the example's (full-resolution pixels).
+    """The warp from the query's object onto the example's (full-resolution pixels): a
+    smooth warp, then the relief's flow.
 
     Parameters
     ----------
     query_depth, example_depth : ndarray (H, W)
         Depth maps, background 0 (any units: each is taken relative to its own range).
     registration : Registration
-        The fit's settings (working size, control grids, the guide image's weights; a
-        :class:`~imagemap.depth.config.DepthConfig`'s ``registration``).
+        The fit's settings (working size, control grids, the guide image's weights, the
+        flow's; a :class:`~imagemap.depth.config.DepthConfig`'s ``registration``).
+    angle : float
+        The turn (degrees, :class:`~imagemap.depth.pose.Pose`) from the query's axes to
+        the example's, where the fit starts.
 
     Returns
     -------
@@ -275,23 +336,81 @@ def register(
     fixed, fixed_mask = working(query_depth, query_mask)
     moving, moving_mask = working(example_depth, example_mask)
     with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
-        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration)
-    if zoom >= 1.0:
-        return warp
+        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
+    if zoom < 1.0:
+        # Back to full-resolution pixels: a working pixel centre j is full-resolution
+        # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
+        def full(v):
+            return (np.asarray(v) + 0.5) / zoom - 0.5
 
-    # Back to full-resolution pixels: a working pixel centre j is full-resolution
-    # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
-    def full(v):
-        return (np.asarray(v) + 0.5) / zoom - 0.5
+        warp = Warp(
+            query_centre=full(warp.query_centre),
+            example_centre=full(warp.example_centre),
+            linear=warp.linear,
+            box=tuple(float(full(b)) for b in warp.box),  # type: ignore[arg-type]
+            coefficients=warp.coefficients / zoom,
+            n=warp.n,
+        )
+    if registration.flow_attachment > 0:
+        warp = _with_relief_flow(warp, query_depth, example_depth, registration)
+    return warp
 
-    return Warp(
-        query_centre=full(warp.query_centre),
-        example_centre=full(warp.example_centre),
-        scale=warp.scale,
-        box=tuple(float(full(b)) for b in warp.box),  # type: ignore[arg-type]
-        coefficients=warp.coefficients / zoom,
-        n=warp.n,
+
+def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarray:
+    """The relief's detail inside the object, units-free: the depth over its median less
+    its smoothing inside the object over ``scale`` of the object's size, in units of three
+    robust spreads, soft-clipped (tanh) to (-1, 1); 0 outside. A groove, a ridge, a bump:
+    not the body's curvature, nor the step down to the background at the outline.
+
+    Examples
+    --------
+    >>> depth = np.zeros((40, 40), np.float32); depth[5:35, 5:35] = 1.0
+    >>> depth[5:35, 19:21] = 0.9  # a groove
+    >>> detail = relief_detail(depth, depth > 0, 0.1)
+    >>> bool(detail[20, 20] < -0.5 < 0.0 < detail[20, 10] + 0.2)
+    True
+    """
+    from imagemap.core.blend import smooth_inside  # deferred: start-up (SciPy's filters)
+
+    size = max(float(np.sqrt(mask.sum())), 1.0)
+    relative = np.where(mask, depth / float(np.median(depth[mask])), 0.0)
+    detail = np.where(mask, relative - smooth_inside(relative, mask, scale * size), 0.0)
+    values = detail[mask]
+    spread = 1.4826 * float(np.median(np.abs(values - np.median(values)))) + 1e-12
+    return np.where(mask, np.tanh(detail / (3.0 * spread)), 0.0).astype(np.float32)
+
+
+def _with_relief_flow(
+    warp: Warp, query_depth: np.ndarray, example_depth: np.ndarray, registration: Registration
+) -> Warp:
+    """``warp`` with the relief's flow: TV-L1 optical flow (Zach, Pock & Bischof 2007) of
+    the example's relief detail, brought onto the query by the smooth warp, to the query's
+    own. The example's grooves, ridges and bumps then land on the query's, where the
+    smooth warp (a few control points) left them where the example had them."""
+    from skimage.registration import optical_flow_tvl1  # deferred: start-up
+
+    query_mask, example_mask = query_depth > 0, example_depth > 0
+
+    def small(depth, mask):
+        block = max(1, int(round(np.sqrt(mask.sum()) / registration.flow_size)))
+        if block > 1:
+            depth, mask = _block_average(depth, mask, block)
+        return relief_detail(depth, mask, registration.relief_detail_scale), block
+
+    query_detail, step = small(query_depth, query_mask)
+    example_detail, example_step = small(example_depth, example_mask)
+    # The query's flow-grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
+    gy, gx = np.mgrid[0 : query_detail.shape[0], 0 : query_detail.shape[1]].astype(np.float64)
+    ey, ex = warp.smooth_forward((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
+    moving = ndimage.map_coordinates(
+        example_detail, [(ey + 0.5) / example_step - 0.5, (ex + 0.5) / example_step - 0.5],
+        order=1, mode="constant", cval=0.0,
+    ).astype(np.float32)  # fmt: skip
+    flow_y, flow_x = optical_flow_tvl1(
+        query_detail, moving, attachment=registration.flow_attachment
     )
+    flow = np.stack([flow_y, flow_x]).astype(np.float32) * step
+    return replace(warp, flow=flow, flow_step=float(step))
 
 
 def _block_average(depth: np.ndarray, mask: np.ndarray, block: int) -> tuple:

@@ -36,10 +36,10 @@ __all__ = [
     "seam_length",
 ]
 
-#: Offsets (source position minus pixel position) of 4-neighbours copied from one
-#: example may differ by this many pixels (each of y and x) and still be one fragment:
-#: issue #32's definition, so that a slowly warping copy (a stretched example) stays one
-#: piece while a jump to another place of the example starts another.
+#: Sources of 4-neighbours copied from one example may differ from that example's usual
+#: step by this many pixels (each of y and x) and still be one fragment: issue #32's
+#: definition (offsets within 1 px), so that a slowly warping copy (a stretched example)
+#: stays one piece while a jump to another place of the example starts another.
 FRAGMENT_DRIFT = 1
 #: The fragment count reported is the fewest fragments that together cover this share
 #: of the object: issue #32's figure (79 at 200x150, 1,424 at 800x600 on generated
@@ -69,27 +69,35 @@ def _source_links(
 
     Returns ``(right, down, covered)``: ``right[y, x]`` links (y, x) to (y, x + 1),
     ``down[y, x]`` links (y, x) to (y + 1, x); both pixels are object pixels with a
-    source in the same example whose offsets differ by at most ``drift`` in y and x.
+    source in the same example whose sources differ by that example's usual step (the
+    median over its copied pixels) within ``drift`` in y and x. For a copy that is only
+    moved the usual step is one pixel along the same axis (the offsets then differ by at
+    most ``drift``); a copy through a turn or a mirror image (the query posed onto its
+    examples, :mod:`imagemap.depth.pose`) steps along the example's own axes.
     ``covered`` marks the object pixels that have a source.
     """
     index = source[..., 0]
     covered = mask & (index >= 0)
-    rows, columns = np.indices(mask.shape)
-    offset_y, offset_x = source[..., 1] - rows, source[..., 2] - columns
-
-    def link(a: tuple, b: tuple) -> np.ndarray:
-        return (
-            covered[a]
-            & covered[b]
-            & (index[a] == index[b])
-            & (np.abs(offset_y[a] - offset_y[b]) <= drift)
-            & (np.abs(offset_x[a] - offset_x[b]) <= drift)
-        )
-
     every = slice(None)
-    right = link((every, slice(None, -1)), (every, slice(1, None)))
-    down = link((slice(None, -1), every), (slice(1, None), every))
-    return right, down, covered
+    pairs = {
+        "right": ((every, slice(None, -1)), (every, slice(1, None)), (0, 1)),
+        "down": ((slice(None, -1), every), (slice(1, None), every), (1, 0)),
+    }
+    links = {}
+    for name, (a, b, default) in pairs.items():
+        same = covered[a] & covered[b] & (index[a] == index[b])
+        step_y = source[..., 1][b] - source[..., 1][a]
+        step_x = source[..., 2][b] - source[..., 2][a]
+        usual_y = np.full(step_y.shape, default[0], dtype=np.int64)
+        usual_x = np.full(step_x.shape, default[1], dtype=np.int64)
+        for example in np.unique(index[a][same]):
+            mine = same & (index[a] == example)
+            usual_y[mine] = int(np.rint(np.median(step_y[mine])))
+            usual_x[mine] = int(np.rint(np.median(step_x[mine])))
+        links[name] = (
+            same & (np.abs(step_y - usual_y) <= drift) & (np.abs(step_x - usual_x) <= drift)
+        )
+    return links["right"], links["down"], covered
 
 
 def fragment_labels(

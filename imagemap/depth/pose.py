@@ -1,0 +1,443 @@
+"""Where a query lies against each example: a similarity with or without a mirror image.
+
+A query may lie anywhere in its frame, at any size, turned or facing the other way
+than the examples, and its depth may come in any unit. None of that may change which
+examples it is made from, nor its map beyond moving it the same way. So every object
+is compared in a frame of its own: its depth divided by its own median (units-free),
+centred on its centroid and scaled by its size (the square root of its area) on a
+small grid (:attr:`~imagemap.depth.config.Selection.pose_grid` cells across). The
+query is sampled on that grid turned by every angle of a coarse search and mirrored or
+not; each example once, as it lies. The distance of an example is the smallest sum of
+squared differences over those candidates, and the candidate that gives it is the pose
+(refined by bisection of the angle): a :class:`Pose`, the map from query pixels to the
+example's pixels.
+
+The synthesis then runs in the first example's frame (:func:`canonical_frame`): the
+query resampled by its pose onto the example's grid, so that its windows see the
+relief turned, scaled and mirrored as the examples have it, and the map is brought
+back to the query's frame at the end. Rotation, scale and mirror are thereby the
+same for every query, whatever its pose (Hassner & Basri select by depth after
+centroid alignment only, Sec. 2.3; moments give translation, scale and rotation but
+not a reflection, hence the mirrored candidates and a fit that chooses).
+
+Examples
+--------
+>>> yy, xx = np.mgrid[:60, :80]
+>>> def fish(cx, flip=False):
+...     u = (xx - cx) / 25.0
+...     u = -u if flip else u
+...     v = (yy - 30) / (10.0 + 4 * u)  # a body thicker at one end
+...     return np.where(u**2 + v**2 < 1, 1 + 0.3 * u, 0).astype(np.float32)
+>>> pose = find_poses(fish(40, flip=True), [fish(38)])[0]
+>>> pose.mirrored, round(abs(pose.angle)) % 180
+(True, 0)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = [
+    "CanonicalFrame",
+    "Pose",
+    "canonical_frame",
+    "find_poses",
+    "pose_distances",
+    "shape_grid",
+]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A similarity from query pixels to an example's pixels, mirrored or not.
+
+    ``example = example_centre + scale * R(angle) @ F @ (query - query_centre)`` on
+    (y, x) coordinates, ``F`` flipping x when ``mirrored``; ``distance`` is the shape
+    distance at this pose (:func:`pose_distances`).
+    """
+
+    query_centre: tuple[float, float]
+    example_centre: tuple[float, float]
+    scale: float
+    angle: float  # degrees, counter-clockwise on screen
+    mirrored: bool
+    distance: float = 0.0
+
+    @property
+    def linear(self) -> np.ndarray:
+        """The 2x2 matrix acting on (y, x) offsets from the query's centroid."""
+        theta = np.deg2rad(self.angle)
+        # (y, x) with y down: a counter-clockwise turn on screen.
+        rotation = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        flip = np.diag([1.0, -1.0]) if self.mirrored else np.eye(2)
+        return self.scale * rotation @ flip
+
+    def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Example coordinates of query coordinates."""
+        linear = self.linear
+        dy, dx = np.asarray(ys) - self.query_centre[0], np.asarray(xs) - self.query_centre[1]
+        return (
+            self.example_centre[0] + linear[0, 0] * dy + linear[0, 1] * dx,
+            self.example_centre[1] + linear[1, 0] * dy + linear[1, 1] * dx,
+        )
+
+    def inverse(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Query coordinates of example coordinates."""
+        inverse = np.linalg.inv(self.linear)
+        dy, dx = np.asarray(ys) - self.example_centre[0], np.asarray(xs) - self.example_centre[1]
+        return (
+            self.query_centre[0] + inverse[0, 0] * dy + inverse[0, 1] * dx,
+            self.query_centre[1] + inverse[1, 0] * dy + inverse[1, 1] * dx,
+        )
+
+
+def _frame(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """(centroid (y, x), size in pixels, the depth divided by its object's median)."""
+    mask = depth > 0
+    ys, xs = np.nonzero(mask)
+    centre = np.array([ys.mean(), xs.mean()])
+    size = float(np.sqrt(mask.sum()))
+    return centre, size, np.where(mask, depth / float(np.median(depth[mask])), 0.0)
+
+
+def _smoothed(normalized: np.ndarray, size: float, grid: int, span: float) -> np.ndarray:
+    """The normalized depth low-passed for sampling on a grid of ``grid`` cells over
+    ``span`` sizes (one grid cell: ``span * size / grid`` pixels): no aliasing."""
+    cell = span * size / grid
+    if cell <= 1.5:
+        return normalized.astype(np.float32)
+    return ndimage.gaussian_filter(normalized.astype(np.float32), 0.5 * cell, mode="constant")
+
+
+def _sample(image, centre, size, linear, grid, span) -> np.ndarray:
+    """``image`` at ``centre + size * linear @ u`` for the grid's offsets ``u``, flat."""
+    u = (np.arange(grid) - (grid - 1) / 2.0) * (span / grid)
+    gy, gx = np.meshgrid(u, u, indexing="ij")
+    ys = centre[0] + size * (linear[0, 0] * gy + linear[0, 1] * gx)
+    xs = centre[1] + size * (linear[1, 0] * gy + linear[1, 1] * gx)
+    return ndimage.map_coordinates(image, [ys, xs], order=1, mode="constant", cval=0.0).ravel()
+
+
+def shape_grid(depth: np.ndarray, grid: int = 48, span: float = 3.5) -> np.ndarray:
+    """An object's depth as it lies, on its own units-free grid (flat, ``grid**2``).
+
+    Centred on the object's centroid, one cell ``span / grid`` of its size (the square
+    root of its area), the depth divided by its object's median.
+
+    Examples
+    --------
+    >>> disc = np.zeros((40, 40), np.float32); disc[10:30, 10:30] = 2.0
+    >>> a, b = shape_grid(disc, 16), shape_grid(5 * np.roll(disc, 4, axis=1), 16)
+    >>> bool(np.allclose(a, b))
+    True
+    """
+    centre, size, normalized = _frame(np.asarray(depth, np.float64))
+    image = _smoothed(normalized, size, grid, span)
+    return _sample(image, centre, size, np.eye(2), grid, span).astype(np.float32)
+
+
+def _linear(angle: float, mirrored: bool) -> np.ndarray:
+    return Pose((0.0, 0.0), (0.0, 0.0), 1.0, angle, mirrored).linear
+
+
+def _query_grids(image, centre, size, poses, grid, span) -> np.ndarray:
+    """The query sampled for each (angle, mirrored): rows of the shape grid an example
+    would show if the query were turned to it (the inverse map of each pose)."""
+    return np.stack(
+        [_sample(image, centre, size, np.linalg.inv(_linear(a, m)), grid, span) for a, m in poses]
+    )
+
+
+def _coarse(depth, example_grids, mirrored, angle_step, grid, span):
+    """(query image, centre, size), and per example and mirror hypothesis (unmirrored
+    first) the coarse search's best distance and angle: arrays (N, hypotheses)."""
+    centre, size, normalized = _frame(np.asarray(depth, np.float64))
+    image = _smoothed(normalized, size, grid, span)
+    angles = np.arange(-90.0 + angle_step, 90.0 + 1e-9, angle_step)
+    flips = (False, True) if mirrored else (False,)
+    poses = [(a, m) for m in flips for a in angles]
+    queries = _query_grids(image, centre, size, poses, grid, span).astype(np.float64)
+    examples = np.asarray(example_grids, np.float64)
+    ssd = (
+        np.square(queries).sum(1)[:, None]
+        + np.square(examples).sum(1)[None, :]
+        - 2.0 * queries @ examples.T
+    ) / queries.shape[1]
+    ssd = ssd.reshape(len(flips), len(angles), len(examples))
+    best = np.argmin(ssd, axis=1)  # (hypotheses, N)
+    distances = np.take_along_axis(ssd, best[:, None, :], axis=1)[:, 0, :]
+    return (image, centre, size), distances.T, angles[best].T
+
+
+def pose_distances(
+    depth: np.ndarray,
+    example_grids: np.ndarray,
+    *,
+    mirrored: bool = True,
+    angle_step: float = 7.5,
+    grid: int = 48,
+    span: float = 3.5,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each example's shape distance to the query at the coarse search's best pose.
+
+    Parameters
+    ----------
+    depth : ndarray (H, W)
+        The query (background 0).
+    example_grids : ndarray (N, grid**2)
+        The examples' :func:`shape_grid`.
+    mirrored : bool
+        Try the query mirrored too.
+    angle_step : float
+        Degrees between the angles tried over (-90, 90].
+
+    Returns
+    -------
+    distances : ndarray (N,)
+        The mean squared difference per grid cell at the best candidate.
+    candidates : ndarray (N, 2)
+        Its angle (degrees) and whether it is mirrored (0 or 1).
+    """
+    _, distances, angles = _coarse(depth, example_grids, mirrored, angle_step, grid, span)
+    hypothesis = np.argmin(distances, axis=1)
+    rows = np.arange(len(distances))
+    candidates = np.stack([angles[rows, hypothesis], hypothesis.astype(np.float64)], axis=1)
+    return distances[rows, hypothesis], candidates
+
+
+def find_poses(
+    depth: np.ndarray,
+    examples: list[np.ndarray],
+    *,
+    mirrored: bool = True,
+    angle_step: float = 7.5,
+    grid: int = 48,
+    span: float = 3.5,
+    example_grids: np.ndarray | None = None,
+) -> list[Pose]:
+    """The pose of ``depth`` against each example depth: for each mirror hypothesis the
+    coarse search's best angle refined by bisection, then the better hypothesis (each
+    refined on its own: a nearly symmetric object's two hypotheses are close, and the
+    coarse angles alone chose them by chance).
+
+    Parameters
+    ----------
+    depth : ndarray (H, W)
+        The query.
+    examples : list of ndarray
+        The examples' depths.
+    mirrored, angle_step, grid, span
+        As :func:`pose_distances`.
+    example_grids : ndarray, optional
+        The examples' :func:`shape_grid` (made here if not given).
+
+    Returns
+    -------
+    list of Pose
+    """
+    if example_grids is None:
+        example_grids = np.stack([shape_grid(e, grid, span) for e in examples])
+    (image, centre, size), distances, angles = _coarse(
+        depth, example_grids, mirrored, angle_step, grid, span
+    )
+    poses = []
+    for k, (example, target) in enumerate(
+        zip(examples, np.asarray(example_grids, np.float64), strict=True)
+    ):
+        best_pose: tuple[float, float, bool] | None = None
+        for hypothesis in range(distances.shape[1]):
+            mirror = bool(hypothesis)
+
+            def cost(a: float, mirror: bool = mirror, target: Any = target) -> float:
+                query = _query_grids(image, centre, size, [(a, mirror)], grid, span)[0]
+                return float(np.mean(np.square(query - target)))
+
+            # Bisection of the angle within a step of the coarse search's best.
+            angle, value = float(angles[k, hypothesis]), float(distances[k, hypothesis])
+            step = angle_step / 2.0
+            while step > 0.25:
+                for trial in (angle - step, angle + step):
+                    trial_value = cost(trial)
+                    if trial_value < value:
+                        angle, value = trial, trial_value
+                step /= 2.0
+            if best_pose is None or value < best_pose[0]:
+                best_pose = (value, angle, mirror)
+        assert best_pose is not None
+        value, angle, mirror = best_pose
+        example_centre, example_size, _ = _frame(np.asarray(example, np.float64))
+        poses.append(
+            Pose(
+                query_centre=(float(centre[0]), float(centre[1])),
+                example_centre=(float(example_centre[0]), float(example_centre[1])),
+                scale=example_size / size,
+                angle=angle,
+                mirrored=mirror,
+                distance=value,
+            )
+        )
+    return poses
+
+
+@dataclass(frozen=True)
+class CanonicalFrame:
+    """Where the synthesis runs: a box of the first example's pixel grid that holds the
+    query moved by its pose onto that example.
+
+    Canonical pixel (i, j) is example pixel (``origin[0] + i``, ``origin[1] + j``), query
+    coordinates ``pose.inverse`` of that.
+    """
+
+    pose: Pose
+    origin: tuple[int, int]
+    shape: tuple[int, int]
+
+    def to_query(self) -> tuple[np.ndarray, np.ndarray]:
+        """Query coordinates (y, x) of every canonical pixel, (H_c, W_c) each."""
+        ys, xs = np.mgrid[0 : self.shape[0], 0 : self.shape[1]].astype(np.float64)
+        return self.pose.inverse(ys + self.origin[0], xs + self.origin[1])
+
+    def from_query(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """Canonical coordinates (y, x) of every query pixel of a frame of ``shape``."""
+        ys, xs = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+        cy, cx = self.pose.forward(ys, xs)
+        return cy - self.origin[0], cx - self.origin[1]
+
+
+def canonical_frame(mask: np.ndarray, pose: Pose, margin: float) -> CanonicalFrame:
+    """The box of the example's grid that holds the query's object moved by ``pose``,
+    with ``margin`` pixels around it (the windows' and the guides' room)."""
+    ys, xs = np.nonzero(mask)
+    corners_y = np.array([ys.min() - 1, ys.min() - 1, ys.max() + 1, ys.max() + 1], float)
+    corners_x = np.array([xs.min() - 1, xs.max() + 1, xs.min() - 1, xs.max() + 1], float)
+    cy, cx = pose.forward(corners_y, corners_x)
+    y0, x0 = int(np.floor(cy.min() - margin)), int(np.floor(cx.min() - margin))
+    y1, x1 = int(np.ceil(cy.max() + margin)) + 1, int(np.ceil(cx.max() + margin)) + 1
+    return CanonicalFrame(pose=pose, origin=(y0, x0), shape=(y1 - y0, x1 - x0))
+
+
+def resample_depth(depth: np.ndarray, frame: CanonicalFrame) -> np.ndarray:
+    """The query's depth on the canonical grid: interpolated inside its object (the
+    background continued from it first, so the outline is not averaged with 0), 0 outside.
+    """
+    mask = depth > 0
+    _, (iy, ix) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    filled = depth[iy, ix].astype(np.float32)
+    qy, qx = frame.to_query()
+    values = ndimage.map_coordinates(filled, [qy, qx], order=1, mode="nearest")
+    inside = ndimage.map_coordinates(mask.astype(np.float32), [qy, qx], order=1, cval=0.0)
+    return np.where(inside > 0.5, values, 0.0).astype(np.float32)
+
+
+def mirrored_example(example: Any) -> Any:
+    """``example`` mirrored left-right (its columns reversed: exact, nothing resampled),
+    under its own name."""
+    from imagemap.example import Example  # deferred: the examples' module reads files
+
+    labels = example.labels
+    return Example.from_arrays(
+        example.name,
+        np.ascontiguousarray(example.depth[:, ::-1]),
+        np.ascontiguousarray(example.image[:, ::-1]),
+        None if labels is None else np.ascontiguousarray(labels[:, ::-1]),
+    )
+
+
+#: Rows of the query's frame brought back at a time (bounded temporaries at 4096^2).
+_ROWS = 512
+
+
+def unpose(
+    frame: CanonicalFrame,
+    query_mask: np.ndarray,
+    ycbcr: np.ndarray,
+    source: np.ndarray,
+    exemplars: list[np.ndarray] | None,
+    canonical_mask: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The finished canonical map, and its source map, in the query's frame.
+
+    Where the query is at least as large as the canonical frame (``pose.scale`` <= 1)
+    and the map is a copy (``exemplars`` given), every query pixel is copied from its
+    example through the canonical source map at its sub-pixel place, plus the blend's
+    smooth correction there: as crisp as a copy at the query's own size (the same way
+    :func:`imagemap.mesh.uvspace.fine_texture` makes a texture finer than its
+    synthesis). Otherwise the map is resampled, low-passed first where it shrinks.
+
+    Returns
+    -------
+    ycbcr : ndarray (H, W, 3) float32
+    source : ndarray (H, W, 3) int32
+        Example index, y, x in the example's own pixels (as the canonical synthesis used
+        it: a mirrored example's columns are still reversed).
+    """
+    from imagemap.core.blend import copy_through  # deferred: start-up (numba kernels)
+
+    height, width = query_mask.shape
+    ch, cw = ycbcr.shape[:2]
+    scale = frame.pose.scale
+    copied = exemplars if exemplars is not None and scale <= 1.0 else None
+    if copied is not None:
+        correction = ycbcr - copy_through(copied, source).astype(np.float32)
+        smooth = correction
+    else:
+        # A shrinking map is low-passed first (the canonical pixels a query pixel covers).
+        sigma = 0.5 * float(np.sqrt(max(scale * scale - 1.0, 0.0)))
+        smooth = ndimage.gaussian_filter(ycbcr, (sigma, sigma, 0)) if sigma > 0 else ycbcr
+    out = np.zeros((height, width, 3), np.float32)
+    out_source = np.zeros((height, width, 3), np.int32)
+    for y0 in range(0, height, _ROWS):
+        ys, xs = np.mgrid[y0 : min(height, y0 + _ROWS), 0:width].astype(np.float64)
+        cy, cx = frame.pose.forward(ys, xs)
+        cy, cx = cy - frame.origin[0], cx - frame.origin[1]
+        iy = np.clip(np.rint(cy), 0, ch - 1).astype(np.int64)
+        ix = np.clip(np.rint(cx), 0, cw - 1).astype(np.int64)
+        block_source = source[iy, ix]
+        at = [np.clip(cy, 0, ch - 1), np.clip(cx, 0, cw - 1)]
+        block = np.stack(
+            [ndimage.map_coordinates(smooth[..., c], at, order=1) for c in range(3)], axis=-1
+        )
+        fy, fx = cy - iy, cx - ix
+        if copied is not None:
+            for index, exemplar in enumerate(copied):
+                mine = block_source[..., 0] == index
+                if not mine.any():
+                    continue
+                sy = block_source[..., 1][mine] + fy[mine]
+                sx = block_source[..., 2][mine] + fx[mine]
+                h, w = exemplar.shape[:2]
+                place = [np.clip(sy, 0, h - 1), np.clip(sx, 0, w - 1)]
+                block[mine] += np.stack(
+                    [ndimage.map_coordinates(exemplar[..., c], place, order=1) for c in range(3)],
+                    axis=-1,
+                )
+        rows = slice(y0, y0 + ys.shape[0])
+        out[rows] = block
+        out_source[rows] = block_source
+        # The source's pixel at the sub-pixel place (within its example).
+        for index, exemplar in enumerate(exemplars or []):
+            mine = block_source[..., 0] == index
+            h, w = exemplar.shape[:2]
+            out_source[rows][..., 1][mine] = np.clip(
+                np.rint(block_source[..., 1][mine] + fy[mine]), 0, h - 1
+            )
+            out_source[rows][..., 2][mine] = np.clip(
+                np.rint(block_source[..., 2][mine] + fx[mine]), 0, w - 1
+            )
+    out[~query_mask] = 0.0
+    return out, out_source
+
+
+def unpose_nearest(frame: CanonicalFrame, shape: tuple[int, int], values: np.ndarray):
+    """A canonical per-pixel array (a cost map) in the query's frame: each query pixel
+    takes its nearest canonical pixel's value (NaN outside the canonical frame)."""
+    cy, cx = frame.from_query(shape)
+    iy, ix = np.rint(cy).astype(np.int64), np.rint(cx).astype(np.int64)
+    inside = (iy >= 0) & (iy < values.shape[0]) & (ix >= 0) & (ix < values.shape[1])
+    out = np.full(shape, np.nan, dtype=np.float32)
+    out[inside] = values[iy[inside], ix[inside]]
+    return out
