@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
-from skimage import color, io as skio
+from skimage import color
+from skimage import io as skio
 from skimage.transform import AffineTransform, warp
 
 #: The poses: name -> (rotation degrees counter-clockwise, scale, shift (x, y) as a
