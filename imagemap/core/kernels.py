@@ -116,26 +116,49 @@ def _random_below(seed, a, b, c, n):
 
 
 @njit(cache=True, nogil=True)
-def _sq_dist(a, b, ndims):
+def _sq_dist_scaled(a, b, ndims, position_dim, position_scale):
+    """Squared distance over the first ``ndims`` feature columns (float32 or quantized
+    int16), the two position columns from ``position_dim`` times ``position_scale`` (a
+    query pixel's own factor on the position term)."""
     s = np.float32(0.0)
     for i in range(ndims):
-        d = np.float32(a[i]) - np.float32(b[i])  # float32 or quantized (int16) features
-        s += d * d
+        d = np.float32(a[i]) - np.float32(b[i])
+        dd = d * d
+        if i == position_dim or i == position_dim + 1:
+            dd *= position_scale
+        s += dd
     return s
 
 
 @njit(cache=True, nogil=True)
-def _feature_distances(query_features, candidate_features, matches, ndims, out, start, stop):
+def _feature_distances(
+    query_features, candidate_features, matches, ndims, out, start, stop, position_dim, scales
+):
     for m in range(start, stop):
-        out[m] = _sq_dist(query_features[m], candidate_features[matches[m]], ndims)
+        out[m] = _sq_dist_scaled(
+            query_features[m], candidate_features[matches[m]], ndims, position_dim, scales[m]
+        )
 
 
-def feature_distances(query_features, candidate_features, matches, ndims):
-    """Squared distance over the first ``ndims`` feature columns for each (m, matches[m])."""
+def feature_distances(
+    query_features, candidate_features, matches, ndims, position_dim=-2, position_scales=None
+):
+    """Squared distance over the first ``ndims`` feature columns for each (m, matches[m]);
+    the position columns (``position_dim`` and the next) times ``position_scales[m]``."""
     out = np.empty(matches.shape[0], dtype=np.float32)
+    if position_scales is None:
+        position_scales = np.ones(matches.shape[0], dtype=np.float32)
     _run(
         lambda a, b: _feature_distances(
-            query_features, candidate_features, matches, ndims, out, a, b
+            query_features,
+            candidate_features,
+            matches,
+            ndims,
+            out,
+            a,
+            b,
+            position_dim,
+            position_scales,
         ),
         matches.shape[0],
         4096,
@@ -163,6 +186,8 @@ def _patchmatch_band(
     n_passes,
     stride,
     seed,
+    position_dim,
+    position_scales,
 ):
     """PatchMatch of one band of query centres (see :func:`patchmatch`)."""
     n_candidates = candidate_features.shape[0]
@@ -184,6 +209,7 @@ def _patchmatch_band(
             best = matches[m]
             best_d = distances[m]
             qf = query_features[m]
+            scale = position_scales[m]
             # Propagation: the neighbour already visited in this pass, shifted.
             for axis in range(2):
                 ny = y - step if axis == 0 else y
@@ -202,7 +228,7 @@ def _patchmatch_band(
                 cc = exemplar_lookup[e, cy, cx]
                 if cc < 0 or cc == best:
                     continue
-                d = _sq_dist(qf, candidate_features[cc], ndims)
+                d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
                 if d < best_d:
                     best = cc
                     best_d = d
@@ -218,7 +244,7 @@ def _patchmatch_band(
                 cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
                 cc = exemplar_lookup[e, cy, cx]
                 if cc >= 0 and cc != best:
-                    d = _sq_dist(qf, candidate_features[cc], ndims)
+                    d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
                     if d < best_d:
                         best = cc
                         best_d = d
@@ -226,7 +252,7 @@ def _patchmatch_band(
                 trial += 1
             # One jump anywhere: lets a pixel leave a poor exemplar.
             cc = _random_below(seed, m, p, 1000003, n_candidates)
-            d = _sq_dist(qf, candidate_features[cc], ndims)
+            d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
             if d < best_d:
                 best = cc
                 best_d = d
@@ -252,6 +278,8 @@ def patchmatch(
     n_passes,
     stride,
     seed,
+    position_dim=-2,
+    position_scales=None,
 ):
     """PatchMatch over the candidates of several exemplars, in place on matches/distances.
 
@@ -259,8 +287,12 @@ def patchmatch(
     passes): propagation from the previous neighbour in x and y (shifted by one
     stride), random search around the current match with halving radius, and one
     uniformly random candidate (a jump to any exemplar). Bands are independent
-    (propagation does not cross their borders): one thread each.
+    (propagation does not cross their borders): one thread each. ``position_scales``
+    (one per query centre; default 1) multiply the position columns (``position_dim``
+    and the next) of the distances.
     """
+    if position_scales is None:
+        position_scales = np.ones(matches.shape[0], dtype=np.float32)
 
     def band(b):
         _patchmatch_band(
@@ -282,6 +314,8 @@ def patchmatch(
             n_passes,
             stride,
             seed,
+            position_dim,
+            position_scales,
         )
 
     _run_each(band, list(range(band_starts.shape[0] - 1)))
@@ -308,6 +342,7 @@ def _window_costs(
     cand_position,
     position_weight2,
     cand_bias,
+    position_scales,
 ):
     """Window distances of query centres [start, stop) (see :func:`window_costs`)."""
     k = window_weights.shape[0]
@@ -335,7 +370,7 @@ def _window_costs(
                 s += w * acc
         dy = query_position[m, 0] - cand_position[c, 0]
         dx = query_position[m, 1] - cand_position[c, 1]
-        s += position_weight2 * (dy * dy + dx * dx) + cand_bias[c]
+        s += position_weight2 * position_scales[m] * (dy * dy + dx * dx) + cand_bias[c]
         out[m] = s
 
 
@@ -356,6 +391,7 @@ def window_costs(
     cand_position,
     position_weight2,
     cand_bias,
+    position_scales=None,
 ):
     """Exact weighted window distance for each query centre and its match.
 
@@ -366,9 +402,12 @@ def window_costs(
     bands unweighted, of which ``appearance_channels`` (Ca,) are matched with the
     weights ``appearance_scale`` (Ca,), applied here (one copy of the bands);
     ``window_weights`` (k, k) is the Gaussian window, summing to one;
-    ``cand_bias`` (N,) an additive cost per candidate (exemplar preference).
+    ``cand_bias`` (N,) an additive cost per candidate (exemplar preference);
+    ``position_scales`` (M,) a factor per query centre on the position term (default 1).
     """
     out = np.empty(matches.shape[0], dtype=np.float32)
+    if position_scales is None:
+        position_scales = np.ones(matches.shape[0], dtype=np.float32)
     _run(
         lambda a, b: _window_costs(
             a,
@@ -390,6 +429,7 @@ def window_costs(
             cand_position,
             position_weight2,
             cand_bias,
+            position_scales,
         ),
         matches.shape[0],
         1024,

@@ -28,12 +28,17 @@ class Mapping:
         in units of the mask's RMS radius (Hassner & Basri's relative position). A
         front end that has registered its exemplars onto the query gives each
         exemplar pixel the query position it corresponds to.
+    position_scale : ndarray, shape (H, W), optional
+        The query's own factor (>= 0) per pixel on the position term's weight: less
+        where the front end trusts the position less (None: 1 everywhere). Exemplars
+        have none.
     """
 
     guide: np.ndarray
     appearance: np.ndarray | None = None
     mask: np.ndarray | None = None
     position: np.ndarray | None = None
+    position_scale: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         guide = np.asarray(self.guide, dtype=np.float32)
@@ -67,6 +72,15 @@ class Mapping:
             if not np.all(np.isfinite(position)):
                 raise ValueError("position has NaN or infinite values")
             object.__setattr__(self, "position", position)
+        if self.position_scale is not None:
+            scale = np.asarray(self.position_scale, dtype=np.float32)
+            if scale.shape != guide.shape[:2]:
+                raise ValueError(
+                    f"position_scale must be (H, W) of the guide's size, got {scale.shape}"
+                )
+            if not np.all(np.isfinite(scale)) or np.any(scale < 0):
+                raise ValueError("position_scale must be finite and not negative")
+            object.__setattr__(self, "position_scale", scale)
 
     @property
     def shape(self) -> tuple[int, int]:

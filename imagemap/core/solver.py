@@ -468,6 +468,13 @@ class LevelSolver:
         self.query_y, self.query_x = (a.astype(np.int32) for a in np.nonzero(centres))
         self.query_lookup = np.full((h, w), -1, dtype=np.int32)
         self.query_lookup[self.query_y, self.query_x] = np.arange(len(self.query_y))
+        # The position term's factor per query centre (Mapping.position_scale), squared as
+        # the term is; 1 where the front end gives none.
+        if query.position_scale is not None:
+            scale = query.position_scale[self.query_y, self.query_x].astype(np.float32)
+            self.query_position_scale2 = scale * scale
+        else:
+            self.query_position_scale2 = np.ones(len(self.query_y), dtype=np.float32)
         if query.position is not None:
             self.query_position = query.position[self.query_y, self.query_x]
         else:
@@ -546,6 +553,7 @@ class LevelSolver:
         start = time.perf_counter()
         index = (self.cand_e, self.band_y, self.band_x)
         # [guide PCA | position (2) | exemplar cost (1) | appearance PCA]
+        self.position_dim = self.guide_projection.n_components
         self.n_init_dims = self.guide_projection.n_components + 3
         self.candidate_features = self._features(
             self.exemplar_windows, index, self.cand_position, np.sqrt(self.cand_bias)
@@ -667,11 +675,12 @@ class LevelSolver:
         start = time.perf_counter()
         if subset is None:
             centres_y, centres_x = self.query_band_y, self.query_band_x
-            positions = self.query_position
+            positions, scales = self.query_position, self.query_position_scale2
         else:
             matches = matches[subset]
             centres_y, centres_x = self.query_band_y[subset], self.query_band_x[subset]
             positions = self.query_position[subset]
+            scales = self.query_position_scale2[subset]
         out = _kernels.window_costs(
             self.query_active,
             self.exemplar_guide,
@@ -689,6 +698,7 @@ class LevelSolver:
             self.cand_position,
             np.float32(self.params.position_weight**2),
             self.cand_bias,
+            scales,
         )
         self.timer.add("costs", start)
         return out
@@ -744,7 +754,12 @@ class LevelSolver:
                     passes *= 2
             new = np.ascontiguousarray(matches, dtype=np.int64).copy()
             distances = _kernels.feature_distances(
-                self.query_features, self.candidate_features, new, ndims
+                self.query_features,
+                self.candidate_features,
+                new,
+                ndims,
+                self.position_dim,
+                self.query_position_scale2,
             )
             _kernels.patchmatch(
                 self.query_features,
@@ -764,6 +779,8 @@ class LevelSolver:
                 passes,
                 self.params.stride,
                 seed,
+                self.position_dim,
+                self.query_position_scale2,
             )
             self.timer.add("search", start)
             return new
@@ -822,9 +839,12 @@ class LevelSolver:
         guided = self.search(matches, init=True, seed=seed, rng=rng, free=free)
         n = self.n_init_dims - (1 if free else 0)
         matches = np.ascontiguousarray(matches, dtype=np.int64)
-        fit = _kernels.feature_distances(self.query_features, self.candidate_features, matches, n)
+        scales = self.position_dim, self.query_position_scale2
+        fit = _kernels.feature_distances(
+            self.query_features, self.candidate_features, matches, n, *scales
+        )
         fit_guided = _kernels.feature_distances(
-            self.query_features, self.candidate_features, guided, n
+            self.query_features, self.candidate_features, guided, n, *scales
         )
         take = (fit > np.quantile(fit, 1.0 - worst)) & (fit_guided < ratio * fit)
         if keep_detail:

@@ -239,6 +239,14 @@ class Guides:
     #: weight grows with its size, so that a pixel of drift from the warp costs the same
     #: at any resolution (4x fish: 1,488 fragments without, about 50 with).
     registered_reference_size: float = setting(100.0, minimum=0.0)
+    #: Where none of the registered examples' relief agrees with the query's (after the
+    #: relief's flow: a groove, ridge or bump that lies elsewhere or nowhere in them),
+    #: the registered position gives way to the paper's relative position
+    #: (``position_weight``), and the windows follow the query's own relief: agreement
+    #: 1 / (1 + D / this), D the squared difference of the units-free relief details (in
+    #: (-1, 1)) averaged over ``relief_detail_scale`` of the object
+    #: (:func:`imagemap.depth.register.position_scales`; 0: off).
+    relief_disagreement: float = setting(0.05, minimum=0.0)
     #: Factor on the registered position weight at the feature level, where the final
     #: reseed draws the small features by their relief, and at the finer levels of a large
     #: map, which must keep them: the warp places an eye or lips within a few pixels only
@@ -329,6 +337,11 @@ class Finish:
     #: own size (the square root of its area): a move's cost grows with its reach. On a
     #: 2048x1536 fish 1 / 2 / 3 left 74 / 35 / 31 fragments in 5.2 / 7.7 / 9.8 s.
     seam_spread: float = setting(2.0, minimum=0.0)
+    #: The relief's detail (units-free, in (-1, 1)) as one more channel, times this, of
+    #: the colours the seams' graph cut compares: whole copies whose relief fits the
+    #: query's win, and seams avoid crossing relief (a copy's groove lands on the query's
+    #: groove, not beside it; 0: colours only).
+    seam_relief_weight: float = setting(1.0, minimum=0.0)
     #: Copy whole every small feature of an example (eye, lips, brow) that the copy cut:
     #: busts with every feature 92 -> 100 % (4x: 67 -> 83 %).
     complete_features: bool = setting(True, kind="bool")

@@ -93,6 +93,9 @@ class SynthesisState:
     exemplars: list[np.ndarray] | None = None  # the examples' colours the copy reads
     source: np.ndarray | None = None  # (H, W, 3): example, y, x of every pixel
     features: list[tuple[np.ndarray, int]] | None = None  # the examples' small features
+    # The relief's detail of the query and of each example (a front end with depth sets
+    # it): the seams then fall where the copies agree in colour and in relief.
+    relief: tuple[np.ndarray, list[np.ndarray]] | None = None
     image: np.ndarray | None = None
     changed: str = ""  # what the last stage changed, for the record
 
@@ -166,17 +169,28 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
     kept = completion.copies_features(old, example_features(state, config)) | (shown > 0)
     del shown
     size = float(np.sqrt(state.mask.sum()))
+    reference = state.made("ycbcr")
+    weight = config.finish.seam_relief_weight
+    if state.relief is not None and weight > 0:
+        # The relief as one more channel of the copies and of the reference: a copy whose
+        # relief disagrees with the query's costs, and so does a seam across relief.
+        query_relief, example_reliefs = state.relief
+        exemplars = [
+            np.concatenate([colours, weight * relief[..., None]], axis=-1)
+            for colours, relief in zip(exemplars, example_reliefs, strict=True)
+        ]
+        reference = np.concatenate([reference, weight * query_relief[..., None]], axis=-1)
     new = place_seams(
         exemplars,
         old,
-        state.made("ycbcr"),
+        reference,
         smoothness=config.finish.seam_smoothness * size / 100.0,
         spread=config.finish.seam_spread,
         mask=state.mask,
         exemplar_masks=[example.mask for example in state.chosen],
         groups=ndimage.label(kept & state.mask)[0],
     )
-    state.source = new
+    state.source, state.relief = new, None  # the relief: not held through the blend
     state.changed = f"{changed_pixels(old, new)} pixels take another source"
     return state
 

@@ -375,16 +375,24 @@ def depth_mappings(
     levels: int = 3,
     guides: Guides = _GUIDES,
     positions: list[np.ndarray] | None = None,
+    position_scales: list[np.ndarray] | None = None,
 ) -> list[Mapping]:
     """The query's pyramid of mappings (guide bands and mask) for a depth map;
-    ``positions`` (per level, (H_l, W_l, 2)) replace the engine's relative position."""
+    ``positions`` (per level, (H_l, W_l, 2)) replace the engine's relative position,
+    ``position_scales`` (per level, (H_l, W_l)) are the position term's factors."""
     depth = validate_depth(depth)
     masks = mask_pyramid(depth > 0, levels)
     level_positions: list[np.ndarray | None] = list(positions) if positions else [None] * levels
+    scales: list[np.ndarray | None] = list(position_scales) if position_scales else [None] * levels
     return [
-        Mapping(guide=guide, mask=mask if mask.any() else None, position=position)
-        for guide, mask, position in zip(
-            _depth_guides(depth, masks, guides), masks, level_positions, strict=True
+        Mapping(
+            guide=guide,
+            mask=mask if mask.any() else None,
+            position=position,
+            position_scale=scale,
+        )
+        for guide, mask, position, scale in zip(
+            _depth_guides(depth, masks, guides), masks, level_positions, scales, strict=True
         )
     ]
 

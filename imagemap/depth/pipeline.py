@@ -82,15 +82,21 @@ from imagemap.depth.guides import (
 from imagemap.depth.pose import (
     CanonicalFrame,
     Pose,
+    PosedExample,
     canonical_frame,
-    mirrored_example,
     resample_depth,
     unpose,
     unpose_nearest,
 )
-from imagemap.depth.register import Warp, register, registered_positions
+from imagemap.depth.register import (
+    Warp,
+    position_scales,
+    register,
+    registered_positions,
+    relief_detail,
+)
 from imagemap.depth.selection import poses_against, select_examples, select_with_poses
-from imagemap.depth.units import depth_scale, exclude_query, scale_of
+from imagemap.depth.units import exclude_query, units_free
 from imagemap.io import InputError, validate_depth
 from imagemap.validate import check_examples, check_seed
 
@@ -175,11 +181,11 @@ def _pose(state: State, config: DepthConfig) -> State:
     # Room around the object for the coarsest level's windows (about a third of the
     # object wide: Pyramid.add_windows_across) and the depth continued past the outline.
     margin = size / (2.0 * config.pyramid.add_windows_across) + 2 * config.guides.extension_sigma
-    frame = canonical_frame(state.mask, first, margin)
-    depth = resample_depth(state.query_depth, frame)
-    # Depth units never count: always the chosen examples' median depth scale.
-    factor = float(np.median([scale_of(e) for e in state.chosen])) / depth_scale(depth)
-    state.depth = (depth.astype(np.float64) * factor).astype(np.float32)
+    levels = sized_config(config, state.chosen[0].mask).pyramid.levels
+    frame = canonical_frame(state.mask, first, margin, align=2 ** (levels - 1))
+    # Depth units never count: the query and every example divided by their own median
+    # depth (units_free), the same values whatever the unit.
+    state.depth = resample_depth(units_free(state.query_depth), frame)
     state.mask = state.depth > 0
     state.frame = frame
     state.mirrored = [pose.mirrored != first.mirrored for pose in state.poses]
@@ -188,13 +194,13 @@ def _pose(state: State, config: DepthConfig) -> State:
         for pose, flip in zip(state.poses, state.mirrored, strict=True)
     ]
     state.chosen = [
-        mirrored_example(e) if flip else e
+        PosedExample.of(e, mirrored=flip)
         for e, flip in zip(state.chosen, state.mirrored, strict=True)
     ]
     state.changed = (
         f"turned {first.angle:.1f} deg, scaled x{first.scale:.3f}"
-        f"{', mirrored' if first.mirrored else ''}; depth x{factor:.4g}; "
-        f"{sum(state.mirrored)} examples used mirrored"
+        f"{', mirrored' if first.mirrored else ''}; {sum(state.mirrored)} examples used "
+        "mirrored"
     )
     return state
 
@@ -221,10 +227,28 @@ def _bands(state: State, config: DepthConfig) -> State:
             grid_points=config.registration.position_grid,
         )
         example_positions = list(registered)
+    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
+    scales = position_scales(
+        state.mask,
+        state.warps,
+        [
+            plan.position_weight if plan.position_weight is not None else params.position_weight
+            for plan in params.level_plans(levels)
+        ],
+        config.guides.position_weight,
+        config.guides.relief_disagreement,
+        config.registration.relief_detail_scale,
+    )
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
-        depth_mappings(state.depth, levels, config.guides, query_positions)
+        depth_mappings(state.depth, levels, config.guides, query_positions, scales)
     )
+    if config.finish.seam_relief_weight > 0:
+        scale = config.registration.relief_detail_scale
+        state.relief = (
+            relief_detail(state.depth, state.mask, scale),
+            [relief_detail(e.depth, e.mask, scale) for e in state.chosen],
+        )
     state.exemplar_levels = [
         ReleasableLevels(
             example_mappings(
@@ -304,7 +328,6 @@ def _unpose(state: State, config: DepthConfig) -> State:
         state.made("ycbcr"),
         state.made("source"),
         state.exemplars,
-        canonical_mask=state.mask,
     )
     for index, (example, flip) in enumerate(zip(state.chosen, state.mirrored, strict=True)):
         if flip:  # a mirrored example's column x is its own column width - 1 - x

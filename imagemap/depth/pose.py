@@ -308,14 +308,17 @@ class CanonicalFrame:
         return cy - self.origin[0], cx - self.origin[1]
 
 
-def canonical_frame(mask: np.ndarray, pose: Pose, margin: float) -> CanonicalFrame:
+def canonical_frame(mask: np.ndarray, pose: Pose, margin: float, align: int = 1) -> CanonicalFrame:
     """The box of the example's grid that holds the query's object moved by ``pose``,
-    with ``margin`` pixels around it (the windows' and the guides' room)."""
+    with ``margin`` pixels around it (the windows' and the guides' room), its origin on a
+    multiple of ``align`` pixels: the pyramids' coarser levels of the frame and of the
+    example then sample the same points (pixel 2i of a level is pixel i of the next)."""
     ys, xs = np.nonzero(mask)
     corners_y = np.array([ys.min() - 1, ys.min() - 1, ys.max() + 1, ys.max() + 1], float)
     corners_x = np.array([xs.min() - 1, xs.max() + 1, xs.min() - 1, xs.max() + 1], float)
     cy, cx = pose.forward(corners_y, corners_x)
-    y0, x0 = int(np.floor(cy.min() - margin)), int(np.floor(cx.min() - margin))
+    y0 = int(np.floor((cy.min() - margin) / align)) * align
+    x0 = int(np.floor((cx.min() - margin) / align)) * align
     y1, x1 = int(np.ceil(cy.max() + margin)) + 1, int(np.ceil(cx.max() + margin)) + 1
     return CanonicalFrame(pose=pose, origin=(y0, x0), shape=(y1 - y0, x1 - x0))
 
@@ -333,20 +336,62 @@ def resample_depth(depth: np.ndarray, frame: CanonicalFrame) -> np.ndarray:
     return np.where(inside > 0.5, values, 0.0).astype(np.float32)
 
 
-def mirrored_example(example: Any) -> Any:
-    """``example`` mirrored left-right (its columns reversed: exact, nothing resampled),
-    under its own name."""
-    from imagemap.example import Example  # deferred: the examples' module reads files
+@dataclass
+class PosedExample:
+    """An example as the synthesis in the canonical frame uses it: its depth units-free
+    (:func:`~imagemap.depth.units.units_free`), mirrored left-right when ``mirrored`` (its
+    columns reversed: exact, nothing resampled). Its image and labels are read from the
+    example when asked and mirrored the same way, not held (a full-size image per
+    example less through the synthesis, as :func:`imagemap.depth.guides.example_ycbcr`
+    keeps it)."""
 
-    labels = example.labels
-    return Example.from_arrays(
-        example.name,
-        np.ascontiguousarray(example.depth[:, ::-1]),
-        np.ascontiguousarray(example.image[:, ::-1]),
-        None if labels is None else np.ascontiguousarray(labels[:, ::-1]),
-    )
+    example: Any
+    depth: np.ndarray
+    mirrored: bool = False
+
+    @classmethod
+    def of(cls, example: Any, mirrored: bool = False) -> PosedExample:
+        from imagemap.depth.units import units_free  # deferred: units imports nothing here
+
+        return cls(example, _arranged(units_free(example.depth), mirrored), mirrored)
+
+    @property
+    def name(self) -> str:
+        return self.example.name
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.depth > 0
+
+    @property
+    def image(self) -> np.ndarray:
+        return _arranged(_read_uncached(self.example, "image"), self.mirrored)
+
+    @property
+    def labels(self) -> np.ndarray | None:
+        return _arranged(self.example.labels, self.mirrored)
 
 
+def _arranged(array, mirrored: bool):
+    return None if array is None else np.ascontiguousarray(array[:, ::-1] if mirrored else array)
+
+
+def _read_uncached(example: Any, name: str) -> Any:
+    """``example.<name>`` without leaving it cached on the example if it was not."""
+    cache = getattr(example, "__dict__", {})
+    cached = name in cache
+    value = getattr(example, name)
+    if not cached and name in cache:
+        del cache[name]
+    return value
+
+
+#: Brought back to the query's frame, the map's nearest pixel is taken while the query's
+#: pixels and the canonical frame's differ in size by at most this factor: crisp, as the
+#: map (a pixel now and then taken twice or skipped). A query larger still is
+#: interpolated (twice the example's size would show 2 x 2 blocks); a smaller one
+#: low-passed first (skipped pixels would alias).
+COPY_RANGE = 1.5
 #: Rows of the query's frame brought back at a time (bounded temporaries at 4096^2).
 _ROWS = 512
 
@@ -357,16 +402,18 @@ def unpose(
     ycbcr: np.ndarray,
     source: np.ndarray,
     exemplars: list[np.ndarray] | None,
-    canonical_mask: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The finished canonical map, and its source map, in the query's frame.
 
-    Where the query is at least as large as the canonical frame (``pose.scale`` <= 1)
-    and the map is a copy (``exemplars`` given), every query pixel is copied from its
-    example through the canonical source map at its sub-pixel place, plus the blend's
-    smooth correction there: as crisp as a copy at the query's own size (the same way
+    While the query's pixels and the canonical frame's differ in size by at most
+    :data:`COPY_RANGE`, every query pixel takes its nearest canonical pixel, colour and
+    source: the map's own pixels, as crisp as it (a pixel now and then taken twice or
+    skipped). A query larger still is, where the map is a copy (``exemplars`` given),
+    copied from its examples through the canonical source map at its sub-pixel places
+    (interpolated) plus the blend's correction there (as
     :func:`imagemap.mesh.uvspace.fine_texture` makes a texture finer than its
-    synthesis). Otherwise the map is resampled, low-passed first where it shrinks.
+    synthesis), else the map interpolated; a smaller one is the map low-passed (over the
+    canonical pixels a query pixel covers) and interpolated.
 
     Returns
     -------
@@ -380,14 +427,15 @@ def unpose(
     height, width = query_mask.shape
     ch, cw = ycbcr.shape[:2]
     scale = frame.pose.scale
-    copied = exemplars if exemplars is not None and scale <= 1.0 else None
+    nearest = 1.0 / COPY_RANGE <= scale <= COPY_RANGE
+    copied = exemplars if exemplars is not None and scale < 1.0 / COPY_RANGE else None
     if copied is not None:
-        correction = ycbcr - copy_through(copied, source).astype(np.float32)
-        smooth = correction
+        colours = ycbcr - copy_through(copied, source).astype(np.float32)  # the correction
+    elif scale > COPY_RANGE:
+        sigma = 0.5 * float(np.sqrt(scale * scale - 1.0))
+        colours = ndimage.gaussian_filter(ycbcr, (sigma, sigma, 0))
     else:
-        # A shrinking map is low-passed first (the canonical pixels a query pixel covers).
-        sigma = 0.5 * float(np.sqrt(max(scale * scale - 1.0, 0.0)))
-        smooth = ndimage.gaussian_filter(ycbcr, (sigma, sigma, 0)) if sigma > 0 else ycbcr
+        colours = ycbcr
     out = np.zeros((height, width, 3), np.float32)
     out_source = np.zeros((height, width, 3), np.int32)
     for y0 in range(0, height, _ROWS):
@@ -397,37 +445,30 @@ def unpose(
         iy = np.clip(np.rint(cy), 0, ch - 1).astype(np.int64)
         ix = np.clip(np.rint(cx), 0, cw - 1).astype(np.int64)
         block_source = source[iy, ix]
+        rows = slice(y0, y0 + ys.shape[0])
+        out_source[rows] = block_source
+        if nearest:
+            out[rows] = colours[iy, ix]
+            continue
         at = [np.clip(cy, 0, ch - 1), np.clip(cx, 0, cw - 1)]
         block = np.stack(
-            [ndimage.map_coordinates(smooth[..., c], at, order=1) for c in range(3)], axis=-1
+            [ndimage.map_coordinates(colours[..., c], at, order=1) for c in range(3)], axis=-1
         )
-        fy, fx = cy - iy, cx - ix
-        if copied is not None:
-            for index, exemplar in enumerate(copied):
-                mine = block_source[..., 0] == index
-                if not mine.any():
-                    continue
-                sy = block_source[..., 1][mine] + fy[mine]
-                sx = block_source[..., 2][mine] + fx[mine]
-                h, w = exemplar.shape[:2]
-                place = [np.clip(sy, 0, h - 1), np.clip(sx, 0, w - 1)]
-                block[mine] += np.stack(
-                    [ndimage.map_coordinates(exemplar[..., c], place, order=1) for c in range(3)],
-                    axis=-1,
-                )
-        rows = slice(y0, y0 + ys.shape[0])
-        out[rows] = block
-        out_source[rows] = block_source
-        # The source's pixel at the sub-pixel place (within its example).
-        for index, exemplar in enumerate(exemplars or []):
+        for index, exemplar in enumerate(copied or []):
             mine = block_source[..., 0] == index
+            if not mine.any():
+                continue
             h, w = exemplar.shape[:2]
-            out_source[rows][..., 1][mine] = np.clip(
-                np.rint(block_source[..., 1][mine] + fy[mine]), 0, h - 1
+            sy = np.clip(block_source[..., 1][mine] + (cy - iy)[mine], 0, h - 1)
+            sx = np.clip(block_source[..., 2][mine] + (cx - ix)[mine], 0, w - 1)
+            block[mine] += np.stack(
+                [ndimage.map_coordinates(exemplar[..., c], [sy, sx], order=1) for c in range(3)],
+                axis=-1,
             )
-            out_source[rows][..., 2][mine] = np.clip(
-                np.rint(block_source[..., 2][mine] + fx[mine]), 0, w - 1
-            )
+            # The source: the example's pixel at the sub-pixel place.
+            out_source[rows][..., 1][mine] = np.rint(sy)
+            out_source[rows][..., 2][mine] = np.rint(sx)
+        out[rows] = block
     out[~query_mask] = 0.0
     return out, out_source
 

@@ -40,7 +40,14 @@ from threadpoolctl import threadpool_limits
 
 from imagemap.depth.config import Registration
 
-__all__ = ["Warp", "register", "registered_positions", "registration_guide", "relief_detail"]
+__all__ = [
+    "Warp",
+    "position_scales",
+    "register",
+    "registered_positions",
+    "registration_guide",
+    "relief_detail",
+]
 
 #: The defaults of every setting of the fit (a :class:`DepthConfig`'s ``registration``).
 _REGISTRATION = Registration()
@@ -144,6 +151,10 @@ class Warp:
         where the query's own relief (a groove, a bump) lies against the example's once
         the smooth warp has brought them together.
     flow_step : float
+    relief_residual : ndarray (h, w), optional
+        On the flow's grid: the squared difference between the query's relief detail
+        and the example's carried onto it by the whole warp (:func:`relief_detail`, in
+        (-1, 1)): where the example's relief still disagrees with the query's.
     """
 
     query_centre: np.ndarray
@@ -154,6 +165,7 @@ class Warp:
     n: int
     flow: np.ndarray | None = None
     flow_step: float = 1.0
+    relief_residual: np.ndarray | None = None
 
     def displacement(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The B-spline displacement (query pixels) at query coordinates."""
@@ -410,7 +422,9 @@ def _with_relief_flow(
         query_detail, moving, attachment=registration.flow_attachment
     )
     flow = np.stack([flow_y, flow_x]).astype(np.float32) * step
-    return replace(warp, flow=flow, flow_step=float(step))
+    landed = ndimage.map_coordinates(moving, [gy + flow_y, gx + flow_x], order=1, mode="nearest")
+    residual = np.square(query_detail - landed).astype(np.float32)
+    return replace(warp, flow=flow, flow_step=float(step), relief_residual=residual)
 
 
 def _block_average(depth: np.ndarray, mask: np.ndarray, block: int) -> tuple:
@@ -490,3 +504,49 @@ def registered_positions(
             per_level.append(np.stack(sampled, axis=-1).astype(np.float32))
         example_levels.append(per_level)
     return query_levels, example_levels
+
+
+def position_scales(
+    mask: np.ndarray,
+    warps: list[Warp],
+    level_weights: list[float],
+    relative_weight: float,
+    disagreement: float,
+    reach: float,
+) -> list[np.ndarray] | None:
+    """Per pyramid level, the query's factor on the position term's weight: where none of
+    the registered examples' relief agrees with the query's own (a groove, a ridge, a bump
+    that lies elsewhere or nowhere in them), the registered position gives way to the
+    paper's relative position (weight ``relative_weight`` against the level's own
+    ``level_weights[l]``), and the windows follow the query's relief.
+
+    With agreement ``a = 1 / (1 + D / disagreement)`` (``D`` the smallest over the examples
+    of :attr:`Warp.relief_residual`, averaged over ``reach`` of the object's size), the
+    factor is ``a + (1 - a) * min(1, relative_weight / level_weights[l])``: 1 where the
+    relief agrees. None when no warp has a residual (no flow) or ``disagreement`` is 0.
+    """
+    residuals = [w for w in warps if w.relief_residual is not None]
+    if not residuals or disagreement <= 0:
+        return None
+    size = float(np.sqrt(mask.sum()))
+    height, width = mask.shape
+    smallest = None
+    for warp in residuals:
+        step = warp.flow_step
+        assert warp.relief_residual is not None
+        smooth = ndimage.gaussian_filter(warp.relief_residual, reach * size / step)
+        ys = (np.arange(height) + 0.5) / step - 0.5
+        xs = (np.arange(width) + 0.5) / step - 0.5
+        gy, gx = np.meshgrid(ys, xs, indexing="ij")
+        full = ndimage.map_coordinates(smooth, [gy, gx], order=1, mode="nearest")
+        smallest = full if smallest is None else np.minimum(smallest, full)
+    assert smallest is not None
+    agreement = (1.0 / (1.0 + smallest / disagreement)).astype(np.float32)
+    from imagemap.core.pyramid import gaussian_pyramid  # deferred: as the guides' own
+
+    return [
+        np.asarray(a + (1.0 - a) * min(1.0, relative_weight / max(weight, 1e-12)), np.float32)
+        for a, weight in zip(
+            gaussian_pyramid(agreement, len(level_weights)), level_weights, strict=True
+        )
+    ]

@@ -1,10 +1,10 @@
 """Depth units, and a query that is an example.
 
 A depth map may come in any unit: relief in [0, 1], a 16-bit PNG, millimetres, metres
-saved as float. The guide weights are set for the examples' own scale, so the ``pose``
-stage (:mod:`imagemap.depth.pose`) always brings the query to the chosen examples'
-median :func:`depth_scale`: any positive factor on a query's depth gives the same map,
-with no band inside which units would still count.
+saved as float. So the ``pose`` stage (:mod:`imagemap.depth.pose`) takes the query and
+every chosen example :func:`units_free`: divided by its object's median depth and
+rounded to :data:`UNIT_STEP`, so that any positive factor on a depth gives the same
+values, hence the same map, with no band inside which units would still count.
 
 The ``select`` stage looks for the query among the examples by content
 (:func:`exclude_query`; the same depth, value for value): an example chosen
@@ -39,14 +39,21 @@ import numpy as np
 from imagemap.errors import InputError
 
 __all__ = [
+    "UNIT_STEP",
     "depth_scale",
     "exclude_query",
     "find_example",
     "query_in_database",
     "scale_of",
+    "units_free",
 ]
 
 log = logging.getLogger("imagemap")
+
+#: A units-free depth is rounded to multiples of this (of its median): far finer than any
+#: file holds (a 16-bit PNG steps 2**-16 of its range), and coarse enough that a depth
+#: times a factor, divided again, rounds to the same values (float32 keeps 24 bits).
+UNIT_STEP = 2.0**-18
 
 _QUERY_IN_DATABASE = contextvars.ContextVar("imagemap_query_in_database", default=False)
 
@@ -131,3 +138,21 @@ def exclude_query(database, names: list[str] | None, depth: np.ndarray):
         same,
     )
     return database.without(same), f"{same} (the query itself) left out"
+
+
+def units_free(depth: np.ndarray) -> np.ndarray:
+    """``depth`` divided by its object's median depth (:func:`depth_scale`), rounded to
+    :data:`UNIT_STEP`: the same values whatever its unit (float32, background 0).
+
+    Examples
+    --------
+    >>> dome = np.array([[0.0, 0.31, 0.52], [0.0, 0.47, 0.6]], np.float32)
+    >>> bool(np.array_equal(units_free(dome), units_free(dome * np.float32(1.6))))
+    True
+    """
+    depth = np.asarray(depth)
+    scale = depth_scale(depth)
+    if scale <= 0:
+        return np.zeros(depth.shape, np.float32)
+    relative = np.asarray(depth, np.float64) / scale
+    return (np.rint(relative / UNIT_STEP) * UNIT_STEP).astype(np.float32)
