@@ -131,8 +131,7 @@ class Warp:
     """A query-to-example map: ``forward(y, x)`` gives the example coordinates of query
     pixel coordinates (any resolution: coordinates are in pixels of the full images).
 
-    ``example = example_centre + linear @ (p + d(p) - query_centre)`` with
-    ``p = query + flow(query)``.
+    ``example = example_centre + linear @ (query + d(query) - query_centre)``.
 
     Attributes
     ----------
@@ -146,15 +145,12 @@ class Warp:
         The B-spline displacement ``d`` (query pixels) per control point.
     n : int
         Control points per side.
-    flow : ndarray (2, h, w), optional
-        The relief's flow (query pixels) on a grid of ``flow_step`` query pixels a cell:
-        where the query's own relief (a groove, a bump) lies against the example's once
-        the smooth warp has brought them together.
-    flow_step : float
     relief_residual : ndarray (h, w), optional
-        On the flow's grid: the squared difference between the query's relief detail
-        and the example's carried onto it by the whole warp (:func:`relief_detail`, in
-        (-1, 1)): where the example's relief still disagrees with the query's.
+        The squared difference between the query's relief detail and the example's
+        carried onto it by the warp (:func:`relief_detail`, in (-1, 1)), on a grid of
+        ``relief_step`` query pixels a cell: where the example's relief disagrees with
+        the query's (a groove, ridge or bump that lies elsewhere or nowhere in it).
+    relief_step : float
     """
 
     query_centre: np.ndarray
@@ -163,9 +159,8 @@ class Warp:
     box: tuple[float, float, float, float]
     coefficients: np.ndarray
     n: int
-    flow: np.ndarray | None = None
-    flow_step: float = 1.0
     relief_residual: np.ndarray | None = None
+    relief_step: float = 1.0
 
     def displacement(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The B-spline displacement (query pixels) at query coordinates."""
@@ -175,19 +170,8 @@ class Warp:
             basis @ self.coefficients[1]
         ).reshape(shape)
 
-    def relief_flow(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The relief's flow (query pixels) at query coordinates (0 without one)."""
-        if self.flow is None:
-            return np.zeros(np.shape(ys)), np.zeros(np.shape(xs))
-        step = self.flow_step  # flow-grid pixel j is query coordinate (j + 0.5) * step - 0.5
-        at = [(np.asarray(ys) + 0.5) / step - 0.5, (np.asarray(xs) + 0.5) / step - 0.5]
-        return (
-            ndimage.map_coordinates(self.flow[0], at, order=1, mode="nearest"),
-            ndimage.map_coordinates(self.flow[1], at, order=1, mode="nearest"),
-        )
-
-    def smooth_forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Example coordinates of query coordinates by the smooth warp alone (no flow)."""
+    def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Example coordinates (y, x) of query coordinates."""
         dy, dx = self.displacement(ys, xs)
         oy = np.asarray(ys) + dy - self.query_centre[0]
         ox = np.asarray(xs) + dx - self.query_centre[1]
@@ -196,14 +180,9 @@ class Warp:
             self.example_centre[1] + self.linear[1, 0] * oy + self.linear[1, 1] * ox,
         )
 
-    def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Example coordinates (y, x) of query coordinates."""
-        fy, fx = self.relief_flow(ys, xs)
-        return self.smooth_forward(np.asarray(ys) + fy, np.asarray(xs) + fx)
-
     def inverse(self, ys: np.ndarray, xs: np.ndarray, iterations: int = 12) -> tuple:
-        """Query coordinates of example coordinates (fixed-point iterations: the
-        displacement and the flow are small against the object)."""
+        """Query coordinates of example coordinates (fixed-point iteration: the
+        displacement is smooth and small against the object)."""
         inverse = np.linalg.inv(self.linear)
         oy, ox = np.asarray(ys) - self.example_centre[0], np.asarray(xs) - self.example_centre[1]
         ty = self.query_centre[0] + inverse[0, 0] * oy + inverse[0, 1] * ox
@@ -212,12 +191,6 @@ class Warp:
         for _ in range(iterations):
             dy, dx = self.displacement(qy, qx)
             qy, qx = ty - dy, tx - dx
-        if self.flow is None:
-            return qy, qx
-        py, px = qy, qx  # the smooth warp's point; the query's is p - flow(query)
-        for _ in range(iterations):
-            fy, fx = self.relief_flow(qy, qx)
-            qy, qx = py - fy, px - fx
         return qy, qx
 
 
@@ -302,16 +275,16 @@ def register(
     registration: Registration = _REGISTRATION,
     angle: float = 0.0,
 ) -> Warp:
-    """The warp from the query's object onto the example's (full-resolution pixels): a
-    smooth warp, then the relief's flow.
+    """The smooth warp from the query's object onto the example's (full-resolution pixels),
+    with the relief's residual disagreement.
 
     Parameters
     ----------
     query_depth, example_depth : ndarray (H, W)
         Depth maps, background 0 (any units: each is taken relative to its own range).
     registration : Registration
-        The fit's settings (working size, control grids, the guide image's weights, the
-        flow's; a :class:`~imagemap.depth.config.DepthConfig`'s ``registration``).
+        The fit's settings (working size, control grids, the guide image's weights; a
+        :class:`~imagemap.depth.config.DepthConfig`'s ``registration``).
     angle : float
         The turn (degrees, :class:`~imagemap.depth.pose.Pose`) from the query's axes to
         the example's, where the fit starts.
@@ -363,9 +336,7 @@ def register(
             coefficients=warp.coefficients / zoom,
             n=warp.n,
         )
-    if registration.flow_attachment > 0:
-        warp = _with_relief_flow(warp, query_depth, example_depth, registration)
-    return warp
+    return _with_relief_residual(warp, query_depth, example_depth, registration)
 
 
 def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarray:
@@ -392,39 +363,31 @@ def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarr
     return np.where(mask, np.tanh(detail / (3.0 * spread)), 0.0).astype(np.float32)
 
 
-def _with_relief_flow(
+def _with_relief_residual(
     warp: Warp, query_depth: np.ndarray, example_depth: np.ndarray, registration: Registration
 ) -> Warp:
-    """``warp`` with the relief's flow: TV-L1 optical flow (Zach, Pock & Bischof 2007) of
-    the example's relief detail, brought onto the query by the smooth warp, to the query's
-    own. The example's grooves, ridges and bumps then land on the query's, where the
-    smooth warp (a few control points) left them where the example had them."""
-    from skimage.registration import optical_flow_tvl1  # deferred: start-up
-
+    """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail against the
+    example's carried onto it by the warp, with the object about ``relief_size`` pixels
+    across (block averages of larger maps)."""
     query_mask, example_mask = query_depth > 0, example_depth > 0
 
     def small(depth, mask):
-        block = max(1, int(round(np.sqrt(mask.sum()) / registration.flow_size)))
+        block = max(1, int(round(np.sqrt(mask.sum()) / registration.relief_size)))
         if block > 1:
             depth, mask = _block_average(depth, mask, block)
         return relief_detail(depth, mask, registration.relief_detail_scale), block
 
     query_detail, step = small(query_depth, query_mask)
     example_detail, example_step = small(example_depth, example_mask)
-    # The query's flow-grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
+    # The query's grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
     gy, gx = np.mgrid[0 : query_detail.shape[0], 0 : query_detail.shape[1]].astype(np.float64)
-    ey, ex = warp.smooth_forward((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
-    moving = ndimage.map_coordinates(
+    ey, ex = warp.forward((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
+    landed = ndimage.map_coordinates(
         example_detail, [(ey + 0.5) / example_step - 0.5, (ex + 0.5) / example_step - 0.5],
         order=1, mode="constant", cval=0.0,
-    ).astype(np.float32)  # fmt: skip
-    flow_y, flow_x = optical_flow_tvl1(
-        query_detail, moving, attachment=registration.flow_attachment
-    )
-    flow = np.stack([flow_y, flow_x]).astype(np.float32) * step
-    landed = ndimage.map_coordinates(moving, [gy + flow_y, gx + flow_x], order=1, mode="nearest")
+    )  # fmt: skip
     residual = np.square(query_detail - landed).astype(np.float32)
-    return replace(warp, flow=flow, flow_step=float(step), relief_residual=residual)
+    return replace(warp, relief_residual=residual, relief_step=float(step))
 
 
 def _block_average(depth: np.ndarray, mask: np.ndarray, block: int) -> tuple:
@@ -523,7 +486,7 @@ def position_scales(
     With agreement ``a = 1 / (1 + D / disagreement)`` (``D`` the smallest over the examples
     of :attr:`Warp.relief_residual`, averaged over ``reach`` of the object's size), the
     factor is ``a + (1 - a) * min(1, relative_weight / level_weights[l])``: 1 where the
-    relief agrees. None when no warp has a residual (no flow) or ``disagreement`` is 0.
+    relief agrees. None when no warp has a residual or ``disagreement`` is 0.
     """
     residuals = [w for w in warps if w.relief_residual is not None]
     if not residuals or disagreement <= 0:
@@ -532,7 +495,7 @@ def position_scales(
     height, width = mask.shape
     smallest = None
     for warp in residuals:
-        step = warp.flow_step
+        step = warp.relief_step
         assert warp.relief_residual is not None
         smooth = ndimage.gaussian_filter(warp.relief_residual, reach * size / step)
         ys = (np.arange(height) + 0.5) / step - 0.5
