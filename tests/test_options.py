@@ -210,9 +210,9 @@ def test_every_setting_has_one_name_and_one_group():
     names = [f.name for group in fields(config) for f in fields(getattr(config, group.name))]
     assert len(names) == len(set(names))
     assert list(config.flat()) == names
-    changed = config.replace_fields(rim=3, work_size=32.0, scale_tolerance=1.2, edge_floor=0.1)
+    changed = config.replace_fields(rim=3, work_size=32.0, pose_angle_step=5.0, edge_floor=0.1)
     assert (changed.completion.rim, changed.registration.work_size) == (3, 32.0)
-    assert (changed.selection.scale_tolerance, changed.finish.edge_floor) == (1.2, 0.1)
+    assert (changed.selection.pose_angle_step, changed.finish.edge_floor) == (5.0, 0.1)
     with pytest.raises(InputError, match="control_grids"):
         config.replace_fields(control_grids=(3, 5))
     with pytest.raises(InputError, match="partial_share"):
@@ -220,11 +220,11 @@ def test_every_setting_has_one_name_and_one_group():
 
 
 def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, monkeypatch):
-    """The registration's, the completion's, the units' and the blend's thresholds are
+    """The registration's, the completion's, the pose's and the blend's thresholds are
     handed from the configuration to the functions the stages call (not read from
     module constants)."""
     import imagemap.depth.finish
-    import imagemap.depth.units
+    import imagemap.depth.selection
 
     pipeline = imagemap.depth.pipeline
     seen: dict = {}
@@ -242,9 +242,9 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
     spy(pipeline.completion, "small_features", "small_features")
     spy(pipeline.completion, "complete_features", "complete_features")
     spy(imagemap.depth.finish, "seamless_copy", "seamless_copy")
-    spy(imagemap.depth.units, "match_scale", "match_scale")
+    spy(imagemap.depth.selection, "find_poses", "find_poses")
     config = resolve_config("busts").replace_fields(
-        work_size=48.0, rim_agreement=0.06, scale_tolerance=1.4, edge_contrast=2.5
+        work_size=48.0, rim_agreement=0.06, pose_angle_step=5.0, edge_contrast=2.5
     )
     depth, _ = query_blob
     imagemap.colorize(depth, blob_database, config)
@@ -253,4 +253,4 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
     assert all(kw["completion"] is config.completion for _, kw in seen["complete_features"])
     assert seen["seamless_copy"][0][1]["edge_contrast"] == 2.5
     assert seen["seamless_copy"][0][1]["edge_floor"] == config.finish.edge_floor
-    assert seen["match_scale"][0][0][2] == 1.4
+    assert all(kw["angle_step"] == 5.0 for _, kw in seen["find_poses"])

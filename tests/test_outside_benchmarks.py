@@ -40,6 +40,7 @@ def test_quick_run_prints_the_table_and_writes_pictures(script, feature, tmp_pat
     rows = module.main(["--quick", "--out", str(out), "--json", str(tmp_path / "f.json")])
     table = capsys.readouterr().out
     assert "| ours |" in table and "| bbox copy |" in table and "| truth |" in table
+    assert "| warp_nearest |" in table  # #42's baseline
     assert "ebsynth" not in table  # EBSYNTH unset: skipped
     by_method = {row["method"]: row for row in rows}
     # The truth's own feature passes the feature test the metrics module uses.
@@ -48,10 +49,11 @@ def test_quick_run_prints_the_table_and_writes_pictures(script, feature, tmp_pat
     assert 5 < ours["psnr"] < 60 and ours["fragments_90"] >= 1
     assert 0 < ours["continuity"] < 1.5 and 0 < ours["midtones"] < 5
     assert math.isfinite(by_method["bbox copy"]["psnr"])
+    assert by_method["warp_nearest"]["fragments_90"] >= 1  # a copy through one warp
     pictures = {p.name for p in out.iterdir()}
     assert pictures == {"120x90.png", f"120x90_{feature}.png", "120x90_fragments.png"}
     saved = json.loads((tmp_path / "f.json").read_text())
-    assert [r["method"] for r in saved["rows"]] == ["ours", "bbox copy", "truth"]
+    assert [r["method"] for r in saved["rows"]] == ["ours", "warp_nearest", "bbox copy", "truth"]
 
 
 def test_method_options_reach_the_synthesis(tmp_path):
@@ -60,7 +62,8 @@ def test_method_options_reach_the_synthesis(tmp_path):
     paper = module.main(["--quick", "--out", str(tmp_path / "b"), "--finish", "paper"])
     assert default[0]["method"] == paper[0]["method"] == "ours"
     assert default[0]["psnr"] != paper[0]["psnr"]
-    assert default[1] == paper[1]  # the bounding-box copy does not depend on the method
+    # The bounding-box copy does not depend on the method.
+    assert default[2]["method"] == "bbox copy" and default[2] == paper[2]
 
 
 def test_bbox_copy_of_the_query_itself_is_the_truth_and_ebsynth_must_exist(tmp_path, monkeypatch):

@@ -1,6 +1,6 @@
-"""What the speed and memory work must keep: selection by the precomputed statistics ranks
-examples as the direct centroid-aligned SSD does, and the copy finish's channel-by-channel
-solve gives the all-channels result."""
+"""What the speed and memory work must keep: selection by the examples' precomputed shape
+grids does not depend on the query's pose, and the copy finish's channel-by-channel solve
+gives the all-channels result."""
 
 from __future__ import annotations
 
@@ -8,49 +8,56 @@ import numpy as np
 from scipy import fft, ndimage
 
 from imagemap import Database, Example, select_examples
-from imagemap.align import centroid_shift, translate
 from imagemap.core.blend import copy_through
 from imagemap.core.poisson import seamless_copy
 
 
-def _direct_ranking(depth, database):
-    """The definition: SSD of the query and each translated example, plus the example's
-    depth that falls outside the query frame."""
-    distances = []
-    for example in database:
-        other = example.depth.astype(np.float64)
-        shifted = translate(other, centroid_shift(other > 0, depth > 0), depth.shape)
-        outside = np.square(other).sum() - np.square(shifted.astype(np.float64)).sum()
-        distances.append(np.square(depth - shifted.astype(np.float64)).sum() + outside)
-    return list(np.argsort(distances, kind="stable")), distances
+def _creature(shape, centre, length, aspect, angle=0.0, mirrored=False, scale=1.0):
+    """An ellipsoid with a bump at one end (its head): turned, mirrored, scaled, placed."""
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    dy, dx = (yy - centre[0]) / scale, (xx - centre[1]) / scale
+    theta = np.deg2rad(angle)
+    u = np.cos(theta) * dx - np.sin(theta) * dy  # along the body (y down, turned on screen)
+    v = np.sin(theta) * dx + np.cos(theta) * dy
+    u = -u if mirrored else u
+    a, b = length / 2, length / 2 / aspect
+    r2 = (u / a) ** 2 + (v / b) ** 2
+    body = 0.3 + 0.6 * np.sqrt(np.clip(1 - r2, 0, 1))
+    head = 0.25 * np.exp(-((u - 0.6 * a) ** 2 + (v + 0.3 * b) ** 2) / (0.08 * a * a))
+    return np.where(r2 < 1, body + head, 0).astype(np.float32)
 
 
-def _blob(rng, shape, centre, radii):
-    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
-    r2 = ((yy - centre[0]) / radii[0]) ** 2 + ((xx - centre[1]) / radii[1]) ** 2
-    bumps = 0.05 * rng.random(shape)
-    return np.where(r2 < 1, 0.3 + 0.6 * np.sqrt(np.clip(1 - r2, 0, 1)) + bumps, 0).astype(
-        np.float32
-    )
-
-
-def test_selection_ranks_as_the_direct_ssd():
-    rng = np.random.default_rng(4)
-    examples = []
-    for i in range(25):
-        shape = (int(rng.integers(30, 70)), int(rng.integers(30, 90)))  # sizes differ
-        centre = (rng.uniform(0.2, 0.8) * shape[0], rng.uniform(0.2, 0.8) * shape[1])
-        radii = (rng.uniform(5, shape[0] / 2), rng.uniform(5, shape[1] / 2))
-        depth = _blob(rng, shape, centre, radii)
-        examples.append(Example.from_arrays(f"e{i:02d}", depth, np.zeros(shape + (3,))))
+def test_selection_does_not_depend_on_pose_size_place_or_units():
+    """#42: the examples chosen and their order are the same for a query turned, mirrored,
+    scaled, moved or in other depth units; the pose found says how it lies."""
+    examples = [
+        Example.from_arrays(
+            f"a{aspect:.2f}",
+            _creature((70, 90), (35, 45), 60, aspect),
+            np.zeros((70, 90, 3)),
+        )
+        for aspect in (1.2, 1.5, 1.8, 2.1, 2.4, 2.7, 3.0)
+    ]
     database = Database(examples)
-    for q in range(5):
-        query = _blob(rng, (50, 60), (25 + 3 * q, 30 - 2 * q), (12 + q, 20 - q))
-        order, distances = _direct_ranking(query, database)
-        chosen = select_examples(query, database, m=5)
-        # Same ranking (up to exact ties, which the fixtures do not have).
-        assert chosen == [int(i) for i in order[:5]], (chosen, order[:5])
-        assert len(set(np.round(distances, 6))) == len(distances)
+    upright = select_examples(_creature((80, 100), (40, 50), 56, 2.0), database, m=3)
+    assert [database[i].name for i in upright[:2]] == ["a2.10", "a1.80"]
+    from imagemap.depth.selection import select_with_poses
+
+    for angle, mirrored, scale, centre, units in (
+        (30.0, False, 1.0, (40, 50), 1.0),
+        (-40.0, False, 1.0, (40, 50), 1.0),
+        (0.0, True, 1.0, (40, 50), 1.0),
+        (20.0, True, 0.7, (30, 62), 1.0),
+        (0.0, False, 1.5, (40, 50), 1e3),
+    ):
+        query = units * _creature((80, 100), centre, 56, 2.0, angle, mirrored, scale)
+        chosen, poses = select_with_poses(query, database, m=3)
+        assert chosen == upright, (angle, mirrored, scale)
+        first = poses[0]
+        assert first.mirrored == mirrored
+        turn = -angle if not mirrored else angle  # the pose turns the query back
+        assert abs(first.angle - turn) < 3.0, (first.angle, angle, mirrored)
+        assert abs(first.scale * scale - 60 / 56) < 0.08
 
 
 def _all_channels_reference(exemplars, source, reference, scale):

@@ -40,7 +40,7 @@ Examples
 >>> result.image.shape, result.example_names
 ((40, 48, 3), ['blob_0', 'blob_2'])
 >>> [stage.name for stage in result.stages][:3]
-['units', 'select', 'register']
+['select', 'pose', 'register']
 """
 
 from __future__ import annotations
@@ -83,6 +83,7 @@ from imagemap.depth.pose import (
     CanonicalFrame,
     Pose,
     PosedExample,
+    absorbed_pose,
     canonical_frame,
     resample_depth,
     unpose,
@@ -175,8 +176,10 @@ def _relative_angle(pose: Pose, first: Pose, mirrored: bool) -> float:
 def _pose(state: State, config: DepthConfig) -> State:
     # The synthesis runs in the first example's frame: the query turned, scaled and
     # mirrored as that example lies, at its depth scale; an example that lies mirrored
-    # against it is used mirrored (exactly: its columns reversed).
-    first = state.poses[0]
+    # against it is used mirrored (exactly: its columns reversed). A turn and a scale the
+    # registration's warp absorbs are left to it: the query is then only moved (and
+    # mirrored), by whole pixels, not resampled.
+    first = absorbed_pose(state.poses[0], config.selection)
     size = float(np.sqrt(state.chosen[0].mask.sum()))
     # Room around the object for the coarsest level's windows (about a third of the
     # object wide: Pyramid.add_windows_across) and the depth continued past the outline.
@@ -197,10 +200,12 @@ def _pose(state: State, config: DepthConfig) -> State:
         PosedExample.of(e, mirrored=flip)
         for e, flip in zip(state.chosen, state.mirrored, strict=True)
     ]
+    found = state.poses[0]
     state.changed = (
-        f"turned {first.angle:.1f} deg, scaled x{first.scale:.3f}"
-        f"{', mirrored' if first.mirrored else ''}; {sum(state.mirrored)} examples used "
-        "mirrored"
+        f"turned {found.angle:.1f} deg, scaled x{found.scale:.3f}"
+        f"{', mirrored' if found.mirrored else ''}"
+        f"{' (left to the warp)' if first.scale == 1.0 and first.angle == 0.0 else ''}; "
+        f"{sum(state.mirrored)} examples used mirrored"
     )
     return state
 

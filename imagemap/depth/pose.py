@@ -308,6 +308,37 @@ class CanonicalFrame:
         return cy - self.origin[0], cx - self.origin[1]
 
 
+def absorbed_pose(pose: Pose, selection: Any) -> Pose:
+    """``pose`` as the synthesis uses it: where its turn and scale are within what the
+    registration's warp absorbs (``selection.pose_turn_tolerance`` degrees, a scale within
+    ``selection.pose_scale_tolerance``), a move by whole pixels (and the mirror image)
+    only, so that the query is not resampled; else ``pose`` itself.
+
+    Examples
+    --------
+    >>> from imagemap.depth.config import Selection
+    >>> pose = Pose((10.2, 20.7), (12.0, 25.5), 1.05, 3.0, False)
+    >>> moved = absorbed_pose(pose, Selection())
+    >>> moved.scale, moved.angle, moved.forward(np.array([10.0]), np.array([20.0]))
+    (1.0, 0.0, (array([12.]), array([25.])))
+    """
+    tolerance = selection.pose_scale_tolerance
+    if abs(pose.angle) > selection.pose_turn_tolerance or not (
+        1.0 / tolerance <= pose.scale <= tolerance
+    ):
+        return pose
+    # example = example_centre + F (query - query_centre): whole pixels when the
+    # centres' difference (their sum in x, mirrored) is.
+    cy, cx = pose.query_centre
+    ey, ex = pose.example_centre
+    shift_y = float(np.rint(ey - cy))
+    if pose.mirrored:
+        ex = float(np.rint(ex + cx)) - cx
+    else:
+        ex = cx + float(np.rint(ex - cx))
+    return Pose((cy, cx), (cy + shift_y, ex), 1.0, 0.0, pose.mirrored, pose.distance)
+
+
 def canonical_frame(mask: np.ndarray, pose: Pose, margin: float, align: int = 1) -> CanonicalFrame:
     """The box of the example's grid that holds the query's object moved by ``pose``,
     with ``margin`` pixels around it (the windows' and the guides' room), its origin on a
