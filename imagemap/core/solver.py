@@ -36,7 +36,7 @@ _GATHER_ROWS = 2048  # windows per gather of one channel into such a block (see 
 _MAX_BANDS = 8
 # Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
 _EXACT_START_FLOPS = 2e9
-_BAND_ROWS = 64
+_BAND_ROWS = 32
 _SOURCE_ROWS = 256  # rows per block when the dense source map is made
 #: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
 #: margin of that largest magnitude over the largest value in the PCA samples.
@@ -567,8 +567,11 @@ class LevelSolver:
             self.query_windows, (self.query_band_y, self.query_band_x), self.query_position, 0.0
         )
         ys = self.query_y
-        n_bands = int(np.clip(h // _BAND_ROWS, 1, _MAX_BANDS))
-        row_edges = np.linspace(0, h, n_bands + 1).astype(np.int64)
+        # Bands over the rows the object's window centres span (not the frame's: an
+        # object in a tight frame, as the pose stage crops it, still gets its threads).
+        top, bottom = (int(ys.min()), int(ys.max()) + 1) if len(ys) else (0, h)
+        n_bands = int(np.clip((bottom - top) // _BAND_ROWS, 1, _MAX_BANDS))
+        row_edges = np.linspace(top, bottom, n_bands + 1).astype(np.int64)
         self.band_starts = np.searchsorted(ys, row_edges, side="left").astype(np.int64)
         timer.add("features", start)
         self.indexes: dict[str, NearestNeighborIndex] = {}

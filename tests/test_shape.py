@@ -1,0 +1,117 @@
+"""#42: maps tailored to the query's own shape, its relief where it differs from the
+examples' and its pose."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from skimage import color
+
+import imagemap
+from data_gen.dataset import write_class
+from imagemap.depth.pipeline import warp_nearest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def load(name: str):
+    """A benchmark script as a module (with ``outside.py`` beside it importable)."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        spec = importlib.util.spec_from_file_location(
+            f"benchmark_{name}", BENCHMARKS / f"{name}.py"
+        )
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    return module
+
+
+@pytest.fixture(scope="module")
+def plates():
+    return load("relief_plates").make_task(256, 192)
+
+
+def test_seams_follow_the_querys_own_grooves(plates):
+    """Two examples whose plates and grooves lie elsewhere than the query's: the seams
+    are drawn on the query's grooves, where the registered examples' layout cannot put
+    them (warp_nearest, the first example warped onto the query and copied, is far)."""
+    database = imagemap.Database(plates.examples)
+    ours = imagemap.colorize(plates.depth, database, "fish", seed=0)
+    warped = warp_nearest(plates.depth, database, "fish", seed=0)
+    mask = plates.depth > 0
+    ours_f1 = plates.features(ours.image, mask)["seam_f1"]
+    warped_f1 = plates.features(warped.image, mask)["seam_f1"]
+    assert ours_f1 >= 0.85, ours_f1  # measured 0.96 at 320x240, 0.93 at 768x576
+    assert ours_f1 >= warped_f1 + 0.1, (ours_f1, warped_f1)
+    # Without the relief's say (the registered position everywhere, colours alone in
+    # the seams' cut) the examples' layout comes back.
+    registered = imagemap.colorize(
+        plates.depth,
+        database,
+        imagemap.DepthConfig().replace_fields(relief_disagreement=0.0, seam_relief_weight=0.0),
+        seed=0,
+    )
+    assert plates.features(registered.image, mask)["seam_f1"] <= ours_f1 - 0.1
+    # One palette over the plates (the examples' palettes differ).
+    assert plates.provenance(ours.source, mask)["palette_share"] >= 0.9
+
+
+@pytest.fixture(scope="module")
+def fish_class(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fish_pose")
+    write_class("fish", root, count=7, seed=0, size=(160, 120), holdout=1, quiet=True)
+    database = imagemap.Database.from_directory(root)
+    query = imagemap.read_depth(next((root / "holdout").glob("*_depth.png")))
+    frame = np.zeros((240, 320), np.float32)  # room to move the fish
+    frame[60:180, 80:240] = query
+    return database, frame
+
+
+def _de00(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
+    from scipy import ndimage
+
+    inner = ndimage.binary_erosion(mask, iterations=2)
+    lab_a, lab_b = color.rgb2lab(np.clip(a, 0, 1)), color.rgb2lab(np.clip(b, 0, 1))
+    return float(color.deltaE_ciede2000(lab_a, lab_b)[inner].mean())
+
+
+def test_a_mirrored_query_gives_the_mirrored_map(fish_class):
+    database, depth = fish_class
+    upright = imagemap.colorize(depth, database, "fish", seed=0)
+    mirrored = imagemap.colorize(np.ascontiguousarray(depth[:, ::-1]), database, "fish", seed=0)
+    assert mirrored.example_names == upright.example_names
+    assert mirrored.poses[0].mirrored != upright.poses[0].mirrored
+    # The mirror image of the upright map (measured 1.1-1.9 on generated fish; 19 before
+    # mirrored candidates: no eye on the head, the tail painted like the body).
+    assert _de00(mirrored.image, upright.image[:, ::-1], mirrored.mask) <= 8.0
+    # Mirrored examples switched off (a class that is not mirror-symmetric): the fit
+    # cannot mirror them, and the map is no longer the mirror image.
+    plain = imagemap.colorize(np.ascontiguousarray(depth[:, ::-1]), database, "fish", mirror=False)
+    assert not plain.poses[0].mirrored
+    assert _de00(plain.image, upright.image[:, ::-1], plain.mask) > 8.0
+
+
+def test_a_turned_and_scaled_query_gives_the_moved_map(fish_class):
+    from skimage.transform import AffineTransform, warp
+
+    database, depth = fish_class
+    upright = imagemap.colorize(depth, database, "fish", seed=0)
+    centre = np.array([(depth.shape[1] - 1) / 2, (depth.shape[0] - 1) / 2])
+    theta, scale = np.deg2rad(-35.0), 0.7
+    linear = scale * np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    matrix = np.eye(3)
+    matrix[:2, :2], matrix[:2, 2] = linear, centre - linear @ centre
+    moved = AffineTransform(matrix=matrix)
+    moved_depth = warp(depth, moved.inverse, order=1, preserve_range=True)
+    moved_mask = warp((depth > 0).astype(float), moved.inverse, order=1) > 0.5
+    moved_depth = np.where(moved_mask, moved_depth, 0).astype(np.float32)
+    turned = imagemap.colorize(moved_depth, database, "fish", seed=0)
+    assert turned.example_names == upright.example_names
+    expected = warp(upright.image, moved.inverse, order=1, preserve_range=True)
+    assert _de00(turned.image, expected, turned.mask) <= 8.0  # benchmarks/pose.py: 2-4
