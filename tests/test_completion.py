@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import ndimage
 
 from imagemap.core.blend import copy_through
-from imagemap.depth import completion
 from imagemap.depth.completion import complete_features, small_features
 from imagemap.depth.config import Completion
 
@@ -285,12 +283,6 @@ def _textured_skin_with_lips(size=80, seed=5):
     return exemplar.astype(np.float32)
 
 
-def _lips_bump(y, x, size=80):
-    """A depth with a bump, wider than tall, centred at (y, x): the relief under lips."""
-    yy, xx = np.mgrid[0:size, 0:size]
-    return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 / 8.0 + (xx - x) ** 2 / 30.0))
-
-
 def test_a_skipped_feature_is_copied_where_its_surroundings_were():
     # The map copies the skin around the lips at offset 0 but fills the lips' place
     # with skin from elsewhere: none of the lips copied, all of their ring.
@@ -332,101 +324,6 @@ def test_a_skipped_feature_is_not_pasted_over_what_the_map_already_shows_there()
     plain = source.copy()
     plain[38:42, 34:46, 1] += 25
     assert complete_features([lips, other], plain, features, mask, [mask, mask])[1] == 1
-
-
-def test_a_skipped_feature_goes_where_its_relief_fits():
-    # The query's bump under the lips lies 3 px lower and 2 px further right than
-    # the exemplar's: given the reliefs, the lips follow it.
-    exemplar = _textured_skin_with_lips()
-    features = [small_features(exemplar, np.ones((80, 80), bool))]
-    mask = np.ones((80, 80), bool)
-    exemplar_depth, query_depth = _lips_bump(39.5, 39.5), _lips_bump(42.5, 41.5)
-    source = _identity(80)
-    source[37:46, 33:49, 1] += 25
-    relief = (query_depth, [exemplar_depth])
-    completed_source, completed = complete_features(
-        [exemplar], source, features, mask, [mask], relief=relief
-    )
-    assert completed == 1
-    whole = copy_through([exemplar], completed_source)
-    np.testing.assert_array_equal(whole[41:45, 36:48], exemplar[38:42, 34:46])
-
-
-def test_a_cut_feature_goes_onto_its_relief_and_leaves_no_piece_behind():
-    # The map copies the left half of the lips where the exemplar has them; the query's
-    # bump under the lips lies 3 px lower and 5 px further right. Without the reliefs
-    # the lips are completed where the cut copy was; with them, on the bump, and the
-    # half copy's pixels left behind copy skin, not a second piece of the lips.
-    exemplar = _textured_skin_with_lips()
-    features = [small_features(exemplar, np.ones((80, 80), bool))]
-    mask = np.ones((80, 80), bool)
-    source = _identity(80)
-    source[30:50, 40:60, 2] += 6  # the lips' right half copies skin from further right
-    lips = features[0][0] > 0
-    for relief, (top, left) in (
-        (None, (38, 34)),
-        ((_lips_bump(42.5, 44.5), [_lips_bump(39.5, 39.5)]), (41, 39)),
-    ):
-        completed_source, completed = complete_features(
-            [exemplar], source, features, mask, [mask], relief=relief
-        )
-        assert completed == 1
-        whole = copy_through([exemplar], completed_source)
-        np.testing.assert_array_equal(
-            whole[top : top + 4, left : left + 12], exemplar[38:42, 34:46]
-        )
-        copies_lips = lips[completed_source[..., 1], completed_source[..., 2]]
-        assert copies_lips.sum() == lips.sum()
-        assert copies_lips[top : top + 4, left : left + 12].all()
-
-
-def test_relief_registration_finds_a_moved_relief_with_full_correlation():
-    # The query's relief is the exemplar's moved by (3, -2); searched from 2 px off in
-    # each direction, the registration finds the move, with a correlation of nearly 1, over a
-    # ring-shaped region (the masked correlation ignores the box's corners).
-    rng = np.random.default_rng(2)
-    exemplar_depth = ndimage.gaussian_filter(rng.random((90, 90)), 2)
-    query_depth = np.roll(exemplar_depth, (-3, 2), axis=(0, 1))
-    yy, xx = np.mgrid[0:21, 0:21]
-    region = np.hypot(yy - 10, xx - 10) <= 10
-    # The box's corners, outside the region, are something else in the query.
-    corners = query_depth[27:48, 32:53]
-    corners[~region] = rng.random(int((~region).sum()))
-    dy, dx, fit = completion._register(
-        query_depth, exemplar_depth, region, 30, 30, 3 + 2, -2 - 2, reach=4
-    )
-    assert (dy, dx) == (3, -2)
-    assert fit > 0.999
-
-
-def test_relief_registration_sees_a_bump_beside_the_outline_not_the_outline():
-    # The exemplar's bump lies well inside its object; the query's, 4 px from its
-    # outline (depth 0 beyond). The step down to the background is no relief: the
-    # registration still finds the bump.
-    yy, xx = np.mgrid[0:90, 0:90]
-
-    def bump(y, x):
-        return 1.0 + 0.2 * np.exp(-((yy - y) ** 2 + (xx - x) ** 2) / 18.0)
-
-    exemplar_depth, query_depth = bump(40, 40), bump(40, 56)
-    query_depth[:, 66:] = 0.0
-    region = np.hypot(yy[:21, :21] - 10, xx[:21, :21] - 10) <= 8
-    dy, dx, fit = completion._register(query_depth, exemplar_depth, region, 30, 30, 0, -12, reach=8)
-    assert (dy, dx) == (0, -16)
-    assert fit > 0.95
-
-
-def test_fft_correlation_matches_scipy_signal():
-    from scipy import signal
-
-    from imagemap.depth.completion import _correlate_valid
-
-    rng = np.random.default_rng(3)
-    shapes = (((40, 50), (9, 13)), ((31, 31), (31, 31)), ((60, 20), (5, 20)))
-    for image_shape, kernel_shape in shapes:
-        image, kernel = rng.standard_normal(image_shape), rng.standard_normal(kernel_shape)
-        expected = signal.correlate(image, kernel, mode="valid")
-        np.testing.assert_allclose(_correlate_valid(image, kernel), expected, atol=1e-10)
 
 
 def _exemplar_with_eye(size=80, radius=6):

@@ -30,13 +30,11 @@ iris belongs to its eye), that are
 map that copy it. Where they lie together (one instance) and cover between
 ``partial_share`` and ``complete_share`` of it, the whole feature, with a rim of
 its surroundings, is copied at the mean offset of those pixels (the most complete
-copies first): the feature appears once, whole, where the cut copy had put it.
-Given the reliefs, the offset is then moved, within half the feature's width, to
-where the feature's own relief fits the query's best, where that fit reaches
-``relief_fit`` (an eye goes on the eye's bulge; the cut copy's pixels left behind
-copy the feature's surroundings at the new offset, not a stray piece of it).
-Not where the rim would not match what the map shows there (a feature is
-completed on its own surroundings, never pasted over another part), and not
+copies first): the feature appears once, whole, where the cut copy had put it
+(where the relief calls for it, the matching and the seams have put it there
+already: :func:`imagemap.depth.register.position_scales`). Not where the rim would
+not match what the map shows there (a feature is completed on its own surroundings,
+never pasted over another part), and not
 beside a whole feature of the same colour (a piece of a second brow above the
 brow is a stray).
 
@@ -44,8 +42,8 @@ A feature can also be skipped whole: the map copies the skin around an eye from
 around the example's eye, at offsets near one another, and fills the eye's place
 with plain skin from elsewhere (a large map's finer levels wear an eye down this
 way). Where the map copies ``skipped_ring_share`` of a feature's ring and nothing
-of it, the feature is completed too, at the offset where its relief fits the
-query's depth best (``relief_fit``), under the same tests, and only where
+of it, the feature is completed too, at the ring's median offset, under the same
+tests, and only where
 the map shows nothing there yet that stands out from the ring
 (``skipped_place_shown``): the copy may have drawn an eye from pixels that no
 example's feature detection found.
@@ -62,7 +60,7 @@ import logging
 from typing import NamedTuple
 
 import numpy as np
-from scipy import fft, ndimage, sparse, spatial
+from scipy import ndimage, sparse, spatial
 from scipy.sparse import csgraph
 
 from imagemap.core.blend import copy_through, fill_background, smooth_inside
@@ -395,13 +393,6 @@ class _Instance(NamedTuple):
     offset: tuple[int, int] | None = None  # where to copy it (a skipped one), else the mean
 
 
-def _inside(ys: np.ndarray, xs: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Per pixel (ys, xs): whether it lies in ``mask``'s array and on it."""
-    ok = (ys >= 0) & (xs >= 0) & (ys < mask.shape[0]) & (xs < mask.shape[1])
-    ok[ok] = mask[ys[ok], xs[ok]]
-    return ok
-
-
 def _within(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, ...]) -> bool:
     """Whether every pixel (ys, xs) lies in ``shape``; False for no pixels (a displaced copy
     wholly outside the object has nothing to recopy: the map is left as it is)."""
@@ -416,7 +407,6 @@ def complete_features(
     features: list[tuple[np.ndarray, int]],
     object_mask: np.ndarray,
     exemplar_masks: list[np.ndarray],
-    relief: tuple[np.ndarray, list[np.ndarray]] | None = None,
     *,
     completion: Completion = _COMPLETION,
 ) -> tuple[np.ndarray, int]:
@@ -434,9 +424,6 @@ def complete_features(
         The query's object: a completed feature must lie inside it.
     exemplar_masks : list of ndarray of bool
         The exemplars' objects: a completed feature's rim must come from inside.
-    relief : (ndarray, list of ndarray), optional
-        The query's depth and the exemplars' depths: a skipped feature (see
-        :func:`_skipped_instances`) is placed where its relief fits the query's.
     completion : Completion
         The thresholds (``complete_share``, ``partial_share``, ``feature_contrast``,
         ``rim``, ``rim_agreement``, the doubles' and the skipped features').
@@ -466,7 +453,7 @@ def complete_features(
     instances = _instances(exemplars, source, features)
     if _undouble(source, instances, features, object_mask, exemplar_masks, completion):
         instances = _instances(exemplars, source, features)  # the recopied pixels moved
-    instances += _skipped_instances(source, features, exemplars, exemplar_masks, relief, completion)
+    instances += _skipped_instances(source, features, exemplars, exemplar_masks, completion)
     # Where the map already shows a whole feature, and its colour: a partial copy
     # beside a whole feature of the same colour (a piece of a second brow above the
     # brow, of a second eye beside the eye) is a stray, not a feature to complete.
@@ -491,17 +478,11 @@ def complete_features(
         # pixels are its ring's at the chosen offset) passed its own ring-share test.
         if item.offset is None and len(ys) < completion.partial_share * size:
             continue
-        moved = False
         if item.offset is not None:
             dy, dx = item.offset
         else:
             dy = int(np.rint(np.mean(source[ys, xs, 1] - ys)))
             dx = int(np.rint(np.mean(source[ys, xs, 2] - xs)))
-            if relief is not None:
-                fitted = _fitted_offset(
-                    relief, k, features[k][0], exemplar_masks[k], item, dy, dx, completion
-                )
-                moved, (dy, dx) = fitted != (dy, dx), fitted
         ty, tx = item.fy - dy, item.fx - dx
         if not _within(ty, tx, (height, width)) or not inside[ty, tx].all():
             continue
@@ -547,15 +528,6 @@ def complete_features(
                 continue
         source[ry, rx] = np.stack([np.full_like(ry, k), sy, sx], axis=-1)
         taken[ry, rx] = True
-        if moved:
-            # The cut copy's pixels that the relief moved the feature away from would
-            # draw a stray piece of it beside the whole one: they copy the feature's
-            # surroundings at its new offset instead.
-            left = ~taken[ys, xs]
-            ly, lx = ys[left], xs[left]
-            ok = _inside(ly + dy, lx + dx, mask_k)
-            ly, lx = ly[ok], lx[ok]
-            source[ly, lx] = np.stack([np.full_like(ly, k), ly + dy, lx + dx], axis=-1)
         drawn[ty, tx] = len(colours)
         colours.append(item.colour)
         completed += 1
@@ -633,41 +605,14 @@ def _feature_pixels(labels, box, f):
     return fy, fx, span, max(span // 2, 1)
 
 
-def _fitted_offset(relief, k, labels, mask, item, dy, dx, completion) -> tuple[int, int]:
-    """The offset within half its width of (dy, dx) at which the relief of feature
-    ``item.f`` of exemplar k (its own pixels: the ground around it is another object's)
-    fits the query's best (:func:`_register`), where that fit reaches
-    ``relief_fit``; else (dy, dx). An eye goes on the eye's bulge, a painted spot
-    where the cut copy put it."""
-    fy, fx, reach = item.fy, item.fx, max(item.span // 2, 1)
-    y0, x0 = max(int(fy.min()) - 1, 0), max(int(fx.min()) - 1, 0)
-    y1, x1 = min(int(fy.max()) + 2, labels.shape[0]), min(int(fx.max()) + 2, labels.shape[1])
-    region = (labels[y0:y1, x0:x1] == item.f) & mask[y0:y1, x0:x1]
-    fit_y, fit_x, fit = _register(relief[0], relief[1][k], region, y0, x0, dy, dx, reach)
-    log.debug(
-        "feature %d of exemplar %d: relief fit %.2f, moved by %d, %d",
-        item.f,
-        k,
-        fit,
-        fit_y - dy,
-        fit_x - dx,
-    )
-    return (fit_y, fit_x) if fit >= completion.relief_fit else (dy, dx)
-
-
-def _skipped_instances(source, features, exemplars, exemplar_masks, relief, completion):
+def _skipped_instances(source, features, exemplars, exemplar_masks, completion):
     """Features whose surroundings the map copies around one place, without them: an
     eye's ring of skin copied around a hole that other offsets filled with plain skin.
 
     For each feature, its ring (the pixels within half its width around it, inside its
     exemplar) is looked up in the source map. Where the map copies at least
     ``skipped_ring_share`` of the ring's pixels at offsets within half the feature's
-    width of their median, the feature belongs near there. With ``relief`` (the
-    query's depth and the exemplars' depths) the offset is then the one, within half
-    the feature's width, at which the exemplar's relief of the feature and its ring
-    correlates best with the query's (an eye goes on the eye's bulge), and the
-    feature is left out unless that correlation reaches ``relief_fit``
-    (the relief must say where it goes). Where no pixel
+    width of their median, the feature belongs there. Where no pixel
     the feature would cover at that offset copies a feature of any exemplar, the
     feature is an instance with nothing of it covered: :func:`complete_features`
     copies it there, under the same tests as a cut one. Not where the map already
@@ -705,12 +650,6 @@ def _skipped_instances(source, features, exemplars, exemplar_masks, relief, comp
             covered = np.unique(sy[near] * labels.shape[1] + sx[near]).size
             if covered < ring_share * n_ring:
                 continue
-            if relief is not None:
-                my, mx, fit = _register(
-                    relief[0], relief[1][k], feature | ring, y0, x0, my, mx, reach
-                )
-                if fit < completion.relief_fit:
-                    continue  # the relief does not say where it goes
             ty, tx = fy - my, fx - mx
             if (
                 not _within(ty, tx, (height, width))
@@ -774,65 +713,6 @@ def copies_features(source: np.ndarray, features: list[tuple[np.ndarray, int]]) 
         sx = np.clip(source[..., 2][at], 0, labels.shape[1] - 1)
         found[at] = labels[sy, sx] > 0
     return found
-
-
-def _register(query_depth, exemplar_depth, region, y0, x0, dy, dx, reach):
-    """The offset within ``reach`` of (dy, dx) at which the exemplar's relief over
-    ``region`` (a mask over a box at y0, x0 of the exemplar) correlates best with the
-    query's, and that correlation: normalized cross-correlation over the region's
-    pixels of the depths' detail (minus a Gaussian of the box's width, taken over the
-    object only), so that the objects' overall depth and scale and their outlines do
-    not count (-1 where the search would leave the
-    query or the exemplar). Every offset at once, as three FFT correlations (masked
-    normalized cross-correlation)."""
-    h, w = region.shape
-    sigma = max(h, w) / 2.0
-    pad = int(4 * sigma) + 1  # the Gaussian's own truncation: as if filtered whole
-
-    def detail(depth, top, left, height, width):
-        # The depth's detail over a box, filtered over the box and a margin only, and
-        # over the object only (background depth is 0): an eye next to the outline is
-        # found by its bulge, not by the step down to the background.
-        b0, b1 = max(top - pad, 0), max(left - pad, 0)
-        patch = np.asarray(depth[b0 : top + height + pad, b1 : left + width + pad], np.float64)
-        inside = patch > 0
-        patch = np.where(inside, patch - smooth_inside(patch, inside, sigma), 0.0)
-        return patch[top - b0 : top - b0 + height, left - b1 : left - b1 + width]
-
-    qy0, qx0 = y0 - dy - reach, x0 - dx - reach
-    qh, qw = h + 2 * reach, w + 2 * reach
-    if (
-        qy0 < 0
-        or qx0 < 0
-        or qy0 + qh > query_depth.shape[0]
-        or qx0 + qw > query_depth.shape[1]
-        or y0 + h > exemplar_depth.shape[0]
-        or x0 + w > exemplar_depth.shape[1]
-    ):
-        return dy, dx, -1.0
-    weight = region.astype(np.float64)
-    n = weight.sum()
-    template = detail(exemplar_depth, y0, x0, h, w)
-    template = (template - (template * weight).sum() / n) * weight  # zero mean on the region
-    window = detail(query_depth, qy0, qx0, qh, qw)
-    # For each offset s: sum over the region of T * W_s, of W_s and of W_s squared.
-    products = _correlate_valid(window, template)
-    sums = _correlate_valid(window, weight)
-    squares = _correlate_valid(window**2, weight)
-    spread = np.maximum(squares - sums**2 / n, 0.0)
-    scores = products / (np.sqrt((template**2).sum() * spread) + 1e-12)
-    sy, sx = np.unravel_index(int(np.argmax(scores)), scores.shape)
-    return dy + reach - int(sy), dx + reach - int(sx), float(scores[sy, sx])
-
-
-def _correlate_valid(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """``scipy.signal.correlate(image, kernel, mode="valid")`` by FFT, with ``scipy.fft``:
-    importing ``scipy.signal`` (it pulls in ``scipy.stats``) took 0.45 s of every fresh
-    ``imagemap synthesize``."""
-    (H, W), (h, w) = image.shape, kernel.shape
-    shape = (fft.next_fast_len(H + h - 1, real=True), fft.next_fast_len(W + w - 1, real=True))
-    spectrum = fft.rfft2(image, shape) * fft.rfft2(kernel[::-1, ::-1], shape)
-    return fft.irfft2(spectrum, shape)[h - 1 : H, w - 1 : W]
 
 
 def _instances(exemplars, source, features) -> list[_Instance]:

@@ -431,12 +431,6 @@ class Completion:
     #: at offsets near one another: its surroundings were taken and it was skipped
     #: (busts_003's eye at 4x: 0.31; busts_009's lips: between 0.2 and 0.3).
     skipped_ring_share: float = setting(0.2, minimum=0.0, maximum=1.0)
-    #: Given the reliefs, a skipped feature is completed only where the exemplar's relief
-    #: of it and its ring correlates at least this well with the query's at the place
-    #: chosen (a bulging eye: 0.99; a shoe on a leg's smooth end: 0.7); a cut one is moved
-    #: to where its own relief fits best only where the fit reaches this (the 2048x1536
-    #: fish's eye on the bulge 0.96; painted features have none and stay).
-    relief_fit: float = setting(0.9, minimum=0.0, maximum=1.0)
     #: A skipped feature is not completed where this share of its place already stands out
     #: from its surroundings in the map: something is drawn there (it refused a blue-grey
     #: eye over busts_008's own brown one).

@@ -316,7 +316,6 @@ def _complete_features(state: State, config: DepthConfig) -> State:
         example_features(state, config),
         state.mask,
         [example.mask for example in state.chosen],
-        relief=(state.depth, [example.depth for example in state.chosen]),
         completion=config.completion,
     )
     log.info("small features completed: %d", completed)
