@@ -104,22 +104,35 @@ def _frame(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
     return centre, size, np.where(mask, depth / float(np.median(depth[mask])), 0.0)
 
 
-def _smoothed(normalized: np.ndarray, size: float, grid: int, span: float) -> np.ndarray:
+def _smoothed(
+    normalized: np.ndarray, size: float, grid: int, span: float
+) -> tuple[np.ndarray, int]:
     """The normalized depth low-passed for sampling on a grid of ``grid`` cells over
-    ``span`` sizes (one grid cell: ``span * size / grid`` pixels): no aliasing."""
+    ``span`` sizes (one grid cell: ``span * size / grid`` pixels): no aliasing. A large
+    map is block-averaged first, ``block`` pixels a side (a third of a cell: the low-pass
+    is wider): a 2048x1536 map's grids cost what a small one's do."""
     cell = span * size / grid
     if cell <= 1.5:
-        return normalized.astype(np.float32)
-    return ndimage.gaussian_filter(normalized.astype(np.float32), 0.5 * cell, mode="constant")
+        return normalized.astype(np.float32), 1
+    block = max(1, int(cell // 3))
+    image = normalized.astype(np.float32)
+    if block > 1:
+        h, w = (image.shape[0] // block) * block, (image.shape[1] // block) * block
+        image = image[:h, :w].reshape(h // block, block, w // block, block).mean(axis=(1, 3))
+    return ndimage.gaussian_filter(image, 0.5 * cell / block, mode="constant"), block
 
 
-def _sample(image, centre, size, linear, grid, span) -> np.ndarray:
-    """``image`` at ``centre + size * linear @ u`` for the grid's offsets ``u``, flat."""
+def _sample(smoothed, centre, size, linear, grid, span) -> np.ndarray:
+    """The smoothed image at ``centre + size * linear @ u`` (full-resolution pixels) for the
+    grid's offsets ``u``, flat."""
+    image, block = smoothed
     u = (np.arange(grid) - (grid - 1) / 2.0) * (span / grid)
     gy, gx = np.meshgrid(u, u, indexing="ij")
     ys = centre[0] + size * (linear[0, 0] * gy + linear[0, 1] * gx)
     xs = centre[1] + size * (linear[1, 0] * gy + linear[1, 1] * gx)
-    return ndimage.map_coordinates(image, [ys, xs], order=1, mode="constant", cval=0.0).ravel()
+    # Full-resolution coordinate p is block pixel (p + 0.5) / block - 0.5.
+    at = [(ys + 0.5) / block - 0.5, (xs + 0.5) / block - 0.5]
+    return ndimage.map_coordinates(image, at, order=1, mode="constant", cval=0.0).ravel()
 
 
 def shape_grid(depth: np.ndarray, grid: int = 48, span: float = 3.5) -> np.ndarray:

@@ -353,14 +353,39 @@ def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarr
     >>> bool(detail[20, 20] < -0.5 < 0.0 < detail[20, 10] + 0.2)
     True
     """
-    from imagemap.core.blend import smooth_inside  # deferred: start-up (SciPy's filters)
-
     size = max(float(np.sqrt(mask.sum())), 1.0)
     relative = np.where(mask, depth / float(np.median(depth[mask])), 0.0)
-    detail = np.where(mask, relative - smooth_inside(relative, mask, scale * size), 0.0)
+    detail = np.where(mask, relative - _smooth_inside(relative, mask, scale * size), 0.0)
     values = detail[mask]
     spread = 1.4826 * float(np.median(np.abs(values - np.median(values)))) + 1e-12
     return np.where(mask, np.tanh(detail / (3.0 * spread)), 0.0).astype(np.float32)
+
+
+def _smooth_inside(values: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
+    """:func:`imagemap.core.blend.smooth_inside`, for a wide Gaussian on block averages
+    of a third of its width, brought back by bilinear interpolation (the smooth part is
+    smooth: a 2048^2 map's relief costs what a small one's does)."""
+    from imagemap.core.blend import smooth_inside  # deferred: start-up (SciPy's filters)
+
+    block = max(1, int(sigma // 3))
+    if block == 1:
+        return smooth_inside(values, mask, sigma)
+    height, width = mask.shape
+    h, w = -(-height // block) * block, -(-width // block) * block
+    padded = np.zeros((h, w)), np.zeros((h, w))
+    padded[0][:height, :width] = np.where(mask, values, 0.0)
+    padded[1][:height, :width] = mask
+    total, cover = (
+        a.reshape(h // block, block, w // block, block).mean(axis=(1, 3)) for a in padded
+    )
+    weight = ndimage.gaussian_filter(cover, sigma / block)
+    smooth = ndimage.gaussian_filter(total, sigma / block) / np.maximum(weight, 1e-12)
+    # Block pixel j is full-resolution coordinate (j + 0.5) * block - 0.5.
+    ys = (np.arange(height) + 0.5) / block - 0.5
+    xs = (np.arange(width) + 0.5) / block - 0.5
+    gy, gx = np.meshgrid(ys, xs, indexing="ij")
+    full = ndimage.map_coordinates(smooth, [gy, gx], order=1, mode="nearest")
+    return np.where(mask, full, 0.0)
 
 
 def _with_relief_residual(
