@@ -21,10 +21,12 @@ EVALUATE_HELP = """\
 Leave-one-out evaluation of a database: every object's image-map is synthesized
 from the other objects only (automatic example selection, the class preset) and
 compared with its true image-map over the object's mask, for the full method and
-five baselines:
+six baselines:
 
   full          the method (pyramid, hard EM, depth + colour + position)
   copy_nearest  the nearest example's map pasted at the query's centroid
+  warp_nearest  the first-choice example posed and warped onto the query as the
+                method does, and copied whole (no synthesis)
   one_pass      one pass of depth-only matching and voting (no EM, no position)
   mean_vote     the full method with the paper's mean vote instead of the seam-
                 blended copy
