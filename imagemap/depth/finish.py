@@ -180,6 +180,24 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
             for colours, relief in zip(exemplars, example_reliefs, strict=True)
         ]
         reference = np.concatenate([reference, weight * query_relief[..., None]], axis=-1)
+    preference = config.finish.seam_example_preference
+    if preference > 0 and len(exemplars) > 1:
+        # The examples' order as one more channel, constant per example (sqrt of its rank
+        # times the preference; the reference's 0): a copy from a later example costs that
+        # much a pixel, so the relief alone does not hand a part to another palette.
+        exemplars = [
+            np.concatenate(
+                [
+                    colours,
+                    np.full(colours.shape[:2] + (1,), np.sqrt(preference * rank), np.float32),
+                ],
+                axis=-1,
+            )
+            for rank, colours in enumerate(exemplars)
+        ]
+        reference = np.concatenate(
+            [reference, np.zeros(reference.shape[:2] + (1,), np.float32)], -1
+        )
     new = place_seams(
         exemplars,
         old,

@@ -375,7 +375,7 @@ def depth_mappings(
     levels: int = 3,
     guides: Guides = _GUIDES,
     positions: list[np.ndarray] | None = None,
-    position_scales: list[np.ndarray] | None = None,
+    position_scales: list[np.ndarray | None] | None = None,
 ) -> list[Mapping]:
     """The query's pyramid of mappings (guide bands and mask) for a depth map;
     ``positions`` (per level, (H_l, W_l, 2)) replace the engine's relative position,

@@ -501,7 +501,7 @@ def position_scales(
     relative_weight: float,
     disagreement: float,
     reach: float,
-) -> list[np.ndarray] | None:
+) -> list[np.ndarray | None] | None:
     """Per pyramid level, the query's factor on the position term's weight: where none of
     the registered examples' relief agrees with the query's own (a groove, a ridge, a bump
     that lies elsewhere or nowhere in them), the registered position gives way to the
