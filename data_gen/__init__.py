@@ -1,4 +1,4 @@
-"""Procedural example classes (fish, busts, humans) rendered with trimesh ray casting.
+"""Procedural example classes (fish, busts, humans, shells) rendered with trimesh ray casting.
 
 Each instance is a triangle mesh built from randomized shape parameters, coloured by
 procedural functions of its surface (:mod:`data_gen.procedural`), and rendered by an
@@ -21,6 +21,7 @@ from data_gen.core import make_instance as _make_instance
 from data_gen.dataset import contact_sheet, write_class
 from data_gen.fish import FISH
 from data_gen.humans import HUMANS
+from data_gen.shells import SHELLS
 
 __all__ = [
     "CLASSES",
@@ -31,7 +32,12 @@ __all__ = [
     "write_class",
 ]
 
-CLASSES: dict[str, ObjectClass] = {"fish": FISH, "busts": BUSTS, "humans": HUMANS}
+CLASSES: dict[str, ObjectClass] = {
+    "fish": FISH,
+    "busts": BUSTS,
+    "humans": HUMANS,
+    "shells": SHELLS,
+}
 
 
 def make_instance(

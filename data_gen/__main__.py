@@ -29,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--size",
         type=parse_size,
         default=None,
-        help="WIDTHxHEIGHT (default: fish 200x150, busts and humans 150x200)",
+        help="WIDTHxHEIGHT (default: fish and shells 200x150, busts and humans 150x200)",
     )
     parser.add_argument(
         "--seed", type=non_negative_int, default=0, help="run seed >= 0 (default 0)"
@@ -107,8 +107,10 @@ def check_out_holds_only_ours(out: str, class_name: str) -> None:
 
 #: Peak bytes per pixel of one instance while a class is made, measured (VmHWM, count 1):
 #: fish 722 bytes/pixel from 800x600 to 1600x1200 (567 MB, 1.58 GB), busts at 800x600
-#: 992 MB (about 1,800 above the start-up); bounded by busts'.
-_INSTANCE_PIXEL_BYTES = 2000
+#: 992 MB (about 1,800 above the start-up); shells (a 60,000-face mesh, whose ray cast
+#: holds a candidate per face and pixel it may cover) 3,700 at 400x300 (555 MB), 2,400 at
+#: 800x600 (1.26 GB), 1,900 at 1600x1200 (3.73 GB); bounded by shells' from 800x600 on.
+_INSTANCE_PIXEL_BYTES = 2500
 #: Kept per instance until the contact sheet is drawn (depth, image, labels, PBR maps).
 _KEPT_PIXEL_BYTES = 64
 

@@ -79,6 +79,13 @@ class ObjectClass:
         Shape and appearance parameters (JSON-able).
     build : callable (dict) -> Assembly
     colorize : callable (dict, SurfaceHits) -> (labels (N,) uint8, rgb (N, 3) float32)
+    max_jitter : dict, optional
+        Largest view jitter: yaw, pitch, roll (degrees) and shift (pixels).
+    uv_layout : callable (dict, Assembly) -> (source (V',), faces (F, 3), uv (V', 2)), optional
+        The texture atlas of the class's mesh for ``--meshes`` (``source`` indexes the
+        mesh's vertices, split along the charts' seams; ``faces`` index ``source``):
+        for a mesh xatlas takes long to chart. None: xatlas
+        (:func:`imagemap.scene.uv_atlas`).
     """
 
     name: str
@@ -92,6 +99,7 @@ class ObjectClass:
     max_jitter: dict = field(
         default_factory=lambda: {"yaw": 4.0, "pitch": 3.0, "roll": 3.0, "shift_px": 3.0}
     )
+    uv_layout: Callable[[dict, Assembly], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
 
 @dataclass
@@ -125,6 +133,9 @@ PART_ROUGHNESS = {
     "shirt": 0.85,
     "trousers": 0.9,
     "shoes": 0.35,
+    "plate": 0.5,
+    "groove": 0.75,
+    "rim": 0.5,
 }
 #: Roughness of a part missing from :data:`PART_ROUGHNESS`.
 OTHER_ROUGHNESS = 0.6

@@ -51,7 +51,8 @@ def write_instance(instance: Instance, directory: str | os.PathLike) -> list[Pat
 def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_size: int = 512):
     """Instance ``index`` as a textured trimesh, posed as it is rendered (view jitter included).
 
-    The class's colouring is evaluated at every texel of a UV atlas (``xatlas``), so
+    The class's colouring is evaluated at every texel of a UV atlas (the class's
+    :attr:`~data_gen.core.ObjectClass.uv_layout`, else ``xatlas``), so
     the mesh rendered from the front shows the instance's image-map; its roughness
     per part (:func:`data_gen.core.part_roughness`) is the material's roughness
     texture. Same seed, same mesh and textures.
@@ -61,7 +62,11 @@ def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_
     from imagemap.scene import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
 
     params, _, assembly, pose, mesh = posed_instance(object_class, index, seed)
-    vertices, faces, uv, source = uv_atlas(mesh)
+    if object_class.uv_layout is not None:
+        source, faces, uv = object_class.uv_layout(params, assembly)
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)[source]
+    else:
+        vertices, faces, uv, source = uv_atlas(mesh)
     texel, face, bary = rasterize_uv(uv, faces, texture_size)
     points = np.einsum("nk,nkc->nc", bary, vertices[faces[face]])
     labels, rgb = colour_surface(object_class, params, assembly, pose, mesh, face, points)

@@ -1,7 +1,7 @@
 """Procedural solid textures for the example classes: :mod:`imagemap.btf.procedural`.
 
 They moved to ``imagemap`` because the BTF experiment's materials are made of them and
-``imagemap`` never imports ``data_gen``; the fish, busts and humans keep importing them from
+``imagemap`` never imports ``data_gen``; the fish, busts, humans and shells keep importing them from
 here.
 
 Example
