@@ -100,9 +100,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="allow replacing files beside a query depth that look like its held-out truth "
-        "(NAME_image.png, NAME_labels.png, NAME.json); the query depths and the database are "
-        "never overwritten",
+        help="allow replacing an existing NAME_image.png, NAME_labels.png or NAME.json that "
+        "has a NAME_depth.* or a NAME mesh beside it (a held-out truth, or an example of a "
+        "database this command does not read); nothing else: never a PBR map "
+        "(NAME_roughness.png ...), a depth map, a query or a file of --db",
     )
     p.add_argument(
         "--no-memory-check",
@@ -274,7 +275,7 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
     """Every output against every input and every other output, and writable: before any work."""
     from imagemap.outputs import OutputPlan, check_output_directory
 
-    plan = OutputPlan()
+    plan = OutputPlan(overwrite=args.overwrite)
     for job in jobs:
         # The query, and the truth beside it (NAME_image.png ...): --overwrite replaces that.
         plan.add_query(

