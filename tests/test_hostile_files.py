@@ -202,3 +202,89 @@ def test_the_rule_knows_a_set_of_its_own_from_an_example(tmp_path):
     alone.add_output(tmp_path / "x.json", "--report")
     with pytest.raises(InputError, match=r"x\.json.*sidecar.*x\.glb.*--overwrite"):
         alone.check()
+
+
+# -- data_gen onto an existing database (lost 2) -----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def earlier_run(tmp_path_factory):
+    """An earlier data_gen run: fish, 3 instances at 40x30, one held out."""
+    from data_gen.__main__ import main as data_gen_main
+
+    out = tmp_path_factory.mktemp("earlier") / "fish"
+    args = ["fish", "--count", "3", "--holdout", "1", "--size", "40x30", "--out", str(out), "-q"]
+    assert data_gen_main(args) == 0
+    return out
+
+
+@pytest.fixture
+def database_run(tmp_path, earlier_run):
+    import shutil
+
+    shutil.copytree(earlier_run, tmp_path / "fish")
+    return {"root": tmp_path, "out": tmp_path / "fish"}
+
+
+def _data_gen(w, *extra):
+    from data_gen.__main__ import main as data_gen_main
+
+    return data_gen_main(["fish", "--out", str(w["out"]), "-q", *extra])
+
+
+DATA_GEN_CASES = {
+    "another --size and --seed (the user's case)": (
+        ["--count", "2", "--size", "32x24", "--seed", "4"],
+        ["fish_000.json", "--size 40x30", "--size 32x24", "--overwrite", "replace", "mixed"],
+    ),
+    "another --holdout split": (
+        ["--count", "3", "--size", "40x30"],
+        ["holdout/fish_002", "not among this run's", "--overwrite"],
+    ),
+    "fewer instances": (
+        ["--count", "2", "--holdout", "1", "--size", "40x30"],
+        ["16 of its files are not among this run's", "fish_001.json", "--overwrite"],
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DATA_GEN_CASES))
+def test_data_gen_refuses_an_earlier_run_at_other_settings(database_run, capsys, case):
+    extra, words = DATA_GEN_CASES[case]
+    before = snapshot(database_run["root"])
+    code = _data_gen(database_run, *extra)
+    message = capsys.readouterr().err
+    assert code == 2, message
+    for word in words:
+        assert word in message, message
+    assert_unchanged(database_run, before)
+
+
+def test_data_gen_refuses_stale_meshes_and_overwrite_replaces_the_run_whole(database_run, capsys):
+    """An earlier run with --meshes: a run without is refused (its meshes/ would stay);
+    with --overwrite the folder is the new run's alone."""
+    from data_gen.dataset import planned_files
+
+    out = database_run["out"]
+    (out / "meshes").mkdir()
+    (out / "meshes" / "fish_000.glb").write_bytes(b"an earlier run's mesh")
+    before = snapshot(database_run["root"])
+    assert _data_gen(database_run, "--count", "3", "--holdout", "1", "--size", "40x30") == 2
+    assert "meshes/fish_000.glb" in capsys.readouterr().err
+    assert_unchanged(database_run, before)
+    code = _data_gen(database_run, "--count", "2", "--size", "32x24", "--overwrite")
+    assert code == 0
+    files = sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file())
+    assert files == sorted(planned_files("fish", 2))
+    sizes = {tuple(json.loads((out / f"fish_00{i}.json").read_text())["size"]) for i in (0, 1)}
+    assert sizes == {(32, 24)}
+
+
+def test_data_gen_memory_refusal_blames_count_when_count_is_the_cause(tmp_path, capsys):
+    from data_gen.__main__ import main as data_gen_main
+
+    code = data_gen_main(["fish", "--count", "100000000", "--size", "40x30", "--out",
+                          str(tmp_path / "new"), "-q"])  # fmt: skip
+    message = capsys.readouterr().err
+    assert code == 2 and "--count 100000000" in message and "smaller --count" in message, message
+    assert not (tmp_path / "new").exists()
