@@ -288,3 +288,114 @@ def test_data_gen_memory_refusal_blames_count_when_count_is_the_cause(tmp_path, 
     message = capsys.readouterr().err
     assert code == 2 and "--count 100000000" in message and "smaller --count" in message, message
     assert not (tmp_path / "new").exists()
+
+
+# -- meshes: non-finite vertices and UVs refused by name, never dropped -----------------------
+
+
+def _bad_mesh(w, kind: str) -> Path:
+    """A damaged mesh file in root/bad/ (its folder is part of the snapshot)."""
+    folder = w["root"] / "bad"
+    folder.mkdir(exist_ok=True)
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    if kind in ("nan.ply", "nan.obj", "inf.ply"):
+        vertices = sphere.vertices.copy()
+        if kind == "inf.ply":
+            vertices[3] = np.inf
+        else:
+            vertices[::7] = np.nan  # the user's case: every 7th vertex
+        trimesh.Trimesh(vertices, sphere.faces, process=False).export(folder / kind)
+    elif kind == "nan_uv.glb":
+        uv = sphere.vertices[:, :2] / 2 + 0.5
+        uv[5] = np.nan
+        export_textured(textured_mesh(sphere.vertices, sphere.faces, uv, np.ones((8, 8, 3))),
+                        folder / kind)  # fmt: skip
+    elif kind == "line.glb":  # zero-area faces (every vertex on a line) and NaN UVs
+        vertices = np.stack([np.linspace(0, 1, 6), np.zeros(6), np.zeros(6)], axis=1)
+        faces = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5]])
+        uv = np.full((6, 2), np.nan)
+        export_textured(textured_mesh(vertices, faces, uv, np.ones((8, 8, 3))), folder / kind)
+    return folder / kind
+
+
+MESH_FILE_CASES = {
+    "NaN vertices (every 7th), PLY": ("nan.ply", ["nan.ply", "92 of 642 vertices", "477 of 1280"]),
+    "NaN vertices (every 7th), OBJ": ("nan.obj", ["nan.obj", "vertices are NaN or infinite"]),
+    "one infinite vertex": ("inf.ply", ["inf.ply", "1 of 642 vertices", "touching 5 of 1280"]),
+    "NaN UVs": ("nan_uv.glb", ["nan_uv.glb", "UV coordinates are NaN"]),
+    "zero-area faces and NaN UVs": ("line.glb", ["line.glb", "UV coordinates are NaN"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MESH_FILE_CASES))
+def test_non_finite_meshes_are_refused_by_name(fish, capsys, no_work, case):
+    kind, words = MESH_FILE_CASES[case]
+    source = _bad_mesh(fish, kind)
+    argv = ["synthesize", str(source), "--db", str(fish["db"] / "meshes"), "-q", "--view=front",
+            "-o", str(fish["root"] / "out.glb")]  # fmt: skip
+    run_refused(fish, capsys, argv, words)
+
+
+def test_faces_without_area_are_refused(tmp_path):
+    from imagemap.scene import load_mesh
+
+    vertices = np.stack([np.linspace(0, 1, 6), np.zeros(6), np.zeros(6)], axis=1)
+    faces = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5]])
+    trimesh.Trimesh(vertices, faces, process=False).export(tmp_path / "line.ply")
+    with pytest.raises(InputError, match=r"line\.ply: its 4 faces have no area"):
+        load_mesh(tmp_path / "line.ply")
+
+
+def test_the_bake_size_of_nan_uvs_is_an_input_error():
+    """texture_size_for (the mesh route's memory guard) on NaN UVs: an InputError, which
+    the guard takes as "no usable UVs", not a ValueError traceback."""
+    from imagemap.scene.bake import texture_size_for
+
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=np.full((len(mesh.vertices), 2), np.nan))
+    with pytest.raises(InputError, match="NaN"):
+        texture_size_for(mesh, 0.01)
+
+
+def _nan_uv_ball():
+    mesh = ball()
+    mesh.visual.uv[4] = np.nan
+    return mesh
+
+
+@pytest.mark.parametrize(
+    "mesh, kwargs, words",
+    [
+        (ball, {"texture_size": 64.5}, "texture_size: expected an integer"),
+        (ball, {"texture_size": True}, "texture_size: expected an integer"),
+        (ball, {"uv_space": "yes"}, "uv_space: expected True, False"),
+        (ball, {"views": 5}, "views: expected"),
+        (_nan_uv_ball, {}, "mesh: 1 of 162 UV coordinates are NaN"),
+    ],
+)
+def test_colorize_mesh_refuses_what_it_took_as_it_came(blob_database, mesh, kwargs, words):
+    with pytest.raises(InputError, match=words):
+        imagemap.mesh.colorize.colorize_mesh(mesh(), blob_database, **kwargs)
+
+
+def test_views_name_the_number_at_fault():
+    from imagemap.scene.views import parse_views
+
+    with pytest.raises(InputError, match="azimuth 'nan'"):
+        parse_views("nan,0")
+    with pytest.raises(InputError, match="elevation 'inf'"):
+        parse_views("0,inf")
+
+
+def test_a_tiny_mesh_is_seen_as_its_unit_size_copy():
+    """A mesh 1e-6 units across rendered "nothing visible" (trimesh dropped its triangles
+    as degenerate): it is cast at unit size and seen as the same mesh is."""
+    from imagemap.scene.views import render_mesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    tiny = sphere.copy()
+    tiny.vertices *= 1e-6
+    seen, reference = render_mesh(tiny, "front", (40, 30)), render_mesh(sphere, "front", (40, 30))
+    assert seen.mask.sum() == reference.mask.sum() > 400
+    np.testing.assert_array_equal(seen.depth, reference.depth)
+    np.testing.assert_allclose(seen.z[seen.mask], reference.z[seen.mask] * 1e-6, rtol=1e-9)
