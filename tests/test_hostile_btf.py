@@ -166,6 +166,33 @@ def _btf_yuv_one_channel(world, folder):
     return path
 
 
+def _model_offset(data: bytes) -> int:
+    """Where the colour model's code is in ``valid.btf`` (the components field before it,
+    the colour mean after it)."""
+    meta_end = _first_light_offset(data) - 16
+    return meta_end + 4 + len(VIEWS) * (12 + 8 * len(LIGHTS)) + 8 + 4 + 4
+
+
+def _btf_trailing_junk(world, folder):
+    (folder / "junk.btf").write_bytes(bytes(_ubo_bytes(world)) + b"trailing junk")
+    return folder / "junk.btf"
+
+
+def _btf_components_1000(world, folder):
+    data = _ubo_bytes(world)
+    assert struct.unpack_from("<I", data, _model_offset(data) - 4)[0] == 3  # the largest k
+    struct.pack_into("<I", data, _model_offset(data) - 4, 1000)
+    (folder / "k1000.btf").write_bytes(bytes(data))
+    return folder / "k1000.btf"
+
+
+def _btf_nan_colour_mean(world, folder):
+    data = _ubo_bytes(world)
+    struct.pack_into("<f", data, _model_offset(data) + 4, np.nan)
+    (folder / "nan_mean.btf").write_bytes(bytes(data))
+    return folder / "nan_mean.btf"
+
+
 def _npz_nan_view(world, folder):
     from imagemap.btf import load_btf
 
@@ -193,6 +220,12 @@ BTF_FILE_CASES = {
     "UBO2014 file cut short": (_btf_truncated, "truncated"),
     "UBO2014 file with an infinite factor value": (_btf_infinite, "infinite"),
     "UBO2014 file: one channel in YUV": (_btf_yuv_one_channel, "color_model"),
+    "UBO2014 file with trailing junk (#45)": (_btf_trailing_junk, "13 bytes after the last"),
+    "UBO2014 file whose components field says 1000 (#45)": (
+        _btf_components_1000,
+        "components field says 1000",
+    ),
+    "UBO2014 file with a NaN colour mean (#45)": (_btf_nan_colour_mean, "colour mean"),
     ".npz BTF with a NaN view direction": (_npz_nan_view, "view_dirs"),
     ".npz that is not a BTF": (_not_a_btf, "not a BTF"),
 }
@@ -208,6 +241,34 @@ def test_damaged_btf_files_are_refused_by_name(world, tmp_path, capsys, case):
     assert code == 2 and path.name in message and words in message, message
     assert "Traceback" not in message
     assert snapshot(world["root"], tmp_path) == before
+
+
+def test_write_ubo2014_refuses_a_folder_and_a_channel_float16_would_lose(tmp_path, caplog):
+    """A folder as the path was a bare IsADirectoryError; singular values of 1e-9 in float16
+    read back as [0, 0] without a word (overflow was refused)."""
+    factors = {
+        "eigen_abrdfs": [np.eye(2)],
+        "eigentextures": [np.ones((2, 3, 2))],
+        "channels": ("L",),
+        "light_dirs": [[0, 0], [45, 90]],
+        "view_dirs": [[0, 0]],
+    }
+    (tmp_path / "folder").mkdir()
+    with pytest.raises(InputError, match="folder: write_ubo2014 path is a directory"):
+        write_ubo2014(tmp_path / "folder", singular_values=[[1.0, 0.5]], **factors)
+    with pytest.raises(InputError, match=r"singular_values\[0\].*2 of 2 component.*lost"):
+        write_ubo2014(tmp_path / "t.btf", singular_values=[[1e-9, 1e-9]], scalar_size=2, **factors)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder"]
+    with caplog.at_level("WARNING", logger="imagemap"):
+        write_ubo2014(tmp_path / "t.btf", singular_values=[[1.0, 1e-9]], scalar_size=2, **factors)
+    assert "1 of 2 component(s)" in caplog.text
+
+
+def test_write_image_refuses_nan(tmp_path):
+    """An all-NaN array was written as a black PNG."""
+    with pytest.raises(InputError, match=r"x\.png: the image has 12 NaN value\(s\) of 12"):
+        write_image(tmp_path / "x.png", np.full((3, 4), np.nan))
+    assert not list(tmp_path.iterdir())
 
 
 # -- photometric stereo ------------------------------------------------------------------------
@@ -666,8 +727,10 @@ def test_extrapolate_and_render_refuse_bad_input(world, tmp_path, capsys, case):
     assert snapshot(world["root"], tmp_path) == before
 
 
-def test_extrapolate_warns_about_a_scan_of_another_material(tmp_path, capsys, caplog):
-    """--register: a foreign scan is named in a warning; the run goes on (exit 0)."""
+def test_extrapolate_refuses_a_scan_of_another_material(tmp_path, capsys, caplog):
+    """--register: a foreign scan is refused by name with its confidence, nothing written
+    (#45: it was a warning, and the result was written); --allow-misfit goes on with the
+    warning."""
     import tifffile
     from scipy import ndimage
     from skimage.transform import rotate
@@ -702,8 +765,13 @@ def test_extrapolate_warns_about_a_scan_of_another_material(tmp_path, capsys, ca
     sample.save(tmp_path / "sample.npz")
     argv = ["btf", "extrapolate", str(tmp_path / "sample.npz"), "--scans", *paths]
     argv += ["--register", "--linear-scans", "-o", str(tmp_path / "b.npz")]
+    before = snapshot(tmp_path)
+    code, message = cli(argv, capsys)
+    assert code == 2, message
+    assert f"--scans: {paths[3]} (match confidence " in message and "--allow-misfit" in message
+    assert snapshot(tmp_path) == before
     with caplog.at_level("WARNING", logger="imagemap"):
-        code, message = cli(argv, capsys)
+        code, message = cli([*argv, "--allow-misfit"], capsys)
     assert code == 0, message
     warnings = caplog.text  # the command's log lines (stderr outside pytest)
     assert "--scans " + paths[3] + " does not fit" in warnings, warnings
