@@ -399,3 +399,40 @@ def test_a_tiny_mesh_is_seen_as_its_unit_size_copy():
     assert seen.mask.sum() == reference.mask.sum() > 400
     np.testing.assert_array_equal(seen.depth, reference.depth)
     np.testing.assert_allclose(seen.z[seen.mask], reference.z[seen.mask] * 1e-6, rtol=1e-9)
+
+
+# -- smaller: a batch's orphaned output, constant PBR maps --------------------------------------
+
+
+def test_resume_redoes_an_output_whose_manifest_was_deleted(fish, capsys):
+    """The batch report records each output's SHA-256: an output whose manifest is gone is
+    still the batch's while it has that content (resume redoes it; it was refused, and
+    --force did not help); changed since, it is a user's file and stays refused."""
+    inputs = fish["root"] / "in"
+    inputs.mkdir()
+    (inputs / "a_depth.png").write_bytes((fish["holdout"] / "q_depth.png").read_bytes())
+    out = fish["root"] / "out"
+    argv = ["batch", str(inputs), "--db", str(fish["db"]), "-o", str(out), "-q"]
+    assert cli(argv, capsys)[0] == 0
+    (out / ".imagemap-done" / "a_depth.png.json").unlink()
+    code, message = cli(argv, capsys)
+    assert code == 0, message
+    assert (out / ".imagemap-done" / "a_depth.png.json").is_file()
+    (out / ".imagemap-done" / "a_depth.png.json").unlink()
+    (out / "a_image.png").write_bytes(b"the user's own picture now")
+    run_refused(fish, capsys, argv, ["a_image.png", "no earlier run"])
+
+
+def test_no_constant_pbr_map_is_written_for_examples_without_one(fish, capsys):
+    """The database has a roughness map, the examples chosen have none (blob_1 has, but
+    it is the query itself and is left out): no out_roughness.png of the neutral 0.6
+    everywhere (written without a word before), and a note says so."""
+    for name in ("blob_0", "blob_2", "blob_3", "blob_4"):
+        (fish["db"] / f"{name}_roughness.png").unlink()
+    out = fish["root"] / "out.png"
+    argv = _depths(fish, "q", extra=["-o", str(out)])
+    argv.remove("-q")
+    code, message = cli(argv, capsys)
+    assert code == 0, message
+    assert out.is_file() and not (fish["root"] / "out_roughness.png").exists()
+    assert "no roughness map written beside" in message and "have none" in message
