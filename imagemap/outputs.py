@@ -502,10 +502,11 @@ class OutputPlan:
         if self.overwrite and kind in OVERWRITE_KINDS:
             return
         if self.overwrite:
+            way = " (or --no-maps, which writes no PBR map)" if output.main is not None else ""
             raise InputError(
                 f"{path} ({what}) would replace the {kind} map of {owner.name}'s example or "
                 f"held-out truth; --overwrite replaces {named} only, never a {kind} map: "
-                "give the output another name (or --no-maps, which writes no PBR map)"
+                f"give the output another name{way}"
             )
         way = ""
         if self.overwrite is False and kind in OVERWRITE_KINDS:
