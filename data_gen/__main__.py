@@ -47,6 +47,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write each instance as a textured mesh OUT/meshes/NAME.glb "
         "(holdout: OUT/holdout/meshes/), for imagemap's mesh input and batches",
     )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier run in --out made at other settings (--seed, --size, "
+        "--count, --holdout, --meshes): its files are replaced and those this run does not "
+        "write are removed. Without it such a folder is refused; a folder of the same "
+        "settings is made anew either way",
+    )
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no log")
     return parser
 
@@ -59,11 +67,11 @@ _OURS = (
 )
 
 
-def check_out_holds_only_ours(out: str, class_name: str) -> None:
+def check_out_holds_only_ours(out: str, class_name: str) -> list:
     """Refuse an --out folder holding anything this command would not write itself (a
     database of other examples, a user's folder): it would be mixed with, or partly
-    replaced by, the new instances. A folder of an earlier run of the same class is
-    made anew."""
+    replaced by, the new instances. Returns the files of an earlier run of the same
+    class there (relative to ``out``; :func:`check_earlier_run` compares its settings)."""
     import re
     from pathlib import Path
 
@@ -71,7 +79,7 @@ def check_out_holds_only_ours(out: str, class_name: str) -> None:
 
     root = Path(out)
     if not root.is_dir():
-        return
+        return []
     ours = re.compile(_OURS.format(cls=re.escape(class_name)))
     mesh = re.compile(rf"^{re.escape(class_name)}_\d{{3,}}\.glb$")
 
@@ -103,6 +111,41 @@ def check_out_holds_only_ours(out: str, class_name: str) -> None:
             f"someone's data (a database or your files), not an earlier {class_name} run; "
             "give a new or empty folder"
         )
+    return sorted(
+        p.relative_to(root) for p in root.rglob("*") if p.is_file() and not is_temporary(p)
+    )
+
+
+def check_earlier_run(args: argparse.Namespace, existing: list) -> list:
+    """Refuse, unless ``--overwrite``, an --out folder holding an earlier run made at other
+    settings (:func:`data_gen.dataset.compare_run`), saying what would be replaced and
+    what left. Returns the earlier run's files this run does not write (with
+    ``--overwrite``: removed once the new run is written, so the folder is one run's)."""
+    from data_gen import CLASSES
+    from data_gen.dataset import compare_run
+
+    if not existing:
+        return []
+    size = args.size or CLASSES[args.class_name].default_size
+    replaced, left, why = compare_run(
+        args.out,
+        existing,
+        args.class_name,
+        count=args.count,
+        seed=args.seed,
+        size=size,
+        holdout=args.holdout,
+        meshes=args.meshes,
+    )
+    if not why or args.overwrite:
+        return left if why else []
+    shown = ", ".join(str(p) for p in replaced[:4]) + (" ..." if len(replaced) > 4 else "")
+    raise InputError(
+        f"--out {args.out}: holds an earlier {args.class_name} run at other settings ({why}); "
+        f"this run would replace {len(replaced)} of its files ({shown or 'none'}) and leave "
+        f"{len(left)} beside the new ones: a mixed database. Give a new folder, or "
+        "--overwrite to replace the earlier run whole"
+    )
 
 
 #: Peak bytes per pixel of one instance while a class is made, measured (VmHWM, count 1):
@@ -122,8 +165,13 @@ def check_memory_for(class_name: str, count: int, size) -> None:
 
     width, height = size or CLASSES[class_name].default_size
     pixels = int(width) * int(height)
-    needed = pixels * (_INSTANCE_PIXEL_BYTES + _KEPT_PIXEL_BYTES * max(int(count), 1))
-    check_memory(needed, f"--size {width}x{height}", advice="give a smaller --size")
+    one = pixels * _INSTANCE_PIXEL_BYTES
+    kept = pixels * _KEPT_PIXEL_BYTES * max(int(count), 1)
+    if kept > one:  # the instances kept for the contact sheet weigh most: --count's doing
+        what = f"--count {count} at --size {width}x{height} (each kept for the contact sheet)"
+        check_memory(one + kept, what, advice="give a smaller --count (or --size)")
+    else:
+        check_memory(one + kept, f"--size {width}x{height}", advice="give a smaller --size")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -138,8 +186,9 @@ def main(argv: list[str] | None = None) -> int:
         from imagemap.outputs import check_output_directory
 
         check_output_directory(args.out, "--out directory")
-        check_out_holds_only_ours(args.out, args.class_name)
+        existing = check_out_holds_only_ours(args.out, args.class_name)
         check_memory_for(args.class_name, args.count, args.size)
+        stale = check_earlier_run(args, existing)
         instances = write_class(
             CLASSES[args.class_name],
             args.out,
@@ -153,6 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"data_gen: error: {exc}", file=sys.stderr)
         return 2
+    _remove_stale(args.out, stale, args.quiet)
     if not args.quiet:
         print(
             f"data_gen: {len(instances)} {args.class_name} written to {args.out} in "
@@ -160,6 +210,25 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _remove_stale(out: str, stale: list, quiet: bool) -> None:
+    """Remove the earlier run's files this run did not write (``--overwrite``), and the
+    folders that leaves empty."""
+    from pathlib import Path
+
+    root = Path(out)
+    for relative in stale:
+        (root / relative).unlink(missing_ok=True)
+    for folder in sorted({(root / p).parent for p in stale}, key=lambda p: -len(p.parts)):
+        if folder != root and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+    if stale and not quiet:
+        print(
+            f"data_gen: --overwrite: removed {len(stale)} file(s) of the earlier run "
+            f"({', '.join(str(p) for p in stale[:3])}{' ...' if len(stale) > 3 else ''})",
+            file=sys.stderr,
+        )
 
 
 if __name__ == "__main__":

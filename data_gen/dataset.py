@@ -20,9 +20,92 @@ from data_gen.render import ray_backend
 from imagemap.io import InputError, atomic_path, write_image
 from imagemap.progress import progress
 
-__all__ = ["contact_sheet", "instance_mesh", "write_class", "write_instance"]
+__all__ = [
+    "INSTANCE_MAPS",
+    "compare_run",
+    "contact_sheet",
+    "instance_mesh",
+    "planned_files",
+    "write_class",
+    "write_instance",
+]
 
 log = logging.getLogger(__name__)
+
+
+#: The PBR maps :func:`write_instance` writes beside every instance
+#: (:func:`data_gen.core.instance_maps`).
+INSTANCE_MAPS = ("normal", "roughness", "height", "ao")
+
+
+def planned_files(
+    class_name: str, count: int, holdout: int = 0, meshes: bool = False
+) -> list[Path]:
+    """The files :func:`write_class` writes, relative to its ``out`` folder.
+
+    Examples
+    --------
+    >>> [str(p) for p in planned_files("fish", 2, holdout=1)][:3]
+    ['contact_sheet.png', 'fish_000.json', 'fish_000_ao.png']
+    >>> len(planned_files("fish", 2, holdout=1, meshes=True))
+    19
+    """
+    files = [Path("contact_sheet.png")]
+    for index in range(count):
+        name = f"{class_name}_{index:03d}"
+        folder = Path("holdout") if index >= count - holdout else Path()
+        kinds = ["depth", "image", "labels", *INSTANCE_MAPS]
+        files += [folder / f"{name}_{kind}.png" for kind in kinds] + [folder / f"{name}.json"]
+        if meshes:
+            files.append(folder / "meshes" / f"{name}.glb")
+    return sorted(files)
+
+
+def compare_run(
+    out: str | os.PathLike,
+    existing: list[Path],
+    class_name: str,
+    *,
+    count: int,
+    seed: int,
+    size: tuple[int, int],
+    holdout: int = 0,
+    meshes: bool = False,
+) -> tuple[list[Path], list[Path], str]:
+    """How a run compares with the earlier one whose files (``existing``, relative to
+    ``out``) are in its folder: (the files it would replace, the files it would leave
+    behind, why the settings differ; "" when they do not).
+
+    The settings differ when an instance's JSON records another seed or size (or
+    cannot be read), or when files of the earlier run are not among this run's
+    (more instances, another holdout split, meshes): those would be left beside the
+    new ones, a mixed database. Replacing an earlier run of the same settings rewrites
+    the same bytes.
+    """
+    out = Path(out)
+    planned = set(planned_files(class_name, count, holdout, meshes))
+    replaced = sorted(p for p in existing if p in planned)
+    left = sorted(p for p in existing if p not in planned)
+    reasons = []
+    for sidecar in (p for p in existing if p.suffix == ".json"):
+        try:
+            record = json.loads((out / sidecar).read_text())
+            earlier = (int(record["seed"]), tuple(int(v) for v in record["size"]))
+        except (OSError, ValueError, KeyError, TypeError):
+            reasons.append(f"{sidecar} does not say its settings")
+            break
+        if earlier != (int(seed), tuple(int(v) for v in size)):
+            reasons.append(
+                f"{sidecar} was made at --seed {earlier[0]} --size {earlier[1][0]}x"
+                f"{earlier[1][1]}, this run is --seed {seed} --size {size[0]}x{size[1]}"
+            )
+            break
+    if left:
+        reasons.append(
+            f"{len(left)} of its files are not among this run's ({', '.join(map(str, left[:3]))}"
+            f"{' ...' if len(left) > 3 else ''}: another --count, --holdout or --meshes)"
+        )
+    return replaced, left, "; ".join(reasons)
 
 
 def write_instance(instance: Instance, directory: str | os.PathLike) -> list[Path]:

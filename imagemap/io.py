@@ -290,7 +290,8 @@ def write_image(path: str | os.PathLike, image: np.ndarray, bits: int = 8) -> Pa
     path : str or path-like
         Destination (``.png``).
     image : ndarray
-        Float values in [0, 1] (clipped), or uint8/uint16 written as they are.
+        Float values in [0, 1] (clipped), or uint8/uint16 written as they are. NaN is
+        refused (:class:`InputError`): it is no colour, and was written as black.
     bits : {8, 16}
         Bit depth for float input.
     """
@@ -329,6 +330,12 @@ def _image_array(path: Path, image: np.ndarray, bits: int) -> np.ndarray:
     if np.issubdtype(array.dtype, np.floating):
         if bits not in (8, 16):
             raise ValueError("bits must be 8 or 16")
+        missing = int(np.count_nonzero(np.isnan(array)))
+        if missing:
+            raise InputError(
+                f"{path}: the image has {missing} NaN value(s) of {array.size}: NaN is no "
+                "colour (it would be written as black); fill or mask them first"
+            )
         scale = 255 if bits == 8 else 65535
         dtype = np.uint8 if bits == 8 else np.uint16
         array = np.round(np.clip(np.nan_to_num(array), 0.0, 1.0) * scale).astype(dtype)

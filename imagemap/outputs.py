@@ -8,6 +8,12 @@ Rules (docs/errors.md):
   two outputs share, is an :class:`~imagemap.io.InputError` naming both paths.
 - An output's suffix must match what is written (``.png`` for images, ``.json`` for
   reports, ``.npz`` for archives).
+- An existing file that belongs to an example or a held-out truth of any database (read
+  by this command or not) is no output either: ``NAME_image.*``, ``NAME_labels.png``,
+  ``NAME.json`` and every PBR map ``NAME_KIND.*`` that has a ``NAME_depth.*`` or a
+  ``NAME`` mesh beside it (:func:`example_file`), and any existing depth map
+  ``NAME_depth.*``. ``--overwrite`` (``synthesize``) replaces the kinds it names,
+  :data:`OVERWRITE_KINDS`, and nothing else.
 - Every output's folder must exist and be writable, or be creatable under a
   writable folder; an output may not be a directory. All of this is checked before
   the work starts.
@@ -58,10 +64,14 @@ from urllib.parse import unquote
 from imagemap.io import InputError, make_temporary
 
 __all__ = [
+    "EXAMPLE_KINDS",
+    "MESH_SUFFIXES",
+    "OVERWRITE_KINDS",
     "TRUTH_SUFFIXES",
     "OutputPlan",
     "check_output_directory",
     "check_writable",
+    "example_file",
     "exported",
     "mesh_companions",
     "query_name",
@@ -143,7 +153,26 @@ TRUTH_SUFFIXES = (
     ".json",
 )
 
+#: Suffixes read as meshes (anything trimesh loads that holds triangles); also
+#: :data:`imagemap.scene.MESH_SUFFIXES`.
+MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
+#: Suffixes of a depth map ``NAME_depth.*`` (what a database and a batch read as one).
+DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
+#: The files of an example or a held-out truth beside its ``NAME_depth.*`` or ``NAME``
+#: mesh, by kind: ``NAME_image.*``, ``NAME_labels.*``, ``NAME.json`` and the PBR maps
+#: (:data:`imagemap.materials.MAP_KINDS`; data_gen writes them beside every instance).
+EXAMPLE_KINDS = ("image", "labels", "json", "normal", "roughness", "metallic", "height", "ao")
+#: The kinds ``imagemap synthesize --overwrite`` may replace (its help and docs/errors.md
+#: name them): the colour, labels and sidecar of a truth. A PBR map, a depth map or a
+#: mesh is never replaced, with or without it.
+OVERWRITE_KINDS = ("image", "labels", "json")
+
 _DEPTH_NAME = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
+_EXAMPLE_NAME = re.compile(
+    rf"^(?P<name>.+?)(?:_(?P<kind>{'|'.join(k for k in EXAMPLE_KINDS if k != 'json')})"
+    r"\.(?:png|jpg|jpeg|tif|tiff)|(?P<json>\.json))$",
+    re.IGNORECASE,
+)
 # MTL statements naming a file (a texture); options such as "-bm 1.0" may precede the name.
 _MTL_FILE = re.compile(r"^\s*(?:map_\w+|bump|disp|decal|norm|refl)\s+(?P<rest>.+?)\s*$", re.I)
 _OBJ_MTLLIB = re.compile(r"^\s*mtllib\s+(?P<rest>.+?)\s*$")
@@ -167,6 +196,42 @@ def truths_beside(path: str | os.PathLike) -> list[Path]:
     path = Path(path)
     name = query_name(path)
     return [p for s in TRUTH_SUFFIXES if (p := path.parent / f"{name}{s}").is_file()]
+
+
+def example_file(path: str | os.PathLike) -> tuple[str, Path] | None:
+    """(kind, owner) when ``path`` is a file of an example or a held-out truth, else None.
+
+    Such a file is named ``NAME`` + the suffix of one of :data:`EXAMPLE_KINDS`
+    (``NAME_image.png``, ``NAME_labels.png``, ``NAME.json``, ``NAME_roughness.png`` ...)
+    and has the object it describes beside it: ``NAME_depth.*`` (:data:`DEPTH_SUFFIXES`)
+    or a ``NAME`` mesh (:data:`MESH_SUFFIXES`), the owner returned. A depth map
+    ``NAME_depth.*`` is its own owner (kind ``"depth"``). Whether the file exists is
+    not looked at.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> _ = (folder / "fish_005_depth.png").write_bytes(b"depth")
+    >>> kind, owner = example_file(folder / "fish_005_roughness.png")
+    >>> kind, owner.name
+    ('roughness', 'fish_005_depth.png')
+    >>> example_file(folder / "fish_006_image.png") is None  # no fish_006 beside it
+    True
+    """
+    path = Path(path)
+    if _DEPTH_NAME.match(path.name):
+        return "depth", path
+    match = _EXAMPLE_NAME.match(path.name)
+    if match is None:
+        return None
+    name, kind = match["name"], (match["kind"] or "json").lower()
+    owners = [f"{name}_depth{suffix}" for suffix in DEPTH_SUFFIXES]
+    owners += [f"{name}{suffix}" for suffix in MESH_SUFFIXES]
+    for owner in owners:
+        if (path.parent / owner).is_file():
+            return kind, path.parent / owner
+    return None
 
 
 def _named_files(folder: Path, rest: str) -> list[Path]:
@@ -276,8 +341,13 @@ class OutputPlan:
     when its main output exists as well (a previous run's set), never a user's file
     that merely has the name. An output added with ``fresh=True`` (a batch's) replaces
     an existing file only if :meth:`claim` was told it is a previous run's.
+
+    An existing file of an example or a held-out truth (:func:`example_file`) is no
+    output unless ``overwrite`` is True and its kind is one of :data:`OVERWRITE_KINDS`;
+    ``overwrite`` None: the command has no ``--overwrite`` (the message offers none).
     """
 
+    overwrite: bool | None = None
     inputs: list[tuple[Path, str]] = field(default_factory=list)
     protected_dirs: list[tuple[Path, str]] = field(default_factory=list)
     outputs: list[_Output] = field(default_factory=list)
@@ -379,6 +449,7 @@ class OutputPlan:
         folders = {resolve(folder): (folder, what) for folder, what in self.protected_dirs}
         seen: dict[str, _Output] = {}
         probed: set[Path] = set()
+        written = {os.path.normcase(resolve(output.path)) for output in self.outputs}
         for output in self.outputs:
             path, what = output.path, output.what
             full = resolve(path)
@@ -405,9 +476,46 @@ class OutputPlan:
                     )
             if full.is_file() or full.is_symlink():
                 self._check_replace(output, key)
+                self._check_example(output, written)
             if full.parent not in probed or full.is_dir():
                 check_writable(path, what)
                 probed.add(full.parent)
+
+    def _check_example(self, output: _Output, written: set[str]) -> None:
+        """An existing file of an example or a held-out truth: replaced only with
+        ``overwrite``, and only a kind of :data:`OVERWRITE_KINDS`. A file whose owner is
+        written by this command too (``-o x.glb --report x.json``, run again) is part of
+        an earlier run's set, not an example."""
+        found = example_file(output.path)
+        if found is None:
+            return
+        kind, owner = found
+        if kind != "depth" and os.path.normcase(resolve(owner)) in written:
+            return
+        path, what = output.path, output.what
+        if kind == "depth":
+            raise InputError(
+                f"{path} ({what}) would replace a depth map (a query or an example's): "
+                "give the output another name"
+            )
+        named = ", ".join(f"NAME{'.json' if k == 'json' else f'_{k}.png'}" for k in OVERWRITE_KINDS)
+        if self.overwrite and kind in OVERWRITE_KINDS:
+            return
+        if self.overwrite:
+            way = " (or --no-maps, which writes no PBR map)" if output.main is not None else ""
+            raise InputError(
+                f"{path} ({what}) would replace the {kind} map of {owner.name}'s example or "
+                f"held-out truth; --overwrite replaces {named} only, never a {kind} map: "
+                f"give the output another name{way}"
+            )
+        way = ""
+        if self.overwrite is False and kind in OVERWRITE_KINDS:
+            way = "; --overwrite replaces it"
+        shown = "sidecar" if kind == "json" else kind
+        raise InputError(
+            f"{path} ({what}) would replace the {shown} of an example or held-out truth "
+            f"(beside {owner.name}){way}: give the output another name"
+        )
 
     def _check_replace(self, output: _Output, key: str) -> None:
         """An existing file at an output: replaced only when it is the output's own."""

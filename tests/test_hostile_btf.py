@@ -24,7 +24,7 @@ from imagemap.btf.materials import make_material
 from imagemap.btf.rendering import render_btf_matrix
 from imagemap.btf.ubo2014 import write_ubo2014
 from imagemap.cli import main
-from imagemap.io import read_image, write_image
+from imagemap.io import InputError, read_image, write_image
 
 LIGHTS = np.array([[0, 0], [22, 0], [22, 90], [22, 180], [22, 270], [60, 45]], np.float32)
 VIEWS = np.array([[0, 0], [30, 90]], np.float32)
@@ -166,6 +166,33 @@ def _btf_yuv_one_channel(world, folder):
     return path
 
 
+def _model_offset(data: bytes) -> int:
+    """Where the colour model's code is in ``valid.btf`` (the components field before it,
+    the colour mean after it)."""
+    meta_end = _first_light_offset(data) - 16
+    return meta_end + 4 + len(VIEWS) * (12 + 8 * len(LIGHTS)) + 8 + 4 + 4
+
+
+def _btf_trailing_junk(world, folder):
+    (folder / "junk.btf").write_bytes(bytes(_ubo_bytes(world)) + b"trailing junk")
+    return folder / "junk.btf"
+
+
+def _btf_components_1000(world, folder):
+    data = _ubo_bytes(world)
+    assert struct.unpack_from("<I", data, _model_offset(data) - 4)[0] == 3  # the largest k
+    struct.pack_into("<I", data, _model_offset(data) - 4, 1000)
+    (folder / "k1000.btf").write_bytes(bytes(data))
+    return folder / "k1000.btf"
+
+
+def _btf_nan_colour_mean(world, folder):
+    data = _ubo_bytes(world)
+    struct.pack_into("<f", data, _model_offset(data) + 4, np.nan)
+    (folder / "nan_mean.btf").write_bytes(bytes(data))
+    return folder / "nan_mean.btf"
+
+
 def _npz_nan_view(world, folder):
     from imagemap.btf import load_btf
 
@@ -193,6 +220,12 @@ BTF_FILE_CASES = {
     "UBO2014 file cut short": (_btf_truncated, "truncated"),
     "UBO2014 file with an infinite factor value": (_btf_infinite, "infinite"),
     "UBO2014 file: one channel in YUV": (_btf_yuv_one_channel, "color_model"),
+    "UBO2014 file with trailing junk (#45)": (_btf_trailing_junk, "13 bytes after the last"),
+    "UBO2014 file whose components field says 1000 (#45)": (
+        _btf_components_1000,
+        "components field says 1000",
+    ),
+    "UBO2014 file with a NaN colour mean (#45)": (_btf_nan_colour_mean, "colour mean"),
     ".npz BTF with a NaN view direction": (_npz_nan_view, "view_dirs"),
     ".npz that is not a BTF": (_not_a_btf, "not a BTF"),
 }
@@ -208,6 +241,34 @@ def test_damaged_btf_files_are_refused_by_name(world, tmp_path, capsys, case):
     assert code == 2 and path.name in message and words in message, message
     assert "Traceback" not in message
     assert snapshot(world["root"], tmp_path) == before
+
+
+def test_write_ubo2014_refuses_a_folder_and_a_channel_float16_would_lose(tmp_path, caplog):
+    """A folder as the path was a bare IsADirectoryError; singular values of 1e-9 in float16
+    read back as [0, 0] without a word (overflow was refused)."""
+    factors = {
+        "eigen_abrdfs": [np.eye(2)],
+        "eigentextures": [np.ones((2, 3, 2))],
+        "channels": ("L",),
+        "light_dirs": [[0, 0], [45, 90]],
+        "view_dirs": [[0, 0]],
+    }
+    (tmp_path / "folder").mkdir()
+    with pytest.raises(InputError, match="folder: write_ubo2014 path is a directory"):
+        write_ubo2014(tmp_path / "folder", singular_values=[[1.0, 0.5]], **factors)
+    with pytest.raises(InputError, match=r"singular_values\[0\].*2 of 2 component.*lost"):
+        write_ubo2014(tmp_path / "t.btf", singular_values=[[1e-9, 1e-9]], scalar_size=2, **factors)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder"]
+    with caplog.at_level("WARNING", logger="imagemap"):
+        write_ubo2014(tmp_path / "t.btf", singular_values=[[1.0, 1e-9]], scalar_size=2, **factors)
+    assert "1 of 2 component(s)" in caplog.text
+
+
+def test_write_image_refuses_nan(tmp_path):
+    """An all-NaN array was written as a black PNG."""
+    with pytest.raises(InputError, match=r"x\.png: the image has 12 NaN value\(s\) of 12"):
+        write_image(tmp_path / "x.png", np.full((3, 4), np.nan))
+    assert not list(tmp_path.iterdir())
 
 
 # -- photometric stereo ------------------------------------------------------------------------
@@ -310,7 +371,37 @@ PHOTOMETRIC_CASES = {
         ["--shadow-level"],
     ),
     "--gamma 0": (lambda w, f: _ps(w, "-o", str(f / "n.png"), "--gamma", "0"), ["--gamma"]),
+    # #45: lights that decide no normal, samples that say nothing.
+    "12 identical lights": (
+        lambda w, f: _ps_lights(w, f, "0.3 0.4 0.866\n" * 12),
+        ["--lights", "l.txt", "rank 1 < 3", "one direction"],
+    ),
+    "12 lights in one plane through the camera (collinear)": (
+        lambda w, f: _ps_lights(
+            w, f, "".join(f"{np.cos(a):.6f} 0 {np.sin(a):.6f}\n" for a in np.linspace(0.5, 1.5, 12))
+        ),
+        ["--lights", "l.txt", "rank 2 < 3", "one plane"],
+    ),
+    "12 all-saturated images": (
+        lambda w, f: _ps(
+            w,
+            "-o",
+            str(f / "n.png"),
+            "--height",
+            str(f / "h.npy"),
+            images=[str(_image(f / f"white{i:02d}.png", (85, 128), 1.0)) for i in range(12)],
+        ),
+        ["no pixel has 3 usable samples", "saturated"],
+    ),
 }
+
+
+def _ps_lights(world, folder, text: str) -> list[str]:
+    """The grey sphere's images with another lights file, normals and heights asked for."""
+    argv = _ps(world, "-o", str(folder / "n.png"), "--height", str(folder / "h.npy"))
+    lights = argv.index("--lights") + 1
+    argv[lights] = _lights_file(folder, text)
+    return argv
 
 
 def _image(path: Path, shape, value: float = 0.0) -> Path:
@@ -343,6 +434,64 @@ def test_photometric_refuses_bad_input_before_any_work(world, tmp_path, capsys, 
         assert word in message, message
     assert "Traceback" not in message
     assert snapshot(world["root"], tmp_path) == before
+
+
+def test_photometric_leaves_out_pixels_without_three_usable_samples(world, tmp_path, caplog):
+    """A patch saturated in 10 of 12 images keeps 2 usable samples: its pixels are left out
+    of the normals (transparent in the normal map, NaN heights) with a warning giving their
+    share, not filled with a constant; the rest is solved as before."""
+    psm, mask = world["psm"], read_image(world["psm"] / "mask.png")[..., 0] > 0.5
+    patch = np.zeros_like(mask)
+    patch[35:45, 55:70] = True
+    assert mask[patch].all()
+    images = []
+    for i in range(12):
+        grey = read_image(psm / f"gray.{i}.png")[..., 0]
+        grey[patch] = 1.0 if i < 10 else grey[patch]
+        images.append(str(write_image(tmp_path / f"g{i:02d}.png", grey)))
+    out, height = tmp_path / "n.png", tmp_path / "h.npy"
+    argv = _ps(world, "-o", str(out), "--height", str(height), "--mask", str(psm / "mask.png"))
+    with caplog.at_level("WARNING", logger="imagemap"):
+        assert main([*argv[:2], *images, *argv[14:], "-q"]) == 0
+    share = 100 * patch.sum() / mask.sum()
+    assert f"{patch.sum()} of {mask.sum()} pixels ({share:.1f} %) left out" in caplog.text
+    import imageio.v3 as iio
+
+    normal_map = iio.imread(out)
+    assert normal_map.shape[2] == 4
+    np.testing.assert_array_equal(normal_map[..., 3] > 127, mask & ~patch)
+    heights = np.load(height)
+    assert np.isnan(heights[patch]).all() and np.isfinite(heights[mask & ~patch]).all()
+
+
+def test_photometric_warns_about_ill_conditioned_lights_with_the_figure(world, tmp_path, caplog):
+    """12 distinct lights within 1.5 degrees of the view: rank 3 but a condition number
+    near 54, over MAX_LIGHT_CONDITION: a warning with the figure; the run goes on."""
+    from imagemap.btf.photometric import MAX_LIGHT_CONDITION
+
+    angle = np.deg2rad(1.5)
+    text = "".join(
+        f"{np.sin(angle) * np.cos(a):.6f} {np.sin(angle) * np.sin(a):.6f} {np.cos(angle):.6f}\n"
+        for a in np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    )
+    with caplog.at_level("WARNING", logger="imagemap"):
+        assert main([*_ps_lights(world, tmp_path, text), "-q"]) == 0
+    assert "l.txt: the light matrix' condition number is 54." in caplog.text, caplog.text
+    assert f"over {MAX_LIGHT_CONDITION:g}" in caplog.text
+
+
+def test_photometric_api_refuses_rank_two_and_leaves_out_undecided_pixels():
+    from imagemap.btf.photometric import photometric_stereo
+
+    plane = np.array([[np.cos(a), 0.0, np.sin(a)] for a in (0.4, 0.8, 1.2, 1.5)])
+    with pytest.raises(InputError, match=r"light_dirs: .*rank 2 < 3"):
+        photometric_stereo(np.ones((4, 3, 3)), plane)
+    lights = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8]])
+    images = np.full((4, 2, 2), 0.5) * lights[:, 2, None, None]
+    images[1:, 0, 0] = 0.0  # one lit sample left at (0, 0)
+    normals, albedo = photometric_stereo(images, lights)
+    assert np.isnan(normals[0, 0]).all() and np.isnan(albedo[0, 0]).all()
+    np.testing.assert_allclose(normals[1, 1], [0, 0, 1], atol=1e-6)
 
 
 def test_photometric_rgba_alpha_is_the_mask(world, tmp_path, capsys):
@@ -578,8 +727,10 @@ def test_extrapolate_and_render_refuse_bad_input(world, tmp_path, capsys, case):
     assert snapshot(world["root"], tmp_path) == before
 
 
-def test_extrapolate_warns_about_a_scan_of_another_material(tmp_path, capsys, caplog):
-    """--register: a foreign scan is named in a warning; the run goes on (exit 0)."""
+def test_extrapolate_refuses_a_scan_of_another_material(tmp_path, capsys, caplog):
+    """--register: a foreign scan is refused by name with its confidence, nothing written
+    (#45: it was a warning, and the result was written); --allow-misfit goes on with the
+    warning."""
     import tifffile
     from scipy import ndimage
     from skimage.transform import rotate
@@ -614,8 +765,13 @@ def test_extrapolate_warns_about_a_scan_of_another_material(tmp_path, capsys, ca
     sample.save(tmp_path / "sample.npz")
     argv = ["btf", "extrapolate", str(tmp_path / "sample.npz"), "--scans", *paths]
     argv += ["--register", "--linear-scans", "-o", str(tmp_path / "b.npz")]
+    before = snapshot(tmp_path)
+    code, message = cli(argv, capsys)
+    assert code == 2, message
+    assert f"--scans: {paths[3]} (match confidence " in message and "--allow-misfit" in message
+    assert snapshot(tmp_path) == before
     with caplog.at_level("WARNING", logger="imagemap"):
-        code, message = cli(argv, capsys)
+        code, message = cli([*argv, "--allow-misfit"], capsys)
     assert code == 0, message
     warnings = caplog.text  # the command's log lines (stderr outside pytest)
     assert "--scans " + paths[3] + " does not fit" in warnings, warnings

@@ -326,6 +326,15 @@ OPTION_CASES = {
         ["--scheduler"],
     ),
     "batch --format ply": (["batch", "--format", "ply"], ["--format"]),
+    # #45: accepted together, the last one silently won.
+    "batch --scheduler with --workers": (
+        ["batch", "--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"],
+        ["--scheduler", "not allowed with", "--workers"],
+    ),
+    "--uv-space with --no-uv-space": (
+        ["synthesize", "MESH", "--uv-space", "--no-uv-space"],
+        ["--no-uv-space", "not allowed with", "--uv-space"],
+    ),
 }
 
 
@@ -484,6 +493,37 @@ def http_port():
     yield httpd.server_address[1]
     httpd.shutdown()
     httpd.server_close()
+
+
+@pytest.fixture
+def babbling_port():
+    """A port that answers every connection with bytes that are not Dask's protocol (a
+    Dask client read them as a frame length and asked for 3.07 EiB: MemoryError)."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+
+    def accept():
+        while True:
+            try:
+                connection = server.accept()[0]
+                connection.sendall(b"\xff" * 64)
+            except OSError:
+                return
+
+    threading.Thread(target=accept, daemon=True).start()
+    yield server.getsockname()[1]
+    server.close()
+
+
+def test_a_scheduler_that_speaks_another_protocol_is_named_so(
+    world, capsys, no_work, monkeypatch, babbling_port
+):
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(imagemap.batch.cluster, "CONNECT_SECONDS", 1.0)
+    argv = _batch(world, world["holdout"], world["root"] / "out")
+    argv += ["--scheduler", f"tcp://127.0.0.1:{babbling_port}"]
+    run_refused(world, capsys, argv, ["--scheduler", "does not speak Dask's protocol"])
 
 
 @pytest.mark.parametrize("server", ["silent_port", "http_port"])

@@ -62,11 +62,24 @@ def _connect(scheduler: Any) -> tuple[Any, bool]:
             f"{CONNECT_SECONDS:g} s (is it a Dask scheduler's address, tcp://HOST:8786?)"
         )
     if "error" in outcome:
-        error = outcome["error"]  # not 'exc': that name is the except clause's above
-        raise InputError(
-            f"--scheduler {scheduler}: cannot connect ({type(error).__name__}: {error})"
-        ) from None
+        raise InputError(f"--scheduler {scheduler}: {_why_not(outcome['error'])}") from None
     return outcome["client"], True
+
+
+def _why_not(error: BaseException) -> str:
+    """Why a scheduler address gave no client, in words: no answer, or an answer that is
+    not Dask's protocol (a Dask client reading another server's bytes as a frame length
+    asked for 3.07 EiB: a MemoryError is what that looks like)."""
+    if isinstance(error, OSError | TimeoutError):  # refused, unreachable, timed out
+        reason = str(error).split("\n")[0] or type(error).__name__
+        return (
+            f"no Dask scheduler answered ({reason}); is a scheduler running there "
+            "(dask scheduler), and is the address tcp://HOST:PORT?"
+        )
+    return (
+        "what answers at this address does not speak Dask's protocol (it is not a Dask "
+        "scheduler: check the host and port, tcp://HOST:8786)"
+    )
 
 
 def _dask_threads(host_threads: dict[str, int]) -> int:

@@ -16,7 +16,7 @@ from imagemap.database import Database
 from imagemap.depth.config import DepthConfig, resolve_config
 from imagemap.io import InputError
 from imagemap.outputs import OutputPlan, check_output_directory, resolve, written_companions
-from imagemap.scene import DEFAULT_SIZE, FRONT, MESH_SUFFIXES, View, parse_views
+from imagemap.scene import DEFAULT_SIZE, FRONT, MESH_SUFFIXES, View, file_digest, parse_views
 from imagemap.validate import check_float, check_int, check_seed
 
 __all__ = [
@@ -201,7 +201,8 @@ REPORT_NAME = "batch_report.json"
 
 def _claimed(out_dir: Path) -> list[Path]:
     """The files an earlier batch wrote into ``out_dir``: every output its manifests name
-    (finished or started), and its report."""
+    (finished or started), its report, and the outputs its report records with the very
+    content they have now (a manifest deleted since: the output is still the batch's)."""
     claimed = []
     done = out_dir / DONE_DIR
     manifests = [*done.glob("*.json"), *done.glob("*.json.started")] if done.is_dir() else []
@@ -215,10 +216,20 @@ def _claimed(out_dir: Path) -> list[Path]:
             claimed += [out_dir / str(name) for name in names if Path(str(name)).name == name]
     report = out_dir / REPORT_NAME
     try:
-        if {"done", "objects"} <= set(json.loads(report.read_text())):
-            claimed.append(report)
+        content = json.loads(report.read_text())
+        if not {"done", "objects"} <= set(content):
+            return claimed
     except (OSError, ValueError, TypeError):
-        pass
+        return claimed
+    claimed.append(report)
+    for record in content["objects"] if isinstance(content["objects"], list) else []:
+        outputs = record.get("outputs") if isinstance(record, dict) else None
+        for name, digest in (outputs or {}).items() if isinstance(outputs, dict) else ():
+            path = out_dir / str(name)
+            if Path(str(name)).name != name or path in claimed or not path.is_file():
+                continue
+            if file_digest(path) == digest:
+                claimed.append(path)
     return claimed
 
 

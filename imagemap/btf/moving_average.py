@@ -60,6 +60,7 @@ from imagemap.btf.photometric import (
     btf_direction_vectors,
     crossfade_tile,
     enlarge_range_map,
+    flat_where_left_out,
     frankot_chellappa,
     photometric_stereo,
 )
@@ -380,6 +381,7 @@ def fit_moving_average(
             f"one is {sample_shape[0]}x{sample_shape[1]} (at most {max_levels(sample_shape)})"
         )
     normals, _ = photometric_stereo(top_stack, lights, min_intensity=params.min_intensity)
+    normals = flat_where_left_out(normals)  # the range map is the whole sample's
     sample_height = frankot_chellappa(normals)
     # Deshading needs the heights registered with the sample; synthesis needs a tile.
     bumped = normals_from_height(sample_height, scale=params.bump_scale)

@@ -16,6 +16,8 @@ Vectors use the image frame of :mod:`imagemap.render`: x along the columns, y up
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from imagemap.btf.core import directions_to_vectors
@@ -23,16 +25,23 @@ from imagemap.btf.integration import frankot_chellappa  # re-exported: its forme
 from imagemap.io import InputError
 
 __all__ = [
+    "LIGHT_RANK_TOLERANCE",
+    "MAX_LIGHT_CONDITION",
     "btf_direction_vectors",
+    "check_light_matrix",
+    "flat_where_left_out",
     "crossfade_tile",
     "enlarge_range_map",
     "frankot_chellappa",
     "periodic_component",
     "photometric_stereo",
     "range_map_from_btf",
+    "solvable_pixels",
     "split_alpha",
     "usable_samples",
 ]
+
+log = logging.getLogger("imagemap")
 
 #: Rec. 709 luminance weights: the normals are fitted on luminance, the albedo per channel.
 LUMINANCE = (0.2126, 0.7152, 0.0722)
@@ -58,6 +67,138 @@ SATURATION_LEVEL = 0.99
 #: 6.86 degrees at 0.5, 6.80 at 2/3, 7.06 kept; the Lambertian sphere: 2.97, 3.63, 4.52
 #: (measured with the cut at 250/255).
 MIN_KEPT_FRACTION = 0.5
+
+
+#: A light matrix (unit vectors towards the lights, one row each) whose smallest singular
+#: value is below this fraction of its largest spans fewer than 3 directions: its lights
+#: are one direction or one plane through the camera (rank < 3), and no normal follows
+#: from them. The fraction is what a lights file's 5-6 significant digits move a coplanar
+#: set off its plane (about 1e-6), with room: such a set is coplanar as written.
+LIGHT_RANK_TOLERANCE = 1e-4
+
+#: Condition numbers of the light matrix above this get a warning with the figure: the
+#: normal's error grows about linearly with it. A Lambertian sphere under 12 lights on a
+#: cone around the view, 8-bit images with 0.5 % noise (benchmarks/photometric_sphere.py,
+#: ``condition_rows``): mean error 0.4 degrees at condition 1.7 (lights 40 degrees from
+#: the view, as psmImages'; the generated grey sphere's are 2.8), 2.2 at 16, 5.5 at 40,
+#: 10.8 at 81, 20.9 at 162. Above 40 the noise alone costs more than the whole error on
+#: psmImages' real sphere (5.5 degrees).
+MAX_LIGHT_CONDITION = 40.0
+#: The mean normal error per unit of condition number at 0.5 % noise (the slope of the
+#: figures above: 5.5 / 40.5, 10.8 / 81, 20.9 / 162): the warning's estimate.
+DEGREES_PER_CONDITION = 0.135
+
+
+def _singular_spread(gram: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(smallest / largest singular value, condition number) of light matrices from their
+    (..., 3, 3) Gram matrices L^T L (singular values are the eigenvalues' roots)."""
+    eigen = np.clip(np.linalg.eigvalsh(gram), 0.0, None)
+    ratio = np.sqrt(eigen[..., 0] / np.maximum(eigen[..., -1], 1e-300))
+    return ratio, np.where(ratio > 0, 1.0 / np.maximum(ratio, 1e-300), np.inf)
+
+
+def check_light_matrix(
+    light_dirs: np.ndarray, what: str = "light_dirs", *, warn: bool = True
+) -> float:
+    """The condition number of the lights above the horizon; rank < 3 is refused.
+
+    Parameters
+    ----------
+    light_dirs : ndarray, shape (N, 3)
+        Vectors towards the lights (normalized here).
+    what : str
+        What the lights are called in the messages (``"--lights lights.txt"``).
+    warn : bool
+        Log a warning with the figure when the condition number is over
+        :data:`MAX_LIGHT_CONDITION`.
+
+    Returns
+    -------
+    float
+        The condition number (largest over smallest singular value).
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 lights above the horizon, or lights spanning fewer than 3
+        directions (identical, opposite or in one plane through the camera:
+        :data:`LIGHT_RANK_TOLERANCE`), naming ``what``.
+
+    Examples
+    --------
+    >>> round(check_light_matrix(np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8]])), 2)
+    4.16
+    >>> check_light_matrix(np.array([[0, 0, 1.0]] * 4))  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: light_dirs: the 4 lights span 1 direction (rank 1 < 3: ...
+    """
+    lights = np.asarray(light_dirs, dtype=np.float64)
+    lights = lights / np.maximum(np.linalg.norm(lights, axis=1, keepdims=True), 1e-300)
+    above = lights[lights[:, 2] > 0]
+    if len(above) < 3:
+        raise InputError(f"{what}: need at least 3 lights above the horizon, got {len(above)}")
+    singular = np.linalg.svd(above, compute_uv=False)
+    rank = int(np.sum(singular > LIGHT_RANK_TOLERANCE * singular[0]))
+    if rank < 3:
+        shape = "one direction" if rank == 1 else "one plane through the camera"
+        raise InputError(
+            f"{what}: the {len(above)} lights span {rank} direction{'s' if rank > 1 else ''} "
+            f"(rank {rank} < 3: they lie in {shape}); a normal needs lights from 3 "
+            "directions not in one plane"
+        )
+    condition = float(singular[0] / singular[-1])
+    if warn and condition > MAX_LIGHT_CONDITION:
+        log.warning(
+            "%s: the light matrix' condition number is %.1f (over %g): the lights are "
+            "close to one plane or direction, and the normals' error grows with it (about "
+            "%.0f degrees at 0.5 %% noise)",
+            what,
+            condition,
+            MAX_LIGHT_CONDITION,
+            DEGREES_PER_CONDITION * condition,
+        )
+    return condition
+
+
+def solvable_pixels(used: np.ndarray, lights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which pixels' samples decide a normal, and their lights' condition numbers.
+
+    Parameters
+    ----------
+    used : ndarray of bool, shape (N, P)
+        The samples that enter each pixel's fit (:func:`usable_samples`, clipped ones
+        left out).
+    lights : ndarray, shape (N, 3)
+        Unit vectors towards the lights.
+
+    Returns
+    -------
+    solvable : ndarray of bool, shape (P,)
+        At least 3 samples whose lights span 3 directions (:data:`LIGHT_RANK_TOLERANCE`).
+    condition : ndarray of float, shape (P,)
+        The condition number of each pixel's lights (inf where not solvable).
+
+    Pixels that use the same lights share one computation: the usage patterns are few.
+
+    Examples
+    --------
+    >>> lights = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [0, 0, 1.0]])
+    >>> used = np.array([[1, 1], [1, 0], [1, 0], [0, 1]], bool)  # pixel 1: one direction
+    >>> solvable, condition = solvable_pixels(used, lights)
+    >>> solvable.tolist(), condition.round(2).tolist()
+    ([True, False], [4.16, inf])
+    """
+    used = np.asarray(used, dtype=bool)
+    packed = np.packbits(used, axis=0).T.copy()  # (P, ceil(N / 8)): one row per pattern
+    patterns, index = np.unique(packed, axis=0, return_inverse=True)
+    pattern_used = np.unpackbits(patterns, axis=1, count=used.shape[0]).astype(np.float64)
+    lights = np.asarray(lights, dtype=np.float64)
+    gram = np.einsum("kn,ni,nj->kij", pattern_used, lights, lights)
+    ratio, condition = _singular_spread(gram)
+    solvable = (pattern_used.sum(axis=1) >= 3) & (ratio > LIGHT_RANK_TOLERANCE)
+    index = np.asarray(index).ravel()
+    return solvable[index], np.where(solvable, condition, np.inf)[index]
 
 
 def split_alpha(images: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -139,6 +280,7 @@ def photometric_stereo(
     max_intensity: float | None = None,
     ridge: float = 1e-6,
     channel_axis: int | None = -1,
+    lights_name: str = "light_dirs",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares normals and albedo from N >= 3 images of one view under known lights.
 
@@ -163,16 +305,28 @@ def photometric_stereo(
         keeps them (linear data with no full scale). Photographs in [0, 1]:
         :data:`SATURATION_LEVEL`.
     ridge : float
-        Tikhonov term that keeps texels with fewer than three usable lights solvable.
+        Tikhonov term that keeps the per-texel normal equations well posed in floating
+        point (texels without 3 informative samples are left out, not regularized).
     channel_axis : int or None
         Axis of the channels in 4-D input (default last); None: ``images`` is (N, H, W).
+    lights_name : str
+        What the lights are called in messages (the command: ``"--lights FILE"``).
 
     Returns
     -------
     normals : ndarray of float32, shape (H, W, 3)
-        Unit normals (z >= 0 is not enforced; it is what the data say).
+        Unit normals (z >= 0 is not enforced; it is what the data say). NaN where the
+        samples decide no normal (:func:`solvable_pixels`: fewer than :data:`MIN_SAMPLES`
+        lit, unclipped samples, or their lights in one plane): such texels are left out,
+        with a warning giving their share, never filled in.
     albedo : ndarray of float32, shape (H, W, C)
-        Per-channel Lambertian albedo (C = 1 for grey input).
+        Per-channel Lambertian albedo (C = 1 for grey input); NaN where the normal is.
+
+    Raises
+    ------
+    InputError
+        Bad shapes or values; lights of rank < 3 (:func:`check_light_matrix`, which also
+        warns about an ill-conditioned set); no texel with a normal to find.
 
     Examples
     --------
@@ -204,9 +358,7 @@ def photometric_stereo(
     if np.any(norms == 0) or not np.all(np.isfinite(lights)):
         raise InputError("light_dirs: every light needs a finite non-zero direction")
     lights = lights / norms[:, None]
-    above = lights[:, 2] > 0
-    if above.sum() < 3:
-        raise InputError(f"light_dirs: need at least 3 lights above the horizon, got {above.sum()}")
+    overall = check_light_matrix(lights, lights_name)  # rank < 3 refused; else warned
     if not np.all(np.isfinite(images)):
         raise InputError("images: have NaN or infinite values")
     if mask is not None:
@@ -221,6 +373,16 @@ def photometric_stereo(
     used = usable_samples(images, lights, min_intensity=min_intensity, max_intensity=max_intensity)[
         :, solved
     ]  # (N, P)
+    # What decides a normal: lit samples that are not clipped (a clipped sample may still
+    # enter the fit where too few others remain, but it says little of the shading).
+    informative = usable_samples(images, lights, min_intensity=min_intensity)[:, solved]
+    if max_intensity is not None:
+        informative &= (images.max(axis=3) < max_intensity)[:, solved]
+    decided, condition = solvable_pixels(informative, lights)
+    _report_left_out(decided, condition, informative, overall)
+    solved = solved.copy()
+    solved[solved] = decided
+    used = used[:, decided]
     intensity = _intensity(images)[:, solved].astype(np.float64)
     if used.all():
         # Every texel sees the same lights: one pseudo-inverse serves all (Woodham).
@@ -242,10 +404,76 @@ def photometric_stereo(
     denominator = np.einsum("np,np->p", shading, shading)[:, None]
     normals = np.zeros((height, width, 3), np.float32)
     normals[..., 2] = 1.0
-    normals[solved] = found
     albedo = np.zeros((height, width, channels), np.float32)
+    if mask is not None:  # inside the mask, a texel left out has no normal
+        normals[mask], albedo[mask] = np.nan, np.nan
+    else:
+        normals[:], albedo[:] = np.nan, np.nan
+    normals[solved] = found
     albedo[solved] = numerator / np.maximum(denominator, 1e-12)
     return normals, albedo
+
+
+#: The fewest informative samples that decide a texel's normal: the scaled normal has 3
+#: unknowns (Woodham's least squares needs 3 independent equations).
+MIN_SAMPLES = 3
+
+
+def _report_left_out(
+    decided: np.ndarray, condition: np.ndarray, informative: np.ndarray, overall: float
+) -> None:
+    """Warn, with the figures, about texels left out (no normal) and texels solved from
+    ill-conditioned lights (unless all the lights are: :func:`check_light_matrix` said
+    so); refuse when no texel is left to solve."""
+    total = decided.size
+    few = informative.sum(axis=0) < MIN_SAMPLES
+    if not decided.any():
+        raise InputError(
+            f"images: no pixel has {MIN_SAMPLES} usable samples from lights in 3 directions "
+            f"({int(few.sum())} of {total} have fewer than {MIN_SAMPLES} lit, unclipped "
+            "samples: all shadowed, black or saturated?); no normal can be found"
+        )
+    left = int(total - decided.sum())
+    if left:
+        log.warning(
+            "photometric stereo: %d of %d pixels (%.1f %%) left out of the normals (no "
+            "normal, no height): %d with fewer than %d lit, unclipped samples (shadowed, "
+            "saturated or lights behind), %d whose usable lights lie in one plane",
+            left,
+            total,
+            100.0 * left / total,
+            int(few.sum()),
+            MIN_SAMPLES,
+            left - int(few.sum()),
+        )
+    shaky = decided & (condition > MAX_LIGHT_CONDITION)
+    if shaky.any() and overall <= MAX_LIGHT_CONDITION:
+        log.warning(
+            "photometric stereo: %d of %d pixels (%.1f %%) are solved from lights with a "
+            "condition number over %g (up to %.1f): their normals are sensitive to noise",
+            int(shaky.sum()),
+            total,
+            100.0 * shaky.sum() / total,
+            MAX_LIGHT_CONDITION,
+            float(condition[shaky].max()),
+        )
+
+
+def flat_where_left_out(normals: np.ndarray) -> np.ndarray:
+    """``normals`` with the texels :func:`photometric_stereo` left out (NaN) taken flat.
+
+    For what needs a whole field (a BTF's range map is integrated over the whole sample
+    and tiled): a texel no light decides contributes no slope. The solver's warning has
+    said how many there are.
+
+    Examples
+    --------
+    >>> flat_where_left_out(np.array([[[np.nan, np.nan, np.nan], [0.6, 0.0, 0.8]]])).tolist()
+    [[[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]]]
+    """
+    normals = np.asarray(normals)
+    left_out = ~np.all(np.isfinite(normals), axis=-1, keepdims=True)
+    return np.where(left_out, np.array([0.0, 0.0, 1.0], normals.dtype), normals)
 
 
 def periodic_component(image: np.ndarray) -> np.ndarray:
@@ -439,4 +667,5 @@ def range_map_from_btf(
     images = np.stack([btf.image(light, view) for light in range(btf.n_lights)])
     lights = btf_direction_vectors(btf.light_dirs)
     normals, albedo = photometric_stereo(images, lights, min_intensity=min_intensity)
+    normals, albedo = flat_where_left_out(normals), np.nan_to_num(albedo)
     return frankot_chellappa(normals, mirror=mirror), normals, albedo

@@ -34,14 +34,18 @@ reader takes the normal one (as btflib does), so :func:`write_ubo2014` refuses t
 images layout for such sizes instead of writing a file every reader misreads.
 
 Values are range-checked: a factor that float16 (``scalar_size`` 2) cannot hold
-(|value| > 65504) is refused by the writer, and the reader refuses NaN or infinite
-values, zero sizes, a colour model other than RGB on anything but three channels
-(the decorrelated models are 3-channel transforms) and directions outside the upper
-hemisphere, naming the field and the channel.
+(|value| > 65504) is refused by the writer, and so is a channel it would flush to zero
+(every component below float16's 6e-8; some components lost are warned about); the reader
+refuses NaN or infinite values (factors, colour mean and transformation), zero sizes, a
+components field that is neither the channels' largest k (btflib writes that) nor their
+sum, bytes after the last channel, a colour model other than RGB on anything but three
+channels (the decorrelated models are 3-channel transforms) and directions outside the
+upper hemisphere, naming the field and the channel.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import struct
 from collections.abc import Sequence
@@ -51,10 +55,13 @@ import numpy as np
 
 from imagemap.btf.core import BTF, check_directions
 from imagemap.io import InputError, atomic_path
+from imagemap.outputs import check_writable
 
 __all__ = ["SIGNATURE", "COLOR_MODEL_CODES", "read_ubo2014", "write_ubo2014"]
 
 SIGNATURE = b"!DFMF08FCR"
+
+log = logging.getLogger("imagemap")
 
 #: btflib's colour model numbers -> our names (2 LAB and 5/6 spectral are not supported).
 COLOR_MODEL_CODES = {
@@ -176,12 +183,15 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
         raise InputError(f"{path}: width x height is {width}x{height}; both must be >= 1")
     if signature.endswith(b"R"):
         f.array(np.float32, 9 * f.scalars("I"))  # local frame rotations: unused
-    f.scalars("I")  # total components (btflib: the largest channel's k); unused
+    components = f.scalars("I")  # btflib: the largest channel's k (checked below)
     code = f.scalars("i")
     color_mean = np.array(f.scalars("f", 3), np.float32)
     color_matrix = f.array(np.float32, 9).reshape(3, 3)
     if code not in COLOR_MODEL_CODES:
         raise InputError(f"{path}: colour model {code} is not supported")
+    for label, values in (("colour mean", color_mean), ("colour transformation", color_matrix)):
+        if not np.all(np.isfinite(values)):
+            raise InputError(f"{path}: {label} has NaN or infinite values")
     n_lights, n_pairs, n_texels = len(lights), n_views * len(lights), width * height
 
     u_blocks, sigmas, eigentextures = [], [], []
@@ -218,6 +228,18 @@ def read_ubo2014(path: str | os.PathLike) -> BTF:
         u_blocks.append(u)
         sigmas.append(sigma)
         eigentextures.append(sxv.reshape(height, width, k))
+
+    if f.pos != len(f.data):
+        raise InputError(
+            f"{path}: {len(f.data) - f.pos} bytes after the last channel's factors: a damaged "
+            "or concatenated file"
+        )
+    ks = [len(sigma) for sigma in sigmas]
+    if components not in (max(ks), sum(ks)):
+        raise InputError(
+            f"{path}: the components field says {components}, but the channels hold k = "
+            f"{', '.join(map(str, ks))} (the field is the largest, {max(ks)})"
+        )
 
     # Our rows: (light, view, channel) C order; the file's: view-major, light fastest.
     light_idx, view_idx = np.meshgrid(np.arange(n_lights), np.arange(n_views), indexing="ij")
@@ -298,6 +320,7 @@ def write_ubo2014(
     >>> read_ubo2014(path).shape
     (3, 4)
     """
+    check_writable(path, "write_ubo2014 path")  # a folder, or one that cannot be written
     codes = {name: code for code, name in COLOR_MODEL_CODES.items()}
     if color_model not in codes:
         raise InputError(f"color_model: {color_model!r} not one of {sorted(codes)}")
@@ -337,6 +360,8 @@ def write_ubo2014(
         raise InputError(
             f"color_mean, color_matrix: expected (3,) and (3, 3), got {mean.shape}, {matrix.shape}"
         )
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(matrix))):
+        raise InputError("color_mean, color_matrix: have NaN or infinite values")
 
     dtype = np.dtype(_SCALAR_TYPES[scalar_size]).newbyteorder("<")
     lights = np.deg2rad(light_dirs).astype("<f4")
@@ -381,6 +406,7 @@ def _check_range(us, sigmas, sxvs, channels, scalar_size: int) -> None:
     """InputError naming the factor and channel whose values the scalar type cannot hold
     (float16 overflows to inf above 65504)."""
     limit = float(_SCALAR_LIMITS[scalar_size])
+    dtype = _SCALAR_TYPES[scalar_size]
     for c, name in enumerate(channels):
         for label, values in (
             ("eigen_abrdfs", us[c]),
@@ -394,6 +420,25 @@ def _check_range(us, sigmas, sxvs, channels, scalar_size: int) -> None:
                     f"{limit:g}, the largest scalar_size={scalar_size} float; use a larger "
                     "scalar_size or rescale"
                 )
+            # Underflow: a singular value, or a whole component, flushed to zero is lost.
+            values = np.asarray(values).reshape(len(values), -1)
+            if label == "singular_values":
+                values = values.T  # one component per column
+            zero = values.astype(dtype) == 0
+            kept = (values != 0).any(axis=0)
+            lost = np.flatnonzero(zero.all(axis=0) & kept)
+            if not lost.size:
+                continue
+            largest = float(np.abs(values[:, lost]).max())
+            shown = (
+                f"{label}[{c}] (channel {name!r}): {lost.size} of {int(kept.sum())} "
+                f"component(s) (|value| up to {largest:.3g}) are below the smallest "
+                f"scalar_size={scalar_size} float and would be written as 0"
+            )
+            if lost.size == kept.sum():  # the channel would read back as nothing
+                raise InputError(f"{shown}: the channel would be lost; use a larger "
+                                 "scalar_size or rescale")  # fmt: skip
+            log.warning("%s (the others are kept)", shown)
 
 
 def _check_factors(eigen_abrdfs, singular_values, eigentextures, channels, n_pairs: int):

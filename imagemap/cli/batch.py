@@ -60,13 +60,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("input_dir", metavar="INPUT_DIR", help="folder of depth maps and/or meshes")
     p.add_argument("--db", required=True, help="database directory (pictures and/or meshes)")
     p.add_argument("-o", "--output", required=True, help="output directory")
-    p.add_argument(
+    where = p.add_mutually_exclusive_group()  # a local pool or a cluster, not both
+    where.add_argument(
         "--workers",
         type=positive_int,
         default=1,
         help="local worker processes >= 1 (default 1: in-process)",
     )
-    p.add_argument(
+    where.add_argument(
         "--scheduler",
         help="address of a Dask scheduler (tcp://host:8786): run there instead of locally",
     )

@@ -99,6 +99,13 @@ def register(subparsers: argparse._SubParsersAction) -> dict[str, argparse._SubP
         default=5.0,
         help="with --register: largest rotation searched besides quarter turns (degrees)",
     )
+    p.add_argument(
+        "--allow-misfit",
+        action="store_true",
+        help="with --register: go on when a scan does not fit the reference scan (match "
+        "confidence below 17: another material or piece, or a failed alignment); by default "
+        "such a run is refused and nothing is written",
+    )
     p.add_argument("--seed", type=int, default=0)
     add_common_options(p)
     p.set_defaults(func=_extrapolate)
@@ -162,6 +169,8 @@ def _extrapolate(args: argparse.Namespace) -> int:
         raise InputError(f"--max-rotation: between 0 and 20 degrees, got {args.max_rotation}")
     if args.find_order and not args.register:
         raise InputError("--find-order: works on registered scans; add --register")
+    if args.allow_misfit and not args.register:
+        raise InputError("--allow-misfit: applies to registered scans; add --register")
     from imagemap.outputs import resolve
 
     for i, path in enumerate(args.scans):
@@ -209,6 +218,18 @@ def _extrapolate(args: argparse.Namespace) -> int:
             response=response,
             names=[f"--scans {path}" for path in args.scans],
         )
+        if registration.suspect and not args.allow_misfit:
+            from imagemap.btf.registration import MIN_CONFIDENCE
+
+            shown = ", ".join(
+                f"{args.scans[i]} (match confidence {registration.confidences[i]:.1f})"
+                for i in registration.suspect
+            )
+            raise InputError(
+                f"--scans: {shown} does not fit {args.scans[0]} (correct alignments measure "
+                f"{MIN_CONFIDENCE:.0f} and more): a scan of another material or piece, or a "
+                "failed alignment; nothing written (--allow-misfit goes on anyway)"
+            )
         scans = registration.images
         if args.find_order:
             from imagemap.btf.extrapolate import constraint_images, prepare_scans

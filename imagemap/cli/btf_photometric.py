@@ -127,6 +127,8 @@ def _photometric(args: argparse.Namespace) -> int:
     from imagemap.btf.photometric import (
         SATURATION_LEVEL,
         SHADOW_LEVEL,
+        check_light_matrix,
+        flat_where_left_out,
         photometric_stereo,
         split_alpha,
         usable_samples,
@@ -174,6 +176,9 @@ def _photometric(args: argparse.Namespace) -> int:
         raise InputError(
             f"--lights {args.lights}: {len(lights)} lights for {len(args.images)} images"
         )
+    # Rank < 3 (identical lights, lights in one plane) decides no normal: refused before
+    # the images are read. An ill-conditioned set is warned about by the solver.
+    check_light_matrix(lights, f"--lights {args.lights}", warn=False)
     stack = read_image_stack(args.images)
     colour, alpha = split_alpha(stack)
     mask = alpha
@@ -194,29 +199,57 @@ def _photometric(args: argparse.Namespace) -> int:
     linear = colour**args.gamma if args.gamma != 1.0 else colour
     levels = {"min_intensity": shadow**args.gamma, "max_intensity": saturation**args.gamma}
     used = usable_samples(linear, lights, mask=region, **levels)
-    normals, albedo = photometric_stereo(linear, lights, mask=mask, **levels)
+    normals, albedo = photometric_stereo(
+        linear, lights, mask=mask, lights_name=f"--lights {args.lights}", **levels
+    )
+    # Pixels whose samples decide no normal are left out (the solver warned, with their
+    # share): no normal, albedo or height there; the maps get an alpha channel saying so.
+    solved = region & np.all(np.isfinite(normals), axis=2)
+    left_out = bool((region & ~solved).any())
     method = INTEGRATION_NAMES[args.integration]
-    height = integrate_normals(normals, mask=mask, method=method) if args.height else None
+    height = None
+    if args.height:
+        flat = flat_where_left_out(normals)
+        height = integrate_normals(flat, mask=solved if left_out else mask, method=method)
 
-    writers = {Path(args.output): image_writer(encode_normal_map(normals))}
+    writers = {
+        Path(args.output): image_writer(
+            _with_alpha(encode_normal_map(flat_where_left_out(normals)), solved, left_out)
+        )
+    }
     if args.albedo:
-        shown = albedo[..., 0] if albedo.shape[2] == 1 else albedo
-        writers[Path(args.albedo)] = image_writer(np.clip(shown, 0.0, 1.0))
+        shown = np.nan_to_num(albedo[..., 0] if albedo.shape[2] == 1 else albedo)
+        writers[Path(args.albedo)] = image_writer(
+            _with_alpha(np.clip(shown, 0.0, 1.0), solved, left_out)
+        )
     note = ""
     if height is not None:
-        writers[Path(args.height)], note = _height_writer(Path(args.height), height, region)
+        writers[Path(args.height)], note = _height_writer(Path(args.height), height, solved)
     write_all(writers)
     if not args.quiet:
         if note:
             print(note, file=sys.stderr)
         total = int(region.sum()) * len(lights)
+        unsolved = int((region & ~solved).sum())
         print(
-            f"wrote {args.output}: {int(region.sum())} pixels solved from {len(lights)} "
-            f"images; {total - int(used.sum())} of {total} samples left out (shadow, "
-            f"clipped, light behind)",
+            f"wrote {args.output}: {int(solved.sum())} pixels solved from {len(lights)} "
+            f"images{f', {unsolved} left out (transparent)' if left_out else ''}; "
+            f"{total - int(used.sum())} of {total} samples left out (shadow, clipped, light "
+            "behind)",
             file=sys.stderr,
         )
     return 0
+
+
+def _with_alpha(picture, solved, left_out: bool):
+    """``picture`` (H, W) or (H, W, 3) as it is, or, when pixels were left out, RGBA with
+    alpha 0 where no normal was found (a grey picture repeated into RGB)."""
+    import numpy as np
+
+    if not left_out:
+        return picture
+    colour = picture if picture.ndim == 3 else np.repeat(picture[..., None], 3, axis=2)
+    return np.concatenate([colour, solved[..., None].astype(colour.dtype)], axis=2)
 
 
 def _height_writer(path: Path, height, region):

@@ -180,7 +180,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     examples = [n.strip() for n in args.examples.split(",")] if args.examples else None
     for name in examples or []:
         database[name]  # unknown names fail here
-    plan = OutputPlan()
+    plan = OutputPlan(overwrite=args.overwrite)
     # With the MTL and textures it reads, and its truth (kept unless --overwrite).
     plan.add_query(source, "input mesh", overwrite=args.overwrite, hint="; --overwrite replaces it")
     plan.add_database(database, args.db)

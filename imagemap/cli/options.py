@@ -106,7 +106,8 @@ def add_mesh_options(parser: argparse.ArgumentParser, uv_space: bool = False) ->
     textured and written; with ``uv_space``, --uv-space and --no-uv-space too."""
     group = parser.add_argument_group("meshes (input .glb .obj .ply ...; output .glb or .obj)")
     if uv_space:
-        group.add_argument(
+        both = group.add_mutually_exclusive_group()  # both given: refused, not the last wins
+        both.add_argument(
             "--uv-space",
             dest="uv_space",
             action="store_const",
@@ -116,7 +117,7 @@ def add_mesh_options(parser: argparse.ArgumentParser, uv_space: bool = False) ->
             "the query's UV layout (a registered template). Default: when they are found to "
             "be (same UVs, or the same surface point at each texel), else by views",
         )
-        group.add_argument(
+        both.add_argument(
             "--no-uv-space",
             dest="uv_space",
             action="store_const",

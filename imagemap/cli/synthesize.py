@@ -100,9 +100,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="allow replacing files beside a query depth that look like its held-out truth "
-        "(NAME_image.png, NAME_labels.png, NAME.json); the query depths and the database are "
-        "never overwritten",
+        help="allow replacing an existing NAME_image.png, NAME_labels.png or NAME.json that "
+        "has a NAME_depth.* or a NAME mesh beside it (a held-out truth, or an example of a "
+        "database this command does not read); nothing else: never a PBR map "
+        "(NAME_roughness.png ...), a depth map, a query or a file of --db",
     )
     p.add_argument(
         "--no-memory-check",
@@ -274,7 +275,7 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
     """Every output against every input and every other output, and writable: before any work."""
     from imagemap.outputs import OutputPlan, check_output_directory
 
-    plan = OutputPlan()
+    plan = OutputPlan(overwrite=args.overwrite)
     for job in jobs:
         # The query, and the truth beside it (NAME_image.png ...): --overwrite replaces that.
         plan.add_query(
@@ -421,10 +422,23 @@ def _synthesize_one(args, job, depth, database, config, examples, background, ba
     if job["preview"]:
         writers[job["preview"]] = image_writer(_preview(depth, result, database))
     if job.get("maps"):
-        from imagemap.materials import transfer_maps
+        from imagemap.materials import map_kinds, transfer_maps
 
-        maps = transfer_maps(result, database, kinds=list(job["maps"]))
-        for kind, path in job["maps"].items():
+        # A kind none of the examples used has would be its neutral value everywhere: a
+        # constant map says nothing, so it is not written, and the user is told.
+        have = {kind for name in result.example_names for kind in map_kinds(database[name])}
+        kinds = [kind for kind in job["maps"] if kind in have]
+        missing = [kind for kind in job["maps"] if kind not in have]
+        if missing and not args.quiet:
+            print(
+                f"imagemap: note: no {', '.join(missing)} map written beside {job['output']}: "
+                f"the examples used ({', '.join(result.example_names)}) have none (it would "
+                "be a constant)",
+                file=sys.stderr,
+            )
+        maps = transfer_maps(result, database, kinds=kinds)
+        for kind in kinds:
+            path = job["maps"][kind]
             writers[path] = image_writer(maps[kind], bits=16 if kind == "height" else 8)
     report = {
         "query": str(job["depth"]),

@@ -35,7 +35,7 @@ from imagemap.mesh.uvspace import (
 )
 from imagemap.scene.bake import bake_views, project_texture, view_shares
 from imagemap.scene.examples import MeshExample
-from imagemap.scene.files import load_mesh, textured_mesh
+from imagemap.scene.files import check_finite, load_mesh, textured_mesh
 from imagemap.scene.views import (
     DEFAULT_SIZE,
     FRONT,
@@ -46,7 +46,7 @@ from imagemap.scene.views import (
     render_mesh,
     texture_image,
 )
-from imagemap.validate import check_mesh, check_size
+from imagemap.validate import check_int, check_mesh, check_size
 
 __all__ = [
     "PATHS",
@@ -259,6 +259,7 @@ def colorize_mesh(
     if not hasattr(mesh, "faces"):
         mesh = load_mesh(check_mesh(mesh))  # a path; None, a Scene, a PointCloud: InputError
     check_mesh(mesh)
+    check_finite(mesh, "mesh")  # NaN vertices or UVs: refused, never dropped
     size = check_size(size, minimum=8)  # render_mesh's own smallest picture
     config = resolve_config(preset, **colorize_options)
     names = list(examples) if examples else None
@@ -268,14 +269,20 @@ def colorize_mesh(
         views = parse_views(views)
     elif isinstance(views, View):
         views = [views]
-    if not all(isinstance(v, str | View) for v in views):
-        raise InputError(f"views: expected View objects or 'AZ,EL' / names, got {views!r}")
+    if not isinstance(views, list | tuple) or not all(isinstance(v, str | View) for v in views):
+        raise InputError(
+            f"views: expected a View, a list of View objects or 'AZ,EL' / names, got {views!r}"
+        )
     views = [parse_view(v) for v in views]
     if isinstance(database, Database):
         for name in names or ():
             database[name]  # an unknown name is an InputError listing the known ones
-    if texture_size is not None and int(texture_size) < 8:
-        raise InputError(f"texture_size {texture_size} is too small (at least 8)")
+    if texture_size is not None:
+        texture_size = check_int("texture_size", texture_size, minimum=8)
+    if not (uv_space is None or isinstance(uv_space, bool | list)):
+        raise InputError(
+            f"uv_space: expected True, False, None or the examples found, got {uv_space!r}"
+        )
     uv_examples: list | None
     if isinstance(uv_space, list):
         uv_examples = uv_space  # found already (uv_layout_examples)

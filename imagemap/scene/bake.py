@@ -239,6 +239,8 @@ def world_per_uv(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> flo
     e1, e2 = flat[:, 1] - flat[:, 0], flat[:, 2] - flat[:, 0]
     uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     total_uv = float(uv_area.sum())
+    if not np.isfinite(total_uv) or not np.isfinite(area.sum()):
+        raise InputError("the mesh's vertices or UV coordinates have NaN or infinite values")
     if total_uv <= 0:
         raise InputError("the mesh's UV triangles have no area")
     return float(area.sum()) / total_uv

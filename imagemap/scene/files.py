@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from imagemap.io import InputError, atomic_path
+from imagemap.outputs import MESH_SUFFIXES  # one list: the overwrite rule reads it too
 from imagemap.scene.views import texture_image
 from imagemap.validate import check_mesh
 
@@ -40,6 +41,7 @@ __all__ = [
     "TEXTURED_SUFFIXES",
     "UNIT_SCALES",
     "SurfaceMaterial",
+    "check_finite",
     "check_textured",
     "corner_normals",
     "export_textured",
@@ -52,8 +54,6 @@ __all__ = [
     "unit_scale",
 ]
 
-#: Suffixes read as meshes (anything trimesh loads that holds triangles).
-MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
 #: Suffixes written as textured meshes.
 TEXTURED_SUFFIXES = (".glb", ".obj")
 #: Roughness written when neither the input nor a roughness map gives one: a matte
@@ -76,10 +76,16 @@ def is_mesh_path(path: str | os.PathLike) -> bool:
 def load_mesh(path: str | os.PathLike):
     """Read a mesh as one ``trimesh.Trimesh`` (a scene's geometries concatenated).
 
+    The file is read as it is, checked, and only then processed (trimesh's merging of
+    duplicate vertices): processing drops the faces of a non-finite vertex without a
+    word, which would hide a damaged file.
+
     Raises
     ------
     InputError
-        Missing file, unknown format, unreadable, or no triangles.
+        Missing file, unknown format, unreadable, no triangles, vertices or UV
+        coordinates that are NaN or infinite (how many, and how many faces they touch),
+        all vertices at one point, or faces without area (every vertex on one line).
     """
     import trimesh  # deferred: start-up (trimesh)
 
@@ -91,12 +97,17 @@ def load_mesh(path: str | os.PathLike):
             f"{path}: unsupported mesh format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})"
         )
     try:
-        loaded = trimesh.load(path, force="mesh")
-        normals = _file_normals(path, loaded)
+        loaded = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # any decoder failure is the file's fault here
         raise InputError(f"{path}: cannot be read as a mesh ({exc})") from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise InputError(f"{path}: holds no triangles")
+    check_finite(loaded, str(path))
+    try:
+        loaded.process()  # what trimesh.load does by default: duplicate vertices merged
+        normals = _file_normals(path, loaded)
+    except Exception as exc:
+        raise InputError(f"{path}: cannot be read as a mesh ({exc})") from exc
     if normals is not None:
         # trimesh's cache_decorator is a property with a setter, which mypy reads as a method
         loaded.vertex_normals = normals  # type: ignore[method-assign]
@@ -105,7 +116,43 @@ def load_mesh(path: str | os.PathLike):
         raise InputError(f"{path}: vertices have NaN or infinite coordinates")
     if np.ptp(loaded.vertices, axis=0).max() <= 0:
         raise InputError(f"{path}: all vertices coincide")
+    if not np.asarray(loaded.area_faces).sum() > 0:
+        raise InputError(
+            f"{path}: its {len(loaded.faces)} faces have no area (every vertex on one line): "
+            "no surface to see or texture"
+        )
     return loaded
+
+
+def check_finite(mesh, what: str = "mesh") -> None:
+    """InputError naming ``what`` (a file, an argument) when the mesh's vertices or UV
+    coordinates are NaN or infinite: how many, and how many faces they touch (trimesh's
+    processing would drop those faces without a word; they are refused instead).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> box = trimesh.creation.box()
+    >>> box.vertices[2] = np.nan
+    >>> check_finite(box, "box.ply")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    imagemap.errors.InputError: box.ply: 1 of 8 vertices are NaN or infinite (the first: ...
+    """
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    uv = getattr(getattr(mesh, "visual", None), "uv", None)
+    for label, values in (("vertices", mesh.vertices), ("UV coordinates", uv)):
+        if values is None or len(values) != len(mesh.vertices):
+            continue
+        bad = ~np.all(np.isfinite(np.asarray(values, dtype=np.float64)), axis=1)
+        if bad.any():
+            touched = int(bad[faces].any(axis=1).sum())
+            raise InputError(
+                f"{what}: {int(bad.sum())} of {len(bad)} {label} are NaN or infinite "
+                f"(the first: vertex {int(np.argmax(bad))}), touching {touched} of "
+                f"{len(faces)} faces: the file is damaged; repair or export it again "
+                "(nothing is dropped silently)"
+            )
 
 
 def _file_normals(path: Path, loaded) -> np.ndarray | None:

@@ -169,11 +169,20 @@ class RayHits:
     pixels: np.ndarray
 
 
+#: A mesh less than this many world units across is cast on a copy scaled to unit size
+#: (the hits scaled back): trimesh's test for degenerate triangles is absolute, and a
+#: sphere 1e-6 units across (a model in kilometres read as metres) lost every triangle,
+#: "nothing visible"; 1e-5 still rendered. Larger meshes are cast as they are, so their
+#: renders do not change.
+SMALLEST_CAST_EXTENT = 1e-3
+
+
 def cast_orthographic(mesh: trimesh.Trimesh, view: OrthographicView) -> RayHits:
     """Cast one ray per pixel centre along -z and keep the first hit.
 
     Only the pixels inside the mesh's projected bounding box get a ray (the others
-    cannot hit), which saves much of the time on small objects.
+    cannot hit), which saves much of the time on small objects. A mesh smaller than
+    :data:`SMALLEST_CAST_EXTENT` is cast at unit size and the hits scaled back.
 
     Example
     -------
@@ -182,6 +191,21 @@ def cast_orthographic(mesh: trimesh.Trimesh, view: OrthographicView) -> RayHits:
     >>> bool(abs(np.nanmax(hits.z) - 1.0) < 0.01)
     True
     """
+    extent = float(np.ptp(mesh.vertices, axis=0).max()) if len(mesh.vertices) else 0.0
+    if 0.0 < extent < SMALLEST_CAST_EXTENT:
+        origin = np.asarray(mesh.bounds[0], dtype=np.float64)
+        unit = trimesh.Trimesh((mesh.vertices - origin) / extent, mesh.faces, process=False)
+        center = ((view.center[0] - origin[0]) / extent, (view.center[1] - origin[1]) / extent)
+        hits = cast_orthographic(
+            unit, OrthographicView(center, view.pixel_size / extent, view.size)
+        )
+        return RayHits(
+            hits.hit,
+            hits.z * extent + origin[2],
+            hits.points * extent + origin,
+            hits.faces,
+            hits.pixels,
+        )
     width, height = view.size
     xs, ys = view.pixel_centers()
     low, high = mesh.bounds

@@ -124,8 +124,12 @@ def parse_views(text: str) -> list[View]:
                 f"view {text!r}: expected AZ,EL in degrees or one of "
                 f"{', '.join(NAMED_VIEWS)} (got {tokens[i]!r})"
             ) from None
-        if not (np.isfinite(azimuth) and np.isfinite(elevation)) or abs(elevation) > 90:
-            raise InputError(f"view {text!r}: elevation must be within [-90, 90]")
+        if not np.isfinite(azimuth):
+            raise InputError(f"view {text!r}: azimuth {tokens[i]!r} is not a finite number")
+        if not np.isfinite(elevation) or abs(elevation) > 90:
+            raise InputError(
+                f"view {text!r}: elevation {tokens[i + 1]!r} must be a number within [-90, 90]"
+            )
         views.append(View(azimuth, elevation))
         i += 2
     if not views:
