@@ -217,14 +217,14 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
     size = int(region.sum())
     index[region] = np.arange(size, dtype=np.int32)
     step = contrast / 2
-    first, second = [], []
+    firsts, seconds = [], []
     for a, b in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1, :], np.s_[1:, :])):
         joined = region[a] & region[b]
         joined &= np.sqrt(((colours[a] - colours[b]) ** 2).sum(-1)) < step
-        first.append(index[a][joined])
-        second.append(index[b][joined])
+        firsts.append(index[a][joined])
+        seconds.append(index[b][joined])
     del index
-    first, second = np.concatenate(first), np.concatenate(second)
+    first, second = np.concatenate(firsts), np.concatenate(seconds)
     graph = sparse.coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
     del first, second
     m, which = csgraph.connected_components(graph, directed=False)
@@ -264,7 +264,7 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
     number = np.zeros(m + 1, np.int32)
     number[1:][solid] = n + 1 + np.arange(int(solid.sum()), dtype=np.int32)
     labels = np.where(number[pieces] > 0, number[pieces], labels)
-    count = n + int(solid.sum())
+    count = int(n) + int(solid.sum())
     filled_pieces = []
     for j in np.flatnonzero(holed):
         box = (slice(top[j], bottom[j] + 1), slice(left[j], right[j] + 1))
@@ -273,8 +273,8 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
             filled_pieces.append((int(filled.sum()), box, filled))
     # Smaller first: an enclosing piece, written later, takes in what it encloses.
     filled_pieces.sort(key=lambda item: item[0])
-    for j, (_, box, filled) in enumerate(filled_pieces, start=count + 1):
-        labels[box][filled] = j
+    for label, (_, box, filled) in enumerate(filled_pieces, start=count + 1):
+        labels[box][filled] = label
     count += len(filled_pieces)
     keep = np.concatenate([keep, np.ones(count - n, bool)])
     # A piece taken in entirely by its enclosure has no pixels left.
