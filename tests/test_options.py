@@ -210,9 +210,9 @@ def test_every_setting_has_one_name_and_one_group():
     names = [f.name for group in fields(config) for f in fields(getattr(config, group.name))]
     assert len(names) == len(set(names))
     assert list(config.flat()) == names
-    changed = config.replace_fields(rim=3, work_size=32.0, pose_angle_step=5.0, edge_floor=0.1)
+    changed = config.replace_fields(rim=3, work_size=32.0, pose_turn_tolerance=5.0, edge_floor=0.1)
     assert (changed.completion.rim, changed.registration.work_size) == (3, 32.0)
-    assert (changed.selection.pose_angle_step, changed.finish.edge_floor) == (5.0, 0.1)
+    assert (changed.selection.pose_turn_tolerance, changed.finish.edge_floor) == (5.0, 0.1)
     with pytest.raises(InputError, match="control_grids"):
         config.replace_fields(control_grids=(3, 5))
     with pytest.raises(InputError, match="partial_share"):
@@ -244,7 +244,7 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
     spy(imagemap.depth.finish, "seamless_copy", "seamless_copy")
     spy(imagemap.depth.selection, "find_poses", "find_poses")
     config = resolve_config("busts").replace_fields(
-        work_size=48.0, rim_agreement=0.06, pose_angle_step=5.0, edge_contrast=2.5
+        work_size=48.0, rim_agreement=0.06, mirror=False, edge_contrast=2.5
     )
     depth, _ = query_blob
     imagemap.colorize(depth, blob_database, config)
@@ -253,4 +253,4 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
     assert all(kw["completion"] is config.completion for _, kw in seen["complete_features"])
     assert seen["seamless_copy"][0][1]["edge_contrast"] == 2.5
     assert seen["seamless_copy"][0][1]["edge_floor"] == config.finish.edge_floor
-    assert all(kw["angle_step"] == 5.0 for _, kw in seen["find_poses"])
+    assert seen["find_poses"] and all(kw["mirrored"] is False for _, kw in seen["find_poses"])

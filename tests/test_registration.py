@@ -60,7 +60,7 @@ def test_registered_positions_agree_where_the_warp_says():
 
 
 def test_a_large_pair_is_registered_from_block_averaged_guides_as_well():
-    """At 1200x1600 the guides are made from 3x3 block averages (guide_oversampling),
+    """At 1200x1600 the guides are made from 3x3 block averages (detail_size),
     not at full size; the warp still maps the tips, top and bottom onto the example's
     (known answer, within 3 px: a working pixel is 14 px here), as the full-size guides'
     warp does."""
@@ -70,8 +70,8 @@ def test_a_large_pair_is_registered_from_block_averaged_guides_as_well():
     example = ellipsoid((1200, 1600), centre=(540, 880), radii=(320, 540))
     ys = np.array([600.0, 600.0, 210.0, 990.0])
     xs = np.array([170.0, 1430.0, 800.0, 800.0])
-    for oversampling in (Registration().guide_oversampling, 1e6):  # blocks, full size
-        warp = register(query, example, registration=Registration(guide_oversampling=oversampling))
+    for detail in (Registration().detail_size, 1e9):  # blocks, full size
+        warp = register(query, example, registration=Registration(detail_size=detail))
         wy, wx = warp.forward(ys, xs)
         assert np.max(np.abs(wy - (540 + (ys - 600) * 320 / 400))) < 3.0
         assert np.max(np.abs(wx - (880 + (xs - 800) * 540 / 640))) < 3.0

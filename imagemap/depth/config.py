@@ -68,16 +68,6 @@ class Selection:
     #: than its examples is made from them mirrored. Off for a class that is not
     #: mirror-symmetric (writing on a label, a heart on the left).
     mirror: bool = setting(True, kind="bool")
-    #: Degrees between the turns of the query tried over (-90, 90] (then bisected to
-    #: half a degree): the object's moments give its axis only up to a half turn and
-    #: not at all for a round object, so the turn is searched, not read off.
-    pose_angle_step: float = setting(7.5, minimum=0.5, maximum=45.0)
-    #: Cells across the units-free grid objects are compared on, and the share of the
-    #: object's size (square root of its area) one grid spans: the grid must hold a long
-    #: object turned any way (a fish is up to 2.5 sizes long), and its cells be coarser
-    #: than a pixel of a small map. 48 cells of 3.5 sizes: 0.07 size a cell.
-    pose_grid: int = setting(48, kind="int", minimum=8)
-    pose_span: float = setting(3.5, minimum=1.0)
     #: A turn up to this many degrees and a scale within this factor of the first
     #: example's are left to the registration's warp (which absorbs them): the query is
     #: then only moved by whole pixels (and mirrored), not resampled onto the example's
@@ -162,23 +152,16 @@ class Registration:
     #: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
     #: image: the outline and the band within a few percent of it lead the fit.
     outline_reach: float = setting(0.04, minimum=1e-6)
-    #: The guide images are made at no more than this many times the working size (the
-    #: depth and mask block-averaged first), never at full size: the fit at
-    #: ``work_size`` sees nothing finer, and at 2048x1536 the full-size guides (distance
-    #: transforms and smoothing of 3 million pixels, four per pair) took 5.0 of the
-    #: registration's 5.2 s. Maps up to 4x the default size are unchanged (their factor
-    #: is under 2).
-    guide_oversampling: float = setting(4.0, minimum=1.0)
-    #: The registered positions are the inverse warp evaluated on a grid of about this
-    #: many points along the example's longer side (every 4th pixel at least) and
-    #: interpolated: the warp is smooth over its 4-7 control intervals. At 2048x1536 a
-    #: 4-pixel grid took 4.1 s for two examples; maps up to 1024 pixels across keep it.
-    position_grid: int = setting(256, kind="int", minimum=2)
-    #: The relief's disagreement between the query and a registered example
-    #: (:attr:`imagemap.depth.register.Warp.relief_residual`) is measured with the object
-    #: about this many pixels across (block averages of larger maps): a groove of 1 % of
-    #: the object is still 2-3 pixels wide.
-    relief_size: float = setting(256.0, minimum=16.0)
+    #: The registration's detail works with the object about this many pixels across: the
+    #: guide images (made from block averages, never at full size: at 2048x1536 the
+    #: full-size guides, distance transforms and smoothing of 3 million pixels four per
+    #: pair, took 5.0 of the registration's 5.2 s), the registered positions (the inverse
+    #: warp on a grid of about this many points along the example's longer side, every
+    #: 4th pixel at least, interpolated: the warp is smooth over its 4-7 control
+    #: intervals; a 4-pixel grid took 4.1 s for two examples at 2048x1536) and the relief's
+    #: disagreement (a groove of 1 % of the object is still 2-3 pixels wide). 4 times the
+    #: working size: maps up to 4x the default size are unchanged by it.
+    detail_size: float = setting(256.0, minimum=16.0)
 
     def __post_init__(self) -> None:
         check_settings(self)

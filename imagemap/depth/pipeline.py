@@ -229,7 +229,7 @@ def _bands(state: State, config: DepthConfig) -> State:
             [e.depth.shape for e in state.chosen],
             state.warps,
             levels,
-            grid_points=config.registration.position_grid,
+            grid_points=int(config.registration.detail_size),
         )
         example_positions = list(registered)
     params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))

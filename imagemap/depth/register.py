@@ -297,9 +297,9 @@ def register(
     size = float(np.sqrt(query_mask.sum()))
     zoom = min(1.0, registration.work_size / max(size, 1.0))
 
-    # The guides are made at most guide_oversampling x the working size: block averages
-    # of `block` x `block` pixels first (1: full size, as for maps up to 4x the default).
-    block = max(1, int(1.0 / (registration.guide_oversampling * zoom)))
+    # The guides are made with the object at most detail_size across: block averages of
+    # `block` x `block` pixels first (1: full size, as for maps up to 4x the default).
+    block = max(1, int(1.0 / (registration.detail_size / registration.work_size * zoom)))
 
     def working(depth, mask):
         if block > 1:
@@ -392,12 +392,12 @@ def _with_relief_residual(
     warp: Warp, query_depth: np.ndarray, example_depth: np.ndarray, registration: Registration
 ) -> Warp:
     """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail against the
-    example's carried onto it by the warp, with the object about ``relief_size`` pixels
+    example's carried onto it by the warp, with the object about ``detail_size`` pixels
     across (block averages of larger maps)."""
     query_mask, example_mask = query_depth > 0, example_depth > 0
 
     def small(depth, mask):
-        block = max(1, int(round(np.sqrt(mask.sum()) / registration.relief_size)))
+        block = max(1, int(round(np.sqrt(mask.sum()) / registration.detail_size)))
         if block > 1:
             depth, mask = _block_average(depth, mask, block)
         return relief_detail(depth, mask, registration.relief_detail_scale), block

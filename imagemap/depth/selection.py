@@ -35,13 +35,12 @@ REFINED_EXTRA = 4
 
 
 def example_grid(example, selection: Selection = _SELECTION) -> np.ndarray:
-    """An example's :func:`~imagemap.depth.pose.shape_grid`, made once per grid setting
-    (cached on the example: a database's grids are not made again per query)."""
-    key = ("_shape_grid", selection.pose_grid, selection.pose_span)
+    """An example's :func:`~imagemap.depth.pose.shape_grid`, made once (cached on the
+    example: a database's grids are not made again per query)."""
     cache = example.__dict__
-    if key not in cache:
-        cache[key] = shape_grid(example.depth, selection.pose_grid, selection.pose_span)
-    return cache[key]
+    if "_shape_grid" not in cache:
+        cache["_shape_grid"] = shape_grid(example.depth)
+    return cache["_shape_grid"]
 
 
 def selection_distances(
@@ -54,9 +53,6 @@ def selection_distances(
         np.asarray(depth, np.float32),
         grids,
         mirrored=selection.mirror,
-        angle_step=selection.pose_angle_step,
-        grid=selection.pose_grid,
-        span=selection.pose_span,
     )
     return distances
 
@@ -107,8 +103,5 @@ def poses_against(depth: np.ndarray, examples: list, selection: Selection = _SEL
         depth,
         [example.depth for example in examples],
         mirrored=selection.mirror,
-        angle_step=selection.pose_angle_step,
-        grid=selection.pose_grid,
-        span=selection.pose_span,
         example_grids=np.stack([example_grid(example, selection) for example in examples]),
     )
