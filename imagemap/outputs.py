@@ -1,5 +1,7 @@
 """Output paths planned and checked before any work, then written all-or-nothing.
 
+One module for one job: the output plan: every path checked before work, written together.
+
 Rules (docs/errors.md):
 
 - Every output path is resolved (symbolic links followed) and compared with every

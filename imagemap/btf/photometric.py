@@ -1,6 +1,8 @@
 """Range maps of BTF materials by over-determined photometric stereo (section 2.1 of the
 moving-average BTF paper, papers/moving-average-btf-model.txt).
 
+One module for one job: photometric stereo and the range map it gives (check, solve, enlarge).
+
 All images of one fixed view (the top view of a BTF) under all its lights give, per texel,
 an over-determined Lambertian system I_i = rho (n . l_i): least squares gives the scaled
 normal g = rho n (Woodham), whose direction is the normal and whose length the albedo. The

@@ -1,5 +1,7 @@
 """Small features copied whole: completing an exemplar's eye or lips that the copy cut.
 
+One module for one job: finding small features and completing those the copy cut.
+
 A copy-based map draws a small feature (an eye, lips, a brow) only where the
 source map copies it. Where two offsets meet inside it, each copies part of the
 feature and the pixels between them copy the skin beside it: the map shows a

@@ -1,5 +1,7 @@
 """The depth front end's configuration: one frozen, nested :class:`DepthConfig`.
 
+One module for one job: the settings, their groups, presets and the options that set them.
+
 Every setting of a depth-map colorization is a field here, grouped by the part of
 the pipeline that reads it (:mod:`imagemap.depth.pipeline`): which examples
 (:class:`Selection`), how many pyramid levels (:class:`Pyramid`), how each example is

@@ -1,5 +1,7 @@
 """Depth-map colorization as one explicit pipeline (Hassner & Basri 2006, and what we added).
 
+One module for one job: the depth front end's stages, its result and its entry points.
+
 :func:`colorize` sizes the pyramid for the object (as many levels as its size calls
 for), then runs :data:`STAGES` in order with :func:`imagemap.core.stages.run_pipeline`:
 each is a function ``(state, config) -> state`` with a name, a predicate saying whether
