@@ -113,7 +113,7 @@ def crops_figure(count: int = 12) -> np.ndarray:
                 _caption(_crop(_on_backdrop(query.image, mask), box), f"{cls} {what}: truth"),
                 _caption(_crop(_on_backdrop(paper.image, mask), box), "--finish paper"),
                 _caption(_crop(_on_backdrop(before.image, mask), box), "0.1.0 default"),
-                _caption(_crop(_on_backdrop(default.image, mask), box), "0.2.0 default"),
+                _caption(_crop(_on_backdrop(default.image, mask), box), "default (this version)"),
                 _caption(_crop(_on_backdrop(pasted, mask), box), "nearest pasted"),
             ]
             rows.append(_row(tiles))
