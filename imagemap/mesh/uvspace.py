@@ -1,5 +1,8 @@
 """Synthesis in a shared UV atlas: no view, nothing hidden, nothing mirrored.
 
+One module for one job: the UV-space front end (surface guides, layout test, selection,
+its stage tuple and entry point).
+
 When the query mesh and the example meshes share one UV layout (a registered
 template, as scanned faces are), texel (u, v) is the same point of the object on
 every mesh, and the examples' own textures are already aligned with the query's.
