@@ -268,6 +268,23 @@ def transfer_maps(
     return out
 
 
+def maps_written(
+    result, database, kinds: list[str] | tuple[str, ...]
+) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The maps a synthesis writes beside its image-map, and the kinds it leaves out.
+
+    Of ``kinds`` (the kinds planned: :func:`database_map_kinds`), those that at least one
+    example used has are copied through the source map (:func:`transfer_maps`); a kind
+    none of them has would be its neutral value everywhere, a constant that says
+    nothing: left out (returned second, for a note to the user). One function for
+    ``imagemap synthesize`` and ``imagemap batch``.
+    """
+    have = {kind for name in result.example_names for kind in map_kinds(database[name])}
+    kept = [kind for kind in kinds if kind in have]
+    missing = [kind for kind in kinds if kind not in have]
+    return transfer_maps(result, database, kinds=kept), missing
+
+
 def companion_path(output: str | os.PathLike, kind: str) -> Path:
     """``out.png`` -> ``out_KIND.png``: where a map is written beside the image-map.
 

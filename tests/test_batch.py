@@ -20,7 +20,34 @@ from imagemap.io import InputError, read_image, write_image
 from imagemap.scene import check_textured, export_textured, load_mesh, render_textured
 
 SIZE = (60, 45)
-OPTIONS = BatchOptions(preset="fish", size=SIZE, texture_size=64)
+#: In centimetres (issue #46: --units was accepted and ignored by the batch).
+OPTIONS = BatchOptions(preset="fish", size=SIZE, texture_size=64, scale=0.01)
+#: The same options as imagemap synthesize's command line.
+SINGLE = ["--preset", "fish", "--size", "60x45", "--texture-size", "64", "--view", "front"]
+SINGLE += ["--units", "cm", "-q"]
+
+
+def alpha_masked(mesh):
+    """``mesh`` with its texture's left half cut by alpha, double-sided, cut-off 0.4 (an
+    artist's alpha-masked fins)."""
+    from PIL import Image
+    from trimesh.visual.material import PBRMaterial
+
+    from imagemap.scene.views import texture_image
+
+    rgba = np.dstack([texture_image(mesh), np.ones(texture_image(mesh).shape[:2])])
+    rgba[:, : rgba.shape[1] // 3, 3] = 0.0
+    mesh.visual = type(mesh.visual)(
+        uv=mesh.visual.uv,
+        material=PBRMaterial(
+            baseColorTexture=Image.fromarray(np.round(rgba * 255).astype(np.uint8), "RGBA"),
+            alphaMode="MASK",
+            alphaCutoff=0.4,
+            doubleSided=True,
+            roughnessFactor=0.35,
+        ),
+    )
+    return mesh
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +59,8 @@ def fish(tmp_path_factory):
     for index in range(6):
         folder = root / ("db" if index < 3 else "queries")
         mesh = instance_mesh(CLASSES["fish"], index, seed=0, texture_size=128)
+        if index == 5:
+            mesh = alpha_masked(mesh)
         export_textured(mesh, folder / f"fish_{index:03d}.glb")
     depth = make_instance(CLASSES["fish"], 6, seed=0, size=SIZE).depth
     write_image(root / "queries" / "fish_006_depth.png", depth, bits=16)
@@ -71,6 +100,42 @@ def test_local_pool_of_two_makes_every_object(pool_run):
     )
 
 
+def test_batch_gives_the_bytes_of_the_single_command(fish, pool_run, tmp_path):
+    """Issue #46: the batch made a base colour only (roughness 0.6), OPAQUE single-sided
+    meshes from alpha-masked ones, no PBR maps for depth maps, and ignored --units. Every
+    file of the pool's run equals imagemap synthesize's with the same options (the Dask
+    run equals the pool's: the test below)."""
+    from imagemap.scene.files import material_of
+
+    pool_out, _ = pool_run
+    db = str(fish / "db")
+    for name in ("fish_003", "fish_004", "fish_005"):
+        single = tmp_path / f"{name}.glb"
+        query = str(fish / "queries" / f"{name}.glb")
+        assert main(["synthesize", query, "--db", db, "-o", str(single), *SINGLE]) == 0
+        assert single.read_bytes() == (pool_out / f"{name}.glb").read_bytes(), name
+    masked = load_mesh(pool_out / "fish_005.glb")
+    material = material_of(masked)
+    assert (material.alpha_mode, material.alpha_cutoff, material.double_sided) == (
+        "MASK",
+        pytest.approx(0.4),
+        True,
+    )
+    assert masked.visual.material.metallicRoughnessTexture is not None  # the examples' maps
+    extent = np.ptp(masked.vertices, axis=0).max()
+    source = np.ptp(load_mesh(fish / "queries" / "fish_005.glb").vertices, axis=0).max()
+    assert extent == pytest.approx(source * 0.01)  # --units cm
+    depth = str(fish / "queries" / "fish_006_depth.png")
+    single = tmp_path / "fish_006_image.png"
+    assert main(["synthesize", depth, "--db", db, "-o", str(single), "--preset", "fish", "-q"]) == 0
+    assert single.read_bytes() == (pool_out / "fish_006_image.png").read_bytes()
+    maps = sorted(p.name for p in tmp_path.glob("fish_006_image_*.png"))
+    assert maps == ["fish_006_image_roughness.png"]  # the mesh examples' roughness
+    for path in maps:
+        kind = path.removeprefix("fish_006_image_")
+        assert (tmp_path / path).read_bytes() == (pool_out / f"fish_006_{kind}").read_bytes()
+
+
 def test_dask_local_cluster_of_two_workers_gives_the_same_bytes(fish, pool_run, tmp_path):
     distributed = pytest.importorskip("distributed", reason="dask[distributed] not installed")
     pool_out, _ = pool_run
@@ -83,7 +148,8 @@ def test_dask_local_cluster_of_two_workers_gives_the_same_bytes(fish, pool_run, 
         )
     assert (summary.done, summary.skipped, summary.failed) == (4, 0, 0)
     assert_valid_outputs(tmp_path)
-    for name in ("fish_003.glb", "fish_004.glb", "fish_005.glb", "fish_006_image.png"):
+    names = ("fish_003.glb", "fish_004.glb", "fish_005.glb", "fish_006_image.png")
+    for name in (*names, "fish_006_roughness.png"):
         assert (tmp_path / name).read_bytes() == (pool_out / name).read_bytes(), name
 
 
@@ -251,7 +317,8 @@ def test_resume_checks_content_not_size(fish, tmp_path):
     out = tmp_path / "out"
     assert run_batch(queries, fish / "db", out, OPTIONS).done == 1
     manifest = json.loads((out / ".imagemap-done" / "fish_006_depth.png.json").read_text())
-    assert set(manifest["outputs"]) == {"fish_006_image.png"}
+    # The image-map and the PBR map the examples have (their roughness).
+    assert set(manifest["outputs"]) == {"fish_006_image.png", "fish_006_roughness.png"}
     assert len(manifest["outputs"]["fish_006_image.png"]) == 64  # SHA-256, not a size
     assert manifest["settings"]["preset"] == "fish"
     output = out / "fish_006_image.png"

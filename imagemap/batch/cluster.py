@@ -11,7 +11,7 @@ from typing import Any
 
 from imagemap.batch.plan import BatchOptions, Job
 from imagemap.batch.work import _safe_process, _set_threads
-from imagemap.database import Database
+from imagemap.mesh.library import ExampleSet
 from imagemap.io import InputError
 
 __all__ = ["CONNECT_SECONDS"]
@@ -92,7 +92,7 @@ def _dask_threads(host_threads: dict[str, int]) -> int:
 
 
 def _run_dask(
-    todo: list[Job], databases: dict[str, Database], options: BatchOptions, client: Any
+    todo: list[Job], databases: ExampleSet, options: BatchOptions, client: Any
 ) -> Generator[dict, None, None]:
     from dask.distributed import as_completed  # deferred: optional dependency (imagemap[dask])
 

@@ -7,7 +7,7 @@ import json
 import os
 import re
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ __all__ = [
     "Job",
     "check_outputs",
     "plan_jobs",
+    "with_map_companions",
 ]
 
 
@@ -41,11 +42,17 @@ class BatchOptions:
     """What every object of a batch is synthesized with.
 
     ``options`` are :data:`imagemap.depth.config.OPTIONS` by name (a mapping; kept
-    as sorted pairs), over ``preset``; ``views`` apply to meshes (the first one is
-    also the view at which mesh examples are rendered for depth-map queries);
-    ``background`` None writes RGBA maps with a transparent background, else RGB on
-    that colour. Checked when built: an unknown preset or option, or a value the
-    configuration refuses, is an :class:`InputError`.
+    as sorted pairs), over ``preset``; ``views`` apply to meshes (a depth-map query
+    sees mesh examples as ``imagemap synthesize`` shows them to it: from the front at
+    the default size), and with ``auto_views`` they are the candidates each mesh chooses from by coverage
+    (``--views auto``); ``texture_size`` None: each mesh's own atlas resolution;
+    ``scale`` multiplies the written coordinates (``--units``/``--scale``); ``uv_space``
+    as ``--uv-space``/``--no-uv-space`` (None: detected); ``maps`` False writes the
+    colour only (``--no-maps``); ``background`` None writes RGBA maps with a transparent
+    background, else RGB on that colour. Every object is made as ``imagemap
+    synthesize`` makes it with the same options (:meth:`mesh_request`). Checked when
+    built: an unknown preset or option, or a value the configuration refuses, is an
+    :class:`InputError`.
     """
 
     preset: str = "busts"
@@ -53,9 +60,13 @@ class BatchOptions:
     seed: int = 0
     views: tuple[View, ...] = (FRONT,)
     size: tuple[int, int] = DEFAULT_SIZE
-    texture_size: int = 512
+    texture_size: int | None = None
     mesh_format: str = "glb"
     background: tuple[float, float, float] | None = None
+    auto_views: bool = False
+    scale: float = 1.0
+    uv_space: bool | None = None
+    maps: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.options, Mapping | tuple | list):
@@ -85,6 +96,15 @@ class BatchOptions:
         object.__setattr__(self, "size", size)
         if self.texture_size is not None:
             check_int("texture_size", self.texture_size, minimum=1)
+        scale = check_float("scale", self.scale, 0.0, float("inf"))
+        if not scale > 0:
+            raise InputError(f"scale: must be a positive number, got {self.scale}")
+        object.__setattr__(self, "scale", float(scale))
+        if self.uv_space not in (None, True, False):
+            raise InputError(f"uv_space: expected True, False or None, got {self.uv_space!r}")
+        for flag in ("auto_views", "maps"):
+            if not isinstance(getattr(self, flag), bool):
+                raise InputError(f"{flag}: expected True or False, got {getattr(self, flag)!r}")
         if self.mesh_format not in ("glb", "obj"):
             raise InputError(f"mesh format must be glb or obj, got {self.mesh_format!r}")
         if self.background is not None:
@@ -112,6 +132,22 @@ class BatchOptions:
     def config(self) -> DepthConfig:
         """The :class:`~imagemap.depth.config.DepthConfig` every object is made with."""
         return resolve_config(self.preset, **self.colorize_options())
+
+    def mesh_request(self):
+        """The :class:`~imagemap.mesh.route.MeshRequest` every mesh is made with: the one
+        ``imagemap synthesize MESH`` builds from the same options."""
+        from imagemap.mesh.route import MeshRequest  # deferred: start-up (workers only)
+
+        return MeshRequest(
+            views=tuple(self.views),
+            auto_views=self.auto_views,
+            size=tuple(self.size),
+            texture_size=self.texture_size,
+            config=self.config(),
+            seed=self.seed,
+            uv_space=self.uv_space,
+            maps=self.maps,
+        )
 
 
 @dataclass(frozen=True)
@@ -180,6 +216,19 @@ def plan_jobs(
             f"({', '.join(MESH_SUFFIXES)}) found"
         )
     return jobs
+
+
+def with_map_companions(jobs: list[Job], kinds: list[str] | tuple[str, ...]) -> list[Job]:
+    """Each depth job with its PBR maps beside its image-map (``NAME_KIND.png``, as
+    ``imagemap synthesize A_depth.png B_depth.png -o DIR`` names them), for every kind
+    the database has (:func:`imagemap.materials.database_map_kinds`); meshes unchanged."""
+    out = []
+    for job in jobs:
+        if job.kind == "depth" and kinds:
+            maps = tuple(job.output.with_name(f"{job.name}_{kind}.png") for kind in kinds)
+            job = replace(job, companions=(*job.companions, *maps))
+        out.append(job)
+    return out
 
 
 def _outputs_of(job: Job) -> list[Path]:

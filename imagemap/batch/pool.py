@@ -15,7 +15,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 from imagemap.batch.plan import BatchOptions, Job
 from imagemap.batch.work import _safe_process, _set_threads
-from imagemap.database import Database
+from imagemap.mesh.library import ExampleSet
 
 __all__ = ["PARENT_POLL_SECONDS"]
 
@@ -81,7 +81,7 @@ def _usable_workers(workers: int, objects: int) -> int:
 
 def _run_pool(
     todo: list[Job],
-    databases: dict[str, Database],
+    databases: ExampleSet,
     options: BatchOptions,
     workers: int,
     cores: int,

@@ -17,7 +17,14 @@ from typing import Any
 
 from imagemap.batch.cluster import _connect, _is_client, _run_dask
 from imagemap.batch.locks import _locked
-from imagemap.batch.plan import REPORT_NAME, BatchOptions, Job, check_outputs, plan_jobs
+from imagemap.batch.plan import (
+    REPORT_NAME,
+    BatchOptions,
+    Job,
+    check_outputs,
+    plan_jobs,
+    with_map_companions,
+)
 from imagemap.batch.pool import _run_pool, _usable_workers
 from imagemap.batch.work import (
     _remove_stale_temporaries,
@@ -115,6 +122,10 @@ def run_batch(
             raise InputError(f"database: expected a Database or a folder, got {database!r}")
         database_dir = database
         database = Database.from_directory(database, view=options.views[0], size=options.size)
+    if options.maps:  # the PBR maps every depth map's image-map may have beside it
+        from imagemap.materials import database_map_kinds  # deferred: start-up
+
+        jobs = with_map_companions(jobs, database_map_kinds(database))
     check_outputs(jobs, database, out_dir, database_dir)  # before any work
     if any(job.kind == "mesh" for job in jobs):  # the views and texture every mesh will have
         guard_mesh(options.size, len(options.views), options.texture_size or 512, "each mesh")
@@ -137,7 +148,7 @@ def run_batch(
             for job in todo:
                 _remove_stale_temporaries(job)
             try:
-                databases = prepare_databases(database, options) if todo else {}
+                databases = prepare_databases(database, options, todo) if todo else None
                 summary.prepare_seconds = time.perf_counter() - start
                 if todo:
                     log.info("database prepared in %.1f s", summary.prepare_seconds)
@@ -187,7 +198,7 @@ def _collect(
 
 def _run(
     todo: list[Job],
-    databases: dict[str, Database],
+    databases: Any,
     options: BatchOptions,
     workers: int,
     client: Any,

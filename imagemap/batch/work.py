@@ -11,12 +11,12 @@ import time
 import traceback
 
 from imagemap.batch.plan import BatchOptions, Job, _names, _outputs_of, _started
-from imagemap.database import Database, database_at_view, prepare_database
+from imagemap.database import Database
 from imagemap.depth.budget import guard_mesh
 from imagemap.io import InputError, atomic_path, image_writer, is_temporary_of, read_depth
-from imagemap.mesh.colorize import colorize_mesh
-from imagemap.outputs import STAGING_PREFIX, exported, write_all
-from imagemap.scene import export_textured, file_digest, load_mesh
+from imagemap.mesh.library import ExampleSet
+from imagemap.outputs import STAGING_PREFIX, write_all
+from imagemap.scene import DEFAULT_SIZE, FRONT, file_digest, load_mesh
 
 __all__ = ["is_complete", "prepare_databases", "process_job"]
 
@@ -38,7 +38,9 @@ def is_complete(job: Job, options: BatchOptions, digest: str | None = None) -> b
     if manifest.get("input_sha256") != (digest or file_digest(job.source)):
         return False
     outputs = manifest.get("outputs")
-    if not isinstance(outputs, dict) or set(outputs) != {p.name for p in _outputs_of(job)}:
+    # The outputs written, each with its digest (a PBR map none of the examples used has
+    # is planned, not written): each must be there with the same content.
+    if not isinstance(outputs, dict) or job.output.name not in outputs:
         return False
     for name, recorded in outputs.items():
         path = job.output.parent / name
@@ -62,15 +64,21 @@ def _remove_stale_temporaries(job: Job) -> None:
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def prepare_databases(database: Database, options: BatchOptions) -> dict[str, Database]:
-    """The database with every example loaded (and mesh examples rendered), by view ("az,el")."""
-    return {
-        str(view): prepare_database(database_at_view(database, view, options.size))
-        for view in options.views
-    }
+def prepare_databases(
+    database: Database, options: BatchOptions, jobs: list[Job] | None = None
+) -> ExampleSet:
+    """The database as every worker needs it, needing no file (:meth:`ExampleSet.prepared`):
+    every example loaded, mesh examples rendered at every view of ``options`` (the
+    candidates of ``--views auto``) when a job is a mesh, every mesh example's mesh loaded
+    for the uv-space path, and the front at the default size when a job is a depth map."""
+    kinds = {job.kind for job in jobs} if jobs is not None else {"mesh", "depth"}
+    views = options.views if "mesh" in kinds else ()
+    return ExampleSet.of(database).prepared(
+        views, options.size, meshes="mesh" in kinds, pictures="depth" in kinds
+    )
 
 
-def process_job(job: Job, databases: dict[str, Database], options: BatchOptions) -> dict:
+def process_job(job: Job, databases: ExampleSet, options: BatchOptions) -> dict:
     """Synthesize one object and write its outputs, then its manifest (all atomically)."""
     # A pool's parent process and a Dask client never synthesize: the pipeline and its
     # numba kernels (2-3 s) are loaded in the workers only.
@@ -83,40 +91,38 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
     with atomic_path(_started(job)) as tmp:
         tmp.write_text(json.dumps(started, indent=1, sort_keys=True) + "\n")
     if job.kind == "depth":
+        from imagemap.materials import maps_written  # deferred: start-up (see above)
+
+        # As imagemap synthesize DEPTH reads the database: mesh examples from the front
+        # at the default size.
+        examples = ExampleSet.of(databases).at_view(FRONT, DEFAULT_SIZE)
         depth = read_depth(job.source)
-        result = colorize(
-            depth,
-            databases[str(options.views[0])],
-            preset=options.config(),
-            seed=options.seed,
-        )
+        result = colorize(depth, examples, preset=options.config(), seed=options.seed)
         picture = (
             result.rgba if options.background is None else result.on_background(options.background)
         )
-        write_all({job.output: image_writer(picture)})
-        examples = result.example_names
+        writers = {job.output: image_writer(picture)}
+        # The PBR maps, as imagemap synthesize writes them (planned: NAME_KIND.png).
+        planned = {p.stem[len(job.name) + 1 :]: p for p in job.companions}
+        maps, _ = maps_written(result, examples, list(planned))
+        for kind, array in maps.items():
+            writers[planned[kind]] = image_writer(array, bits=16 if kind == "height" else 8)
+        written = write_all(writers)
+        used = result.example_names
     else:
+        from imagemap.mesh.route import mesh_writers, texture_mesh  # deferred: start-up
+
         mesh = load_mesh(job.source)
         # This mesh's texture (chosen from its own when not given): refused here, reported.
         guard_mesh(options.size, len(options.views), _texture_size(mesh, options), job.name)
-        made = colorize_mesh(
-            mesh,
-            databases,
-            list(options.views),
-            size=options.size,
-            texture_size=options.texture_size,
-            preset=options.config(),
-            seed=options.seed,
-        )
-        writers, cleanup = exported(
-            lambda path: export_textured(made.mesh, path), job.output, job.companions
-        )
+        done = texture_mesh(mesh, ExampleSet.of(databases), options.mesh_request())
+        writers, cleanup = mesh_writers(done, job.output, job.companions, options.scale)
         try:
-            write_all(writers)
+            written = write_all(writers)
         finally:
             cleanup()
-        examples = sorted({n for r in made.results for n in r.example_names})
-    outputs = {p.name: file_digest(p) for p in _outputs_of(job) if p.is_file()}
+        used = sorted({n for r in done.made.results for n in r.example_names})
+    outputs = {p.name: file_digest(p) for p in sorted(written)}
     seconds = time.perf_counter() - start
     record = {
         "name": job.name,
@@ -125,7 +131,7 @@ def process_job(job: Job, databases: dict[str, Database], options: BatchOptions)
         "options": job.options_key or options.key(),
         "settings": options.record(),
         "outputs": outputs,
-        "examples": examples,
+        "examples": used,
         "seconds": round(seconds, 3),
     }
     with atomic_path(job.manifest) as tmp:

@@ -87,7 +87,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="maps of depth inputs: 'transparent' (RGBA, default) or a colour",
     )
     p.add_argument("--force", action="store_true", help="redo objects already complete")
-    add_mesh_options(p)
+    p.add_argument(
+        "--no-maps",
+        action="store_true",
+        help="write the colour only: by default the examples' PBR maps are carried as "
+        "imagemap synthesize carries them (depth maps: NAME_normal.png, _roughness ... beside "
+        "NAME_image.png; meshes: in the GLB's material)",
+    )
+    add_mesh_options(p, uv_space=True)
     add_common_options(p)
     p.set_defaults(func=run_batch_cli)
 
@@ -95,9 +102,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_batch_cli(args: argparse.Namespace) -> int:
     from imagemap.batch import BatchOptions, run_batch
     from imagemap.cli.synthesize import check_cache, check_views_given
+    from imagemap.scene.files import unit_scale
 
     check_views_given(args)
     check_cache()
+    # The same options as imagemap synthesize's, read the same way (imagemap.mesh.route).
     options = BatchOptions(
         preset=args.preset,
         options=config_options(args),
@@ -107,6 +116,10 @@ def run_batch_cli(args: argparse.Namespace) -> int:
         texture_size=args.texture_size,
         mesh_format=args.format,
         background=parse_colour(args.background),
+        auto_views=getattr(args, "views", None) == "auto",
+        scale=unit_scale(args.units, args.scale),
+        uv_space=args.uv_space,
+        maps=not args.no_maps,
     )
     if args.scheduler and not args.scheduler.startswith(("tcp://", "tls://", "inproc://")):
         raise InputError(f"--scheduler {args.scheduler!r}: expected tcp://HOST:PORT")

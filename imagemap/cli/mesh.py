@@ -30,29 +30,6 @@ PREVIEW_VIEWS = ("0,0", "35,20")
 PLAUSIBLE_METRES = (0.01, 30.0)
 
 
-def _render_mesh_examples(database, views, size, quiet: bool) -> None:
-    """Render (or read from the cache) every mesh example at every view, each named."""
-    from imagemap.database import database_at_view
-    from imagemap.progress import progress
-    from imagemap.scene import MeshExample
-
-    for view in views:
-        examples = [e for e in database_at_view(database, view, size) if isinstance(e, MeshExample)]
-        todo = [e for e in examples if not e.cache_path().is_file()]
-        if not todo:
-            continue
-        if not quiet:
-            print(
-                f"imagemap: rendering {len(todo)} mesh example(s) from view {view} "
-                "(first use; cached for the next runs)",
-                file=sys.stderr,
-            )
-        for example in progress(todo, desc=f"mesh examples at {view}", quiet=quiet):
-            if not quiet and not sys.stderr.isatty():
-                print(f"imagemap:   {example.name} ({example.mesh_path.name})", file=sys.stderr)
-            _ = example.depth  # renders and caches
-
-
 def _mesh_preview(textured, database, first_name: str, size):
     """The textured result from :data:`PREVIEW_VIEWS` beside the first example's picture
     (a mesh example rendered the same way; a picture example as it is)."""
@@ -87,32 +64,6 @@ def how_made(made, views) -> str:
     return "its UV atlas" if made.path == "uv-space" else f"{len(views)} view(s)"
 
 
-def _with_view_maps(made, mesh, database, size):
-    """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
-    from imagemap.database import database_at_view
-    from imagemap.mesh.maps import with_mesh_maps
-    from imagemap.scene import bake_views, project_texture
-
-    if getattr(made, "path", "views") != "views" or not made.renders:
-        return made.mesh
-    renders = made.renders
-    width = made.mesh.visual.material.baseColorTexture.size[0]
-    if len(renders) == 1:
-
-        def bake(images):
-            return project_texture(mesh, renders[0], images[0])
-
-    else:
-
-        def bake(images):
-            return bake_views(mesh, renders, images, width)
-
-    databases = [database_at_view(database, r.view, size) for r in renders]
-    return with_mesh_maps(
-        made.mesh, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
-    )
-
-
 def _guard_memory(args: argparse.Namespace, mesh, views) -> None:
     """The memory guard of the mesh route (imagemap.depth.budget.guard_mesh): the views'
     size and the texture's (the one the bake would choose when not given)."""
@@ -145,15 +96,11 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     from imagemap.database import Database
     from imagemap.depth.config import resolve_config
     from imagemap.io import image_writer
-    from imagemap.mesh import colorize_mesh
-    from imagemap.mesh.colorize import uv_layout_examples
-    from imagemap.outputs import OutputPlan, exported, write_all, written_companions
-    from imagemap.scene import TEXTURED_SUFFIXES, export_textured, is_mesh_path, load_mesh
-    from imagemap.scene.coverage import (
-        choose_views,
-    )  # deferred: start-up: the parser loads no scientific module
+    from imagemap.mesh.library import ExampleSet
+    from imagemap.mesh.route import MeshRequest, mesh_writers, texture_mesh
+    from imagemap.outputs import OutputPlan, write_all, written_companions
+    from imagemap.scene import TEXTURED_SUFFIXES, is_mesh_path, load_mesh
     from imagemap.scene.files import unit_scale
-    from imagemap.scene.surface import keep_surface
 
     output = Path(args.output)
     if len(args.depth) > 1:
@@ -196,38 +143,20 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
             plan.add_output(path, option, suffixes=suffixes)
     plan.check()
     _guard_memory(args, mesh, views)  # before any work: --size and --texture-size
-    start = time.perf_counter()
-    # Examples in the query's UV layout: synthesized in the atlas, no view is rendered.
-    in_layout = uv_layout_examples(mesh, database, getattr(args, "uv_space", None), examples)
-    if in_layout is not None:
-        views = ()
-        if not quiet:
-            names = ", ".join(e.name for e in in_layout)
-            print(f"imagemap: uv-space path: examples in the mesh's UV layout: {names}",
-                  file=sys.stderr)  # fmt: skip
-    elif getattr(args, "views", None) == "auto":
-        views = tuple(choose_views(mesh, views))
-        if not quiet:
-            print(
-                f"imagemap: views chosen by coverage: {'; '.join(str(v) for v in views)}",
-                file=sys.stderr,
-            )
-    if views:
-        _render_mesh_examples(database, views, args.size, quiet)
-    sizing = {"texture_size": args.texture_size} if args.texture_size else {}
-    made = colorize_mesh(
-        mesh,
-        database,
-        list(views),
-        size=args.size,
-        preset=config,
+    request = MeshRequest(
+        views=tuple(views),
+        auto_views=getattr(args, "views", None) == "auto",
+        size=tuple(args.size),
+        texture_size=args.texture_size,
+        config=config,
         seed=args.seed,
-        examples=examples,
-        quiet=quiet or not sys.stderr.isatty(),
-        uv_space=in_layout if in_layout is not None else False,
-        **sizing,
+        examples=tuple(examples) if examples else None,
+        uv_space=getattr(args, "uv_space", None),
+        maps=not getattr(args, "no_maps", False),
     )
-    textured = keep_surface(_with_view_maps(made, mesh, database, args.size), mesh)
+    start = time.perf_counter()
+    done = texture_mesh(mesh, ExampleSet.of(database), request, quiet=quiet)
+    made, textured, views = done.made, done.textured, done.views
     seconds = time.perf_counter() - start
     first = made.results[0]
     writers = {}
@@ -255,10 +184,8 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         writers[Path(args.report)] = lambda tmp: Path(tmp).write_text(text)
     cleanup = None
     if output.suffix.lower() != ".png":  # the mesh's files join the set (staged, then moved)
-        mesh_writers, cleanup = exported(
-            lambda path: export_textured(textured, path, scale=scale), output, companions
-        )
-        writers.update(mesh_writers)
+        files, cleanup = mesh_writers(done, output, companions, scale)
+        writers.update(files)
     try:
         write_all(writers)
     finally:

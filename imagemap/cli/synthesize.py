@@ -422,13 +422,11 @@ def _synthesize_one(args, job, depth, database, config, examples, background, ba
     if job["preview"]:
         writers[job["preview"]] = image_writer(_preview(depth, result, database))
     if job.get("maps"):
-        from imagemap.materials import map_kinds, transfer_maps
+        from imagemap.materials import maps_written
 
         # A kind none of the examples used has would be its neutral value everywhere: a
         # constant map says nothing, so it is not written, and the user is told.
-        have = {kind for name in result.example_names for kind in map_kinds(database[name])}
-        kinds = [kind for kind in job["maps"] if kind in have]
-        missing = [kind for kind in job["maps"] if kind not in have]
+        maps, missing = maps_written(result, database, list(job["maps"]))
         if missing and not args.quiet:
             print(
                 f"imagemap: note: no {', '.join(missing)} map written beside {job['output']}: "
@@ -436,10 +434,8 @@ def _synthesize_one(args, job, depth, database, config, examples, background, ba
                 "be a constant)",
                 file=sys.stderr,
             )
-        maps = transfer_maps(result, database, kinds=kinds)
-        for kind in kinds:
-            path = job["maps"][kind]
-            writers[path] = image_writer(maps[kind], bits=16 if kind == "height" else 8)
+        for kind, array in maps.items():
+            writers[job["maps"][kind]] = image_writer(array, bits=16 if kind == "height" else 8)
     report = {
         "query": str(job["depth"]),
         "output": str(job["output"]),

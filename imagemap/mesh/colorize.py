@@ -20,11 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imagemap.database import Database, database_at_view
+from imagemap.database import Database
 from imagemap.depth.config import resolve_config
 from imagemap.depth.pipeline import colorize
 from imagemap.depth.selection import selection_distances
 from imagemap.io import InputError
+from imagemap.mesh.library import ExampleSet
 from imagemap.mesh.uvspace import (
     LAYOUT_TEST_SIZE,
     UVExample,
@@ -34,7 +35,6 @@ from imagemap.mesh.uvspace import (
     surface_maps,
 )
 from imagemap.scene.bake import bake_views, project_texture, view_shares
-from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import check_finite, load_mesh, textured_mesh
 from imagemap.scene.views import (
     DEFAULT_SIZE,
@@ -139,7 +139,10 @@ def _by_use(results: list, names: list[str]) -> list[str]:
 
 
 def uv_layout_examples(
-    mesh, database, uv_space: bool | None = None, names: list[str] | None = None
+    mesh,
+    database: Database | dict[str, Database] | ExampleSet,
+    uv_space: bool | None = None,
+    names: list[str] | None = None,
 ) -> list | None:
     """The database's mesh examples in the query's UV layout, or None: the views path.
 
@@ -147,7 +150,8 @@ def uv_layout_examples(
     ----------
     mesh : trimesh.Trimesh
         The query.
-    database : Database (or a dict of prepared views: always None)
+    database : Database, prepared views or ExampleSet
+        Prepared views without the meshes (a dict) have no mesh example: always None.
     uv_space : bool, optional
         As :func:`colorize_mesh`: True declares every textured mesh example to be in the
         query's layout, False never takes the uv-space path, None detects the layout
@@ -169,38 +173,37 @@ def uv_layout_examples(
 
     if uv_space is False:
         return None
-    if not isinstance(database, Database):
+    examples = ExampleSet.of(database)
+    if not examples.mesh_names:
         if uv_space:
-            raise InputError("--uv-space: needs the database's mesh files (not prepared views)")
+            raise InputError("--uv-space: the database has no textured mesh examples")
         return None
     if getattr(mesh.visual, "uv", None) is None:
         if uv_space:
             raise InputError("--uv-space: the query mesh has no UV coordinates")
         return None
-    meshes = [e for e in database if isinstance(e, MeshExample)]
-    if names:
-        meshes = [e for e in meshes if e.name in names]
+    meshes = [n for n in examples.mesh_names if not names or n in names]
     if not meshes:
         if uv_space:
             raise InputError("--uv-space: the database has no textured mesh examples")
         return None
     query_maps = surface_maps(*mesh_uv_arrays(mesh), LAYOUT_TEST_SIZE)
     shared, others = [], []
-    for example in meshes:
-        example_mesh = load_mesh(example.mesh_path)
+    for name in meshes:
+        example_mesh = examples.mesh(name)
         has_uv = getattr(example_mesh.visual, "uv", None) is not None
         texture = texture_image(example_mesh) if has_uv else None
         if texture is None:
             if uv_space:
-                raise InputError(f"--uv-space: {example.mesh_path} has no UVs and texture")
-            others.append(example.name)
+                raise InputError(f"--uv-space: mesh example {name} has no UVs and texture")
+            others.append(name)
             continue
         if uv_space or shares_layout(mesh, example_mesh, query_maps):
             # Kept as bytes (as read): a quarter of float32's memory at 1024^2 and more.
             texture = np.round(texture * 255.0).astype(np.uint8)
-            shared.append(UVExample(example.name, example_mesh, texture))
+            shared.append(UVExample(name, example_mesh, texture))
         else:
-            others.append(example.name)
+            others.append(name)
     if not shared:
         return None
     missing = sorted(set(names or ()) - {e.name for e in shared})
@@ -216,7 +219,7 @@ def uv_layout_examples(
 
 def colorize_mesh(
     mesh,
-    database: Database | dict[str, Database],
+    database: Database | dict[str, Database] | ExampleSet,
     views: list[View] | str | None = None,
     *,
     size: tuple[int, int] = DEFAULT_SIZE,
@@ -233,9 +236,10 @@ def colorize_mesh(
     Parameters
     ----------
     mesh : trimesh.Trimesh or path
-    database : Database or dict
+    database : Database, dict or ExampleSet
         The examples; or, prepared for each view (:func:`prepare_database`), a dict
-        from ``str(view)`` (``"az,el"``) to Database (views path only).
+        from ``str(view)`` (``"az,el"``) to Database (views path only); or an
+        :class:`~imagemap.mesh.library.ExampleSet` (a batch's prepared set: views and meshes).
     views : list of View or str, optional
         The front by default; e.g. ``"front,back,left,right"`` (views path).
     size : (int, int)
@@ -274,9 +278,10 @@ def colorize_mesh(
             f"views: expected a View, a list of View objects or 'AZ,EL' / names, got {views!r}"
         )
     views = [parse_view(v) for v in views]
-    if isinstance(database, Database):
+    examples_set = ExampleSet.of(database)
+    if examples_set.source is not None:
         for name in names or ():
-            database[name]  # an unknown name is an InputError listing the known ones
+            examples_set.source[name]  # an unknown name is an InputError listing the known ones
     if texture_size is not None:
         texture_size = check_int("texture_size", texture_size, minimum=8)
     if not (uv_space is None or isinstance(uv_space, bool | list)):
@@ -287,7 +292,7 @@ def colorize_mesh(
     if isinstance(uv_space, list):
         uv_examples = uv_space  # found already (uv_layout_examples)
     else:
-        uv_examples = uv_layout_examples(mesh, database, uv_space, names)
+        uv_examples = uv_layout_examples(mesh, examples_set, uv_space, names)
     if uv_examples is not None:
         if texture_size is None:
             own = texture_image(mesh)
@@ -312,10 +317,7 @@ def colorize_mesh(
         if not render.mask.any():
             raise InputError(f"nothing of the mesh is visible from view {view}")
         renders.append(render)
-        if isinstance(database, dict):
-            databases.append(database[str(view)])
-        else:
-            databases.append(database_at_view(database, view, size))
+        databases.append(examples_set.at_view(view, size))
     if names is None and len(views) > 1:
         shares = view_shares(mesh, renders)
         names = shared_examples(renders, databases, config.selection.m, shares)

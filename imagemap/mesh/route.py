@@ -1,0 +1,213 @@
+"""The mesh route from a loaded mesh to its written files: one function for
+``imagemap synthesize MESH`` and for every mesh of ``imagemap batch``.
+
+:func:`texture_mesh` chooses the path (uv-space when the examples share the query's UV
+layout, else views; ``auto`` views by coverage), synthesizes, carries the examples'
+PBR maps and what the artist set on the input (normals, alpha, material);
+:func:`mesh_writers` stages the files (the mesh in its format, and beside it what glTF
+has no slot for). Both commands call these two with the same :class:`MeshRequest`, so
+the same options give the same bytes through either (``tests/test_batch.py``).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from imagemap.io import InputError
+from imagemap.mesh.colorize import MeshResult, colorize_mesh, uv_layout_examples
+from imagemap.mesh.library import ExampleSet
+from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
+
+__all__ = ["MeshRequest", "TexturedResult", "mesh_writers", "texture_mesh"]
+
+
+@dataclass(frozen=True)
+class MeshRequest:
+    """How a mesh is textured: what both commands pass to :func:`texture_mesh`.
+
+    Attributes
+    ----------
+    views : tuple of View
+        The views (with ``auto_views``: the candidates, narrowed by coverage per mesh).
+    auto_views : bool
+        ``--views auto``: choose among ``views`` by coverage
+        (:func:`imagemap.scene.coverage.choose_views`).
+    size : (int, int)
+        Each view's depth map (width, height).
+    texture_size : int or None
+        The texture's side; None: the mesh's own atlas resolution.
+    config : DepthConfig or str
+        The resolved configuration (or a preset name).
+    seed : int
+    examples : tuple of str or None
+        The examples asked for (None: chosen).
+    uv_space : bool or None
+        ``--uv-space`` (True), ``--no-uv-space`` (False), detected (None).
+    maps : bool
+        Carry the examples' PBR maps (``--no-maps``: False).
+    """
+
+    views: tuple[View, ...] = (FRONT,)
+    auto_views: bool = False
+    size: tuple[int, int] = DEFAULT_SIZE
+    texture_size: int | None = None
+    config: Any = "busts"
+    seed: int = 0
+    examples: tuple[str, ...] | None = None
+    uv_space: bool | None = None
+    maps: bool = True
+
+
+@dataclass
+class TexturedResult:
+    """A textured mesh ready to write, and what made it.
+
+    Attributes
+    ----------
+    made : MeshResult
+        The synthesis (path, renders, per-view results).
+    textured : trimesh.Trimesh
+        The mesh to write: texture, PBR maps, normals, alpha and material settings.
+    views : tuple of View
+        The views synthesized (empty on the uv-space path).
+    side_maps : dict
+        Maps glTF has no slot for, written beside the mesh as ``STEM_KIND.png``
+        (``"height"``: 16-bit grey).
+    """
+
+    made: MeshResult
+    textured: Any
+    views: tuple[View, ...]
+    side_maps: dict[str, Any] = field(default_factory=dict)
+
+
+def _say(quiet: bool) -> Callable[[str], None]:
+    def say(text: str) -> None:
+        if not quiet:
+            print(f"imagemap: {text}", file=sys.stderr)
+
+    return say
+
+
+def _render_mesh_examples(examples: ExampleSet, views, size, quiet: bool) -> None:
+    """Render (or read from the cache) every mesh example at every view, each named
+    (a prepared set has them rendered already)."""
+    from imagemap.progress import progress
+    from imagemap.scene import MeshExample
+
+    if examples.source is None:
+        return
+    for view in views:
+        found = [e for e in examples.at_view(view, size) if isinstance(e, MeshExample)]
+        todo = [e for e in found if not e.cache_path().is_file()]
+        if not todo:
+            continue
+        _say(quiet)(
+            f"rendering {len(todo)} mesh example(s) from view {view} "
+            "(first use; cached for the next runs)"
+        )
+        for example in progress(todo, desc=f"mesh examples at {view}", quiet=quiet):
+            if not quiet and not sys.stderr.isatty():
+                print(f"imagemap:   {example.name} ({example.mesh_path.name})", file=sys.stderr)
+            _ = example.depth  # renders and caches
+
+
+def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
+    """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
+    from imagemap.mesh.maps import with_mesh_maps
+    from imagemap.scene import bake_views, project_texture
+
+    if made.path != "views" or not made.renders:
+        return made.mesh
+    renders = made.renders
+    width = made.mesh.visual.material.baseColorTexture.size[0]
+    if len(renders) == 1:
+
+        def bake(images):
+            return project_texture(mesh, renders[0], images[0])
+
+    else:
+
+        def bake(images):
+            return bake_views(mesh, renders, images, width)
+
+    databases = [examples.at_view(r.view, size) for r in renders]
+    return with_mesh_maps(
+        made.mesh, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
+    )
+
+
+def texture_mesh(
+    mesh, examples: ExampleSet, request: MeshRequest, *, quiet: bool = True
+) -> TexturedResult:
+    """Texture a loaded mesh as ``imagemap synthesize MESH`` does (and every batch job).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        The query, loaded and checked (:func:`imagemap.scene.files.load_mesh`).
+    examples : ExampleSet
+        The database (on disk, or a batch's prepared set).
+    request : MeshRequest
+    quiet : bool
+        No messages on stderr (which path, which views, examples rendered).
+
+    Returns
+    -------
+    TexturedResult
+    """
+    from imagemap.scene.coverage import choose_views
+    from imagemap.scene.surface import keep_surface
+
+    if not isinstance(request, MeshRequest):
+        raise InputError(f"request: expected a MeshRequest, got {request!r}")
+    say = _say(quiet)
+    names = list(request.examples) if request.examples else None
+    views = tuple(request.views)
+    # Examples in the query's UV layout: synthesized in the atlas, no view is rendered.
+    in_layout = uv_layout_examples(mesh, examples, request.uv_space, names)
+    if in_layout is not None:
+        views = ()
+        say(f"uv-space path: examples in the mesh's UV layout: {', '.join(e.name for e in in_layout)}")
+    elif request.auto_views:
+        views = tuple(choose_views(mesh, views))
+        say(f"views chosen by coverage: {'; '.join(str(v) for v in views)}")
+    if views:
+        _render_mesh_examples(examples, views, request.size, quiet)
+    sizing = {"texture_size": request.texture_size} if request.texture_size else {}
+    made = colorize_mesh(
+        mesh,
+        examples,
+        list(views),
+        size=request.size,
+        preset=request.config,
+        seed=request.seed,
+        examples=names,
+        quiet=quiet or not sys.stderr.isatty(),
+        uv_space=in_layout if in_layout is not None else False,
+        **sizing,
+    )
+    coloured = _with_view_maps(made, mesh, examples, request.size) if request.maps else made.mesh
+    textured = keep_surface(coloured, mesh)
+    return TexturedResult(made=made, textured=textured, views=views)
+
+
+def mesh_writers(
+    result: TexturedResult, output: str | Path, companions, scale: float = 1.0
+) -> tuple[dict, Callable[[], None]]:
+    """:func:`imagemap.outputs.write_all` writers of a textured mesh's files, and a clean-up.
+
+    The mesh is exported into a staging folder (:func:`imagemap.outputs.exported`) as
+    ``output``'s format, scaled by ``scale`` (metres per source unit).
+    """
+    from imagemap.outputs import exported
+    from imagemap.scene.files import export_textured
+
+    textured = result.textured
+    return exported(
+        lambda path: export_textured(textured, path, scale=scale), Path(output), companions
+    )
