@@ -45,6 +45,7 @@ from imagemap.io import _load_raw
 __all__ = [
     "MAP_KINDS",
     "NEUTRAL",
+    "SIDE_MAPS",
     "atlas_normals_to_view",
     "companion_path",
     "database_map_kinds",
@@ -60,6 +61,10 @@ __all__ = [
 ]
 
 #: The maps a material set may hold, with their channel counts.
+#: The maps a glTF material has no slot for: on the mesh route they are written beside
+#: the mesh as ``STEM_KIND.png`` (:func:`imagemap.mesh.route.mesh_writers`), not in it.
+SIDE_MAPS: tuple[str, ...] = ("height",)
+
 MAP_KINDS: dict[str, int] = {"normal": 3, "roughness": 1, "metallic": 1, "height": 1, "ao": 1}
 #: What a map says where it says nothing: a flat normal, the export's default
 #: roughness (:data:`imagemap.scene.files.DEFAULT_ROUGHNESS`), no metal, mid height,

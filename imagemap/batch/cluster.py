@@ -11,8 +11,8 @@ from typing import Any
 
 from imagemap.batch.plan import BatchOptions, Job
 from imagemap.batch.work import _safe_process, _set_threads
-from imagemap.mesh.library import ExampleSet
 from imagemap.io import InputError
+from imagemap.mesh.library import ExampleSet
 
 __all__ = ["CONNECT_SECONDS"]
 

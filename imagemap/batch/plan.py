@@ -44,14 +44,15 @@ class BatchOptions:
     ``options`` are :data:`imagemap.depth.config.OPTIONS` by name (a mapping; kept
     as sorted pairs), over ``preset``; ``views`` apply to meshes (a depth-map query
     sees mesh examples as ``imagemap synthesize`` shows them to it: from the front at
-    the default size), and with ``auto_views`` they are the candidates each mesh chooses from by coverage
-    (``--views auto``); ``texture_size`` None: each mesh's own atlas resolution;
-    ``scale`` multiplies the written coordinates (``--units``/``--scale``); ``uv_space``
-    as ``--uv-space``/``--no-uv-space`` (None: detected); ``maps`` False writes the
-    colour only (``--no-maps``); ``background`` None writes RGBA maps with a transparent
-    background, else RGB on that colour. Every object is made as ``imagemap
-    synthesize`` makes it with the same options (:meth:`mesh_request`). Checked when
-    built: an unknown preset or option, or a value the configuration refuses, is an
+    the default size), and with ``auto_views`` they are the candidates each mesh
+    chooses from by coverage (``--views auto``); ``texture_size`` None: each mesh's
+    own atlas resolution; ``scale`` multiplies the written coordinates
+    (``--units``/``--scale``); ``uv_space`` as ``--uv-space``/``--no-uv-space`` (None:
+    detected); ``maps`` False writes the colour only (``--no-maps``); ``background``
+    None writes RGBA maps with a transparent background, else RGB on that colour.
+    Every object is made as ``imagemap synthesize`` makes it with the same options
+    (:meth:`mesh_request`). Checked when built: an unknown preset or option, or a
+    value the configuration refuses, is an
     :class:`InputError`.
     """
 
@@ -141,7 +142,7 @@ class BatchOptions:
         return MeshRequest(
             views=tuple(self.views),
             auto_views=self.auto_views,
-            size=tuple(self.size),
+            size=(int(self.size[0]), int(self.size[1])),
             texture_size=self.texture_size,
             config=self.config(),
             seed=self.seed,
@@ -219,13 +220,23 @@ def plan_jobs(
 
 
 def with_map_companions(jobs: list[Job], kinds: list[str] | tuple[str, ...]) -> list[Job]:
-    """Each depth job with its PBR maps beside its image-map (``NAME_KIND.png``, as
-    ``imagemap synthesize A_depth.png B_depth.png -o DIR`` names them), for every kind
-    the database has (:func:`imagemap.materials.database_map_kinds`); meshes unchanged."""
+    """Each job with the PBR maps it may write beside its output, for every kind the
+    database has (:func:`imagemap.materials.database_map_kinds`), named as ``imagemap
+    synthesize`` names them: a depth map's ``NAME_KIND.png`` beside its image-map (as
+    ``imagemap synthesize A_depth.png B_depth.png -o DIR`` writes them), a mesh's
+    ``STEM_height.png`` beside it (the map glTF has no slot for:
+    :data:`imagemap.materials.SIDE_MAPS`)."""
+    from imagemap.materials import SIDE_MAPS  # deferred: start-up
+
     out = []
     for job in jobs:
-        if job.kind == "depth" and kinds:
-            maps = tuple(job.output.with_name(f"{job.name}_{kind}.png") for kind in kinds)
+        if job.kind == "depth":
+            maps = [job.output.with_name(f"{job.name}_{kind}.png") for kind in kinds]
+        else:
+            maps = [
+                job.output.with_name(f"{job.output.stem}_{k}.png") for k in SIDE_MAPS if k in kinds
+            ]
+        if maps:
             job = replace(job, companions=(*job.companions, *maps))
         out.append(job)
     return out

@@ -96,6 +96,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     from imagemap.database import Database
     from imagemap.depth.config import resolve_config
     from imagemap.io import image_writer
+    from imagemap.materials import SIDE_MAPS, database_map_kinds
     from imagemap.mesh.library import ExampleSet
     from imagemap.mesh.route import MeshRequest, mesh_writers, texture_mesh
     from imagemap.outputs import OutputPlan, write_all, written_companions
@@ -131,8 +132,12 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     # With the MTL and textures it reads, and its truth (kept unless --overwrite).
     plan.add_query(source, "input mesh", overwrite=args.overwrite, hint="; --overwrite replaces it")
     plan.add_database(database, args.db)
-    # An OBJ's .mtl and texture are checked with it (imagemap.outputs.written_companions).
+    # An OBJ's .mtl and texture are checked with it (imagemap.outputs.written_companions),
+    # and the height map glTF has no slot for (STEM_height.png) when an example has one.
     companions = written_companions(output)
+    if output.suffix.lower() != ".png":
+        kinds = [] if getattr(args, "no_maps", False) else database_map_kinds(database, examples)
+        companions = written_companions(output, [k for k in SIDE_MAPS if k in kinds])
     plan.add_output(output, "-o", suffixes=(*TEXTURED_SUFFIXES, ".png"), companions=companions)
     for option, path, suffixes in (
         ("--provenance", args.provenance, (".png",)),

@@ -103,7 +103,8 @@ class ExampleSet:
         """
         if self.source is None:
             return self
-        wanted = [(v, tuple(size)) for v in views]
+        at_size = (int(size[0]), int(size[1]))
+        wanted = [(v, at_size) for v in views]
         if pictures:
             wanted.append((FRONT, DEFAULT_SIZE))
         ready = {}

@@ -9,6 +9,7 @@ import numpy as np
 from imagemap.materials import (
     MIN_NORMAL_Z,
     NEUTRAL,
+    SIDE_MAPS,
     _picture_frame,
     _surface_normals,
     decode_normals,
@@ -20,7 +21,15 @@ from imagemap.scene.bake import rasterize_uv
 from imagemap.scene.files import _base_colour_texture, material_of, textured_mesh
 from imagemap.scene.views import fill_from_nearest
 
-__all__ = ["bake_maps", "with_mesh_maps"]
+__all__ = ["SIDE_MAPS", "bake_maps", "mesh_maps", "with_mesh_maps", "with_surface_maps"]
+
+
+def _baked(out, what: str = "bake_maps: bake's result") -> np.ndarray:
+    """A bake's texture: the array itself (``texture_only`` bakes, not rounded to 8 bits)
+    or a textured mesh's base colour."""
+    if isinstance(out, np.ndarray):
+        return np.asarray(out, dtype=np.float32)
+    return _base_colour_texture(out, what)
 
 
 def bake_maps(
@@ -36,8 +45,9 @@ def bake_maps(
         One per view.
     view_maps : list of dict
         Per view, :func:`transfer_maps` of its result (picture frame).
-    bake : callable (list of (H, W, 3) images) -> textured trimesh
-        The bake that made the colour's texture (same atlas for any images).
+    bake : callable (list of (H, W, 3) images) -> textured trimesh or (T, T, 3) array
+        The bake that made the colour's texture (same atlas for any images); one that
+        returns the texture itself keeps the maps' precision (a 16-bit height map).
     textured : trimesh.Trimesh
         The colour's textured mesh (its UVs give the atlas' tangent frames).
     projection : bool
@@ -48,7 +58,8 @@ def bake_maps(
     dict of texture-sized maps, as :func:`imagemap.mesh.textured_mesh` takes them.
     """
 
-    kinds = [k for k in ("roughness", "metallic", "ao") if any(k in m for m in view_maps)]
+    grey = ("roughness", "metallic", "ao", "height")
+    kinds = [k for k in grey if any(k in m for m in view_maps)]
     out: dict[str, np.ndarray] = {}
     for start in range(0, len(kinds), 3):  # three grey maps per bake
         group = kinds[start : start + 3]
@@ -58,14 +69,14 @@ def bake_maps(
             for channel, kind in enumerate(group):
                 packed[..., channel] = maps.get(kind, NEUTRAL[kind][0])
             images.append(packed)
-        baked = _base_colour_texture(bake(images), "bake_maps: bake's result")
+        baked = _baked(bake(images))
         for channel, kind in enumerate(group):
             out[kind] = baked[..., channel]
     if any("normal" in m for m in view_maps) and projection:
         # Projection UVs are the picture's own axes: its tangent frame is the atlas'.
         flat = [m.get("normal", np.broadcast_to(NEUTRAL["normal"], r.depth.shape + (3,)))
                 for m, r in zip(view_maps, renders, strict=True)]  # fmt: skip
-        out["normal"] = _base_colour_texture(bake(flat), "bake_maps: bake's result")
+        out["normal"] = _baked(bake(flat))
     elif any("normal" in m for m in view_maps):
         images = []
         for maps, render in zip(view_maps, renders, strict=True):
@@ -81,7 +92,7 @@ def bake_maps(
                 vectors = local[:, :1] * p_t + local[:, 1:2] * p_b + local[:, 2:] * normals
                 world.reshape(-1, 3)[pixels] = vectors
             images.append(encode_normals(world))
-        baked = _base_colour_texture(bake(images), "bake_maps: bake's result")
+        baked = _baked(bake(images))
         size = baked.shape[0]
         texel, face, bary = rasterize_uv(np.asarray(textured.visual.uv), textured.faces, size)
         tangent, bitangent = uv_frames(textured.vertices, textured.faces, textured.visual.uv)
@@ -105,6 +116,34 @@ def bake_maps(
     return out
 
 
+def mesh_maps(
+    textured, mesh, renders: list, results: list, databases: list, bake, projection=False
+) -> dict[str, np.ndarray]:
+    """The examples' maps baked beside the colour of the mesh route: every kind an
+    example used has, ``"height"`` among them (see :data:`SIDE_MAPS`); empty when no
+    example used has a map. Parameters as :func:`with_mesh_maps`."""
+    view_maps = [transfer_maps(r, db) for r, db in zip(results, databases, strict=True)]
+    if not any(view_maps):
+        return {}
+    return bake_maps(mesh, renders, view_maps, bake, textured, projection)
+
+
+def with_surface_maps(textured, maps: dict[str, np.ndarray]):
+    """``textured`` with ``maps`` (normal, roughness, metallic, ao) in its material;
+    ``textured`` itself when there are none."""
+    if not maps:
+        return textured
+    return textured_mesh(
+        textured.vertices,
+        textured.faces,
+        textured.visual.uv,
+        _base_colour_texture(textured, "with_mesh_maps: textured"),
+        normals=np.asarray(textured.vertex_normals),
+        maps=maps,
+        material=material_of(textured),
+    )
+
+
 def with_mesh_maps(
     textured, mesh, renders: list, results: list, databases: list, bake, projection=False
 ):
@@ -112,7 +151,8 @@ def with_mesh_maps(
 
     Each view's maps come through its result's source map (:func:`transfer_maps`),
     then go through the same ``bake`` as the colour (:func:`bake_maps`). Returns
-    ``textured`` itself when no example used has a map.
+    ``textured`` itself when no example used has a map. A height map has no place in
+    a glTF material and is left out (:func:`mesh_maps` gives it).
 
     Parameters
     ----------
@@ -123,22 +163,10 @@ def with_mesh_maps(
     renders, results, databases : lists, one entry per view
         The views' renders, :class:`~imagemap.depth.pipeline.ColorizeResult` and the
         databases they were made from.
-    bake : callable (list of images) -> textured trimesh
+    bake : callable (list of images) -> textured trimesh or texture array
         The colour's bake, e.g. ``lambda images: bake_views(mesh, renders, images, size)``.
     projection : bool
         One view projected (``project_texture``) rather than baked into an atlas.
     """
-
-    view_maps = [transfer_maps(r, db) for r, db in zip(results, databases, strict=True)]
-    if not any(view_maps):
-        return textured
-    maps = bake_maps(mesh, renders, view_maps, bake, textured, projection)
-    return textured_mesh(
-        textured.vertices,
-        textured.faces,
-        textured.visual.uv,
-        _base_colour_texture(textured, "with_mesh_maps: textured"),
-        normals=np.asarray(textured.vertex_normals),
-        maps=maps,
-        material=material_of(textured),
-    )
+    maps = mesh_maps(textured, mesh, renders, results, databases, bake, projection)
+    return with_surface_maps(textured, {k: v for k, v in maps.items() if k not in SIDE_MAPS})

@@ -22,7 +22,13 @@ from imagemap.mesh.colorize import MeshResult, colorize_mesh, uv_layout_examples
 from imagemap.mesh.library import ExampleSet
 from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
 
-__all__ = ["MeshRequest", "TexturedResult", "mesh_writers", "texture_mesh"]
+__all__ = [
+    "MeshRequest",
+    "TexturedResult",
+    "mesh_writers",
+    "side_map_path",
+    "texture_mesh",
+]
 
 
 @dataclass(frozen=True)
@@ -117,28 +123,33 @@ def _render_mesh_examples(examples: ExampleSet, views, size, quiet: bool) -> Non
 
 
 def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
-    """``made.mesh`` with the examples' PBR maps baked beside its colour (views path)."""
-    from imagemap.mesh.maps import with_mesh_maps
+    """``made.mesh`` with the examples' PBR maps baked beside its colour (views path),
+    and the maps glTF has no slot for (:data:`~imagemap.mesh.maps.SIDE_MAPS`), by kind."""
+    from imagemap.mesh.maps import SIDE_MAPS, mesh_maps, with_surface_maps
     from imagemap.scene import bake_views, project_texture
 
     if made.path != "views" or not made.renders:
-        return made.mesh
+        return made.mesh, {}
     renders = made.renders
-    width = made.mesh.visual.material.baseColorTexture.size[0]
+    width = made.mesh.visual.material.baseColorTexture.size[0]  # type: ignore[attr-defined]
+    # The bakes give the texture itself, not rounded to 8 bits: the 16-bit height map
+    # keeps the examples' precision (the same atlas as the colour's bake).
     if len(renders) == 1:
 
         def bake(images):
-            return project_texture(mesh, renders[0], images[0])
+            return project_texture(mesh, renders[0], images[0], texture_only=True)
 
     else:
 
         def bake(images):
-            return bake_views(mesh, renders, images, width)
+            return bake_views(mesh, renders, images, width, texture_only=True)
 
     databases = [examples.at_view(r.view, size) for r in renders]
-    return with_mesh_maps(
+    maps = mesh_maps(
         made.mesh, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
     )
+    side = {kind: maps.pop(kind) for kind in SIDE_MAPS if kind in maps}
+    return with_surface_maps(made.mesh, maps), side
 
 
 def texture_mesh(
@@ -172,7 +183,8 @@ def texture_mesh(
     in_layout = uv_layout_examples(mesh, examples, request.uv_space, names)
     if in_layout is not None:
         views = ()
-        say(f"uv-space path: examples in the mesh's UV layout: {', '.join(e.name for e in in_layout)}")
+        used = ", ".join(e.name for e in in_layout)
+        say(f"uv-space path: examples in the mesh's UV layout: {used}")
     elif request.auto_views:
         views = tuple(choose_views(mesh, views))
         say(f"views chosen by coverage: {'; '.join(str(v) for v in views)}")
@@ -191,9 +203,23 @@ def texture_mesh(
         uv_space=in_layout if in_layout is not None else False,
         **sizing,
     )
-    coloured = _with_view_maps(made, mesh, examples, request.size) if request.maps else made.mesh
+    coloured, side = made.mesh, {}
+    if request.maps:
+        coloured, side = _with_view_maps(made, mesh, examples, request.size)
     textured = keep_surface(coloured, mesh)
-    return TexturedResult(made=made, textured=textured, views=views)
+    return TexturedResult(made=made, textured=textured, views=views, side_maps=side)
+
+
+def side_map_path(output: str | Path, kind: str) -> Path:
+    """Where a map glTF has no slot for is written beside a mesh: ``STEM_KIND.png``.
+
+    Examples
+    --------
+    >>> side_map_path("out/fish.glb", "height").as_posix()
+    'out/fish_height.png'
+    """
+    output = Path(output)
+    return output.with_name(f"{output.stem}_{kind}.png")
 
 
 def mesh_writers(
@@ -202,12 +228,28 @@ def mesh_writers(
     """:func:`imagemap.outputs.write_all` writers of a textured mesh's files, and a clean-up.
 
     The mesh is exported into a staging folder (:func:`imagemap.outputs.exported`) as
-    ``output``'s format, scaled by ``scale`` (metres per source unit).
+    ``output``'s format, scaled by ``scale`` (metres per source unit); beside it, each
+    map glTF has no slot for (``STEM_height.png``: 16-bit grey). Every file must be
+    ``output`` or one of ``companions`` (checked in the output plan before any work);
+    a side map that is not is a ``RuntimeError`` (a plan that missed it).
     """
+    from imagemap.io import image_writer
     from imagemap.outputs import exported
     from imagemap.scene.files import export_textured
 
+    output = Path(output)
+    planned = {Path(p) for p in companions}
+    side = {side_map_path(output, kind): array for kind, array in result.side_maps.items()}
+    unplanned = sorted(str(p) for p in side if p not in planned)
+    if unplanned:
+        raise RuntimeError(f"{output}: {', '.join(unplanned)} not checked by the output plan")
     textured = result.textured
-    return exported(
-        lambda path: export_textured(textured, path, scale=scale), Path(output), companions
+    writers, cleanup = exported(
+        lambda path: export_textured(textured, path, scale=scale),
+        output,
+        [p for p in planned if p not in side],
     )
+    for path, array in side.items():
+        # Heights want more than a texture's 8 bits (glTF has no slot for them anyway).
+        writers[path] = image_writer(array[..., 0] if array.ndim == 3 else array, bits=16)
+    return writers, cleanup

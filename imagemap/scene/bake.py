@@ -45,15 +45,19 @@ __all__ = [
 ]
 
 
-def project_texture(mesh, render: MeshRender, image: np.ndarray):
+def project_texture(mesh, render: MeshRender, image: np.ndarray, *, texture_only: bool = False):
     """The mesh textured with ``image`` seen from ``render``'s view (projection UVs).
 
-    See the module notes for what hidden faces get.
+    See the module notes for what hidden faces get. With ``texture_only``, the texture
+    alone (float32, not rounded to the 8 bits of a mesh's texture): for maps written
+    at more bits than a texture holds, such as a 16-bit height map.
     """
     image = np.asarray(image, dtype=np.float32)[..., :3]
     if image.shape[:2] != render.depth.shape:
         raise InputError(f"image {image.shape} does not match the render {render.depth.shape}")
     texture = fill_from_nearest(image, render.mask)
+    if texture_only:
+        return texture
     uv = render.projection_uv(np.asarray(mesh.vertices))
     return textured_mesh(mesh.vertices, mesh.faces, uv, texture)
 
@@ -408,6 +412,7 @@ def bake_views(
     *,
     seam_band: float = SEAM_BAND_PIXELS,
     return_views: bool = False,
+    texture_only: bool = False,
 ):
     """Bake several views' maps into one UV atlas (see the module notes).
 
@@ -427,6 +432,10 @@ def bake_views(
     return_views : bool
         Also return the view chosen for each texel ((T, T) int, -1 where no view sees
         the texel or outside the charts).
+    texture_only : bool
+        Return the texture alone ((T, T, 3) float32, not rounded to a texture's 8 bits;
+        the atlas is the one the same call makes without it): for maps written at more
+        bits, such as a 16-bit height map.
 
     Returns
     -------
@@ -469,6 +478,8 @@ def bake_views(
     covered = np.zeros((texture_size, texture_size), dtype=bool)
     covered.flat[texel] = True
     texture = fill_from_nearest(texture, covered)
+    if texture_only:
+        return texture
     textured = textured_mesh(vertices, faces, uv, texture)
     if not return_views:
         return textured

@@ -224,6 +224,9 @@ class SurfaceMaterial:
         ``alphaCutoff`` (used with ``"MASK"``).
     double_sided : bool
         ``doubleSided``.
+    name : str or None
+        The material's ``name`` (an engine's material slots and overrides find it by
+        name); None: unnamed.
     """
 
     metallic: float = 0.0
@@ -231,6 +234,7 @@ class SurfaceMaterial:
     alpha_mode: str = "OPAQUE"
     alpha_cutoff: float = 0.5
     double_sided: bool = False
+    name: str | None = None
 
 
 def material_of(mesh) -> SurfaceMaterial:
@@ -240,10 +244,13 @@ def material_of(mesh) -> SurfaceMaterial:
     --------
     >>> import trimesh
     >>> material_of(trimesh.creation.box())  # no material: a matte dielectric
-    SurfaceMaterial(metallic=0.0, roughness=0.6, alpha_mode='OPAQUE', alpha_cutoff=0.5, double_sided=False)
+    SurfaceMaterial(metallic=0.0, roughness=0.6, alpha_mode='OPAQUE', alpha_cutoff=0.5, double_sided=False, name=None)
     """  # noqa: E501
     material = getattr(getattr(mesh, "visual", None), "material", None)
     settings = SurfaceMaterial()
+    name = getattr(material, "name", None)
+    if isinstance(name, str) and name:
+        settings = replace(settings, name=name)
     if material is None or not hasattr(material, "metallicFactor"):
         return settings  # no material, or an OBJ's (no metallic, no alpha mode)
     changes: dict[str, Any] = {}  # SurfaceMaterial's fields: floats, a str and a bool
@@ -415,6 +422,8 @@ def textured_mesh(
         "alphaMode": material.alpha_mode,
         "doubleSided": bool(material.double_sided),
     }
+    if material.name:
+        fields["name"] = material.name
     if material.alpha_mode == "MASK":
         fields["alphaCutoff"] = float(material.alpha_cutoff)
     if "normal" in maps:

@@ -37,10 +37,13 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
       with creases over :data:`CREASE_DEGREES` (vertices split where corners differ);
     - the alpha of ``source``'s base colour (its texture's alpha sampled at the same
       surface points, times its factor), into the new texture's alpha channel;
-    - ``alphaMode``, ``alphaCutoff``, ``doubleSided`` and stated factors
-      (:func:`material_of`), unless ``material`` is given.
+    - ``alphaMode``, ``alphaCutoff``, ``doubleSided``, stated factors and the
+      material's name (:func:`material_of`), unless ``material`` is given;
+    - ``source``'s roughness, metallic and ao maps (sampled at the same surface
+      points) for each kind ``textured`` has no map of.
 
-    Maps already on ``textured`` (normal, roughness, metallic, ao) stay.
+    Maps already on ``textured`` (normal, roughness, metallic, ao) stay: the examples'
+    maps win over the input's.
 
     Examples
     --------
@@ -76,6 +79,14 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
     if alpha is not None:
         image = np.concatenate([image, alpha[..., None]], axis=2)
     maps = _material_maps(textured.visual.material)
+    if same:
+        # The input's own roughness, metallic and ao maps where the examples gave none
+        # (the input's factor alone would flatten a textured roughness to one value).
+        for kind, values in _source_grey_maps(source).items():
+            if kind not in maps:
+                carried = _carried(textured, source, values, image.shape[:2])
+                if carried is not None:
+                    maps[kind] = carried
     return textured_mesh(
         vertices[origin],
         new_faces,
@@ -90,8 +101,36 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
 def _carried_alpha(textured, source, shape: tuple[int, int]) -> np.ndarray | None:
     """``source``'s base colour alpha at every texel of ``textured``'s texture (same faces)."""
     alpha, factor = texture_alpha(source)
+    if alpha is None:
+        return None
+    return _carried(textured, source, alpha * np.float32(factor), shape)
+
+
+def _source_grey_maps(source) -> dict[str, np.ndarray]:
+    """The grey PBR maps of ``source``'s material as the values it renders with (the
+    packed texture's channel times its factor), by kind: roughness, metallic, ao."""
+    material = getattr(getattr(source, "visual", None), "material", None)
+    maps: dict[str, np.ndarray] = {}
+    packed = getattr(material, "metallicRoughnessTexture", None)
+    if packed is not None:
+        packed = np.asarray(packed.convert("RGB"), np.float32) / 255.0
+        for channel, kind, factor in (
+            (1, "roughness", getattr(material, "roughnessFactor", None)),
+            (2, "metallic", getattr(material, "metallicFactor", None)),
+        ):
+            # glTF: the value is the channel times the factor (1 when not stated).
+            maps[kind] = packed[..., channel] * np.float32(1.0 if factor is None else factor)
+    occlusion = getattr(material, "occlusionTexture", None)
+    if occlusion is not None:
+        maps["ao"] = np.asarray(occlusion.convert("L"), np.float32) / 255.0
+    return maps
+
+
+def _carried(textured, source, values: np.ndarray, shape: tuple[int, int]) -> np.ndarray | None:
+    """A grey map of ``source`` (in its UV layout) at every texel of ``textured``'s
+    texture of ``shape`` (same faces); None when ``source`` has no UVs."""
     source_uv = getattr(source.visual, "uv", None)
-    if alpha is None or source_uv is None:
+    if source_uv is None:
         return None
     height, width = shape
     size = max(height, width)
@@ -99,15 +138,15 @@ def _carried_alpha(textured, source, shape: tuple[int, int]) -> np.ndarray | Non
     corner_uv = np.asarray(source_uv, dtype=np.float64)[np.asarray(source.faces)[face]]
     point_uv = np.einsum("nk,nkc->nc", bary, corner_uv)
     point_uv -= np.floor(point_uv)  # textures repeat
-    values = np.ones((size, size), dtype=np.float32)
-    values.flat[texel] = sample_image(alpha[..., None], point_uv)[:, 0] * factor
+    out = np.ones((size, size), dtype=np.float32)
+    out.flat[texel] = sample_image(np.asarray(values, np.float32)[..., None], point_uv)[:, 0]
     covered = np.zeros((size, size), dtype=bool)
     covered.flat[texel] = True
-    values = fill_from_nearest(values, covered)
+    out = fill_from_nearest(out, covered)
     if (height, width) != (size, size):
         from skimage.transform import (
             resize,
         )  # deferred: start-up: skimage.transform (0.4 s) only for a resized texture
 
-        values = resize(values, (height, width), order=1, anti_aliasing=False)
-    return values.astype(np.float32)
+        out = resize(out, (height, width), order=1, anti_aliasing=False)
+    return out.astype(np.float32)
