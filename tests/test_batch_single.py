@@ -4,6 +4,7 @@ height map beside the mesh, the input's material name and roughness."""
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -211,3 +212,37 @@ def test_the_input_roughness_map_is_kept_where_the_examples_have_none():
     middle = rough[16, 4:28]
     expected = 0.5 * (np.arange(4, 28) + 0.5) / 32
     assert middle == pytest.approx(expected, abs=0.03)
+
+
+@pytest.mark.parametrize("path", ["views auto", "uv-space"])
+def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tmp_path):
+    """``--views auto`` (each mesh chooses among the six candidates the batch prepared) and
+    the uv-space path (the batch ships its mesh examples' meshes): the batch's GLB is the
+    single command's, byte for byte, and the path is the one asked for."""
+    import shutil
+
+    queries, db = tmp_path / "queries", tmp_path / "db"
+    queries.mkdir()
+    db.mkdir()
+    if path == "uv-space":  # two heads in one UV layout: one the example, one the query
+        shutil.copy(shared_heads / "head_00.glb", db)
+        shutil.copy(shared_heads / "head_01.glb", queries / "query.glb")
+        options = ["--preset", "busts", "--texture-size", "64", "--uv-space", "-q"]
+    else:
+        shutil.copytree(routes / "db", db, dirs_exist_ok=True)
+        shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
+        options = ["--preset", "fish", "--size", "40x30", "--texture-size", "64", "-q"]
+        options += ["--views", "auto"]
+    single = tmp_path / "single" / "query.glb"
+    command = ["synthesize", str(queries / "query.glb"), "--db", str(db), "-o", str(single)]
+    assert main([*command, *options, "--report", str(tmp_path / "report.json")]) == 0
+    batch = tmp_path / "batch"
+    assert main(["batch", str(queries), "--db", str(db), "-o", str(batch), *options]) == 0
+    made = outputs(batch)
+    assert "query.glb" in made
+    assert outputs(single.parent) == made  # every file, byte for byte
+    report = json.loads((tmp_path / "report.json").read_text())
+    if path == "uv-space":
+        assert report["path"] == "uv-space" and report["views"] == []
+    else:  # the fin is seen by some of the six, not all
+        assert report["path"] == "views" and 1 < len(report["views"]) < 6
