@@ -17,9 +17,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from imagemap.io import InputError
+from imagemap.io import InputError, image_writer
+from imagemap.materials import SIDE_MAPS
 from imagemap.mesh.colorize import MeshResult, colorize_mesh, uv_layout_examples
 from imagemap.mesh.library import ExampleSet
+from imagemap.mesh.maps import mesh_maps, with_surface_maps
+from imagemap.outputs import exported
+from imagemap.progress import progress
+from imagemap.scene.bake import bake_views, project_texture
+from imagemap.scene.coverage import choose_views
+from imagemap.scene.examples import MeshExample
+from imagemap.scene.files import export_textured
+from imagemap.scene.surface import keep_surface
 from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
 
 __all__ = [
@@ -102,9 +111,6 @@ def _say(quiet: bool) -> Callable[[str], None]:
 def _render_mesh_examples(examples: ExampleSet, views, size, quiet: bool) -> None:
     """Render (or read from the cache) every mesh example at every view, each named
     (a prepared set has them rendered already)."""
-    from imagemap.progress import progress
-    from imagemap.scene import MeshExample
-
     if examples.source is None:
         return
     for view in views:
@@ -125,9 +131,6 @@ def _render_mesh_examples(examples: ExampleSet, views, size, quiet: bool) -> Non
 def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
     """``made.mesh`` with the examples' PBR maps baked beside its colour (views path),
     and the maps glTF has no slot for (:data:`~imagemap.mesh.maps.SIDE_MAPS`), by kind."""
-    from imagemap.mesh.maps import SIDE_MAPS, mesh_maps, with_surface_maps
-    from imagemap.scene import bake_views, project_texture
-
     if made.path != "views" or not made.renders:
         return made.mesh, {}
     renders = made.renders
@@ -171,9 +174,6 @@ def texture_mesh(
     -------
     TexturedResult
     """
-    from imagemap.scene.coverage import choose_views
-    from imagemap.scene.surface import keep_surface
-
     if not isinstance(request, MeshRequest):
         raise InputError(f"request: expected a MeshRequest, got {request!r}")
     say = _say(quiet)
@@ -233,10 +233,6 @@ def mesh_writers(
     ``output`` or one of ``companions`` (checked in the output plan before any work);
     a side map that is not is a ``RuntimeError`` (a plan that missed it).
     """
-    from imagemap.io import image_writer
-    from imagemap.outputs import exported
-    from imagemap.scene.files import export_textured
-
     output = Path(output)
     planned = {Path(p) for p in companions}
     side = {side_map_path(output, kind): array for kind, array in result.side_maps.items()}
