@@ -138,3 +138,25 @@ def test_scaling_curves_have_time_and_memory_per_point(bench, tmp_path):
     for row in rows:
         assert row["seconds"] > 0 and row["rss_peak_mb"] > 10, row
     assert rows[-1]["per_query_seconds"] > 0 and rows[-1]["database_size"] == 10
+
+
+def test_the_ebsynth_side_by_side_stops_before_any_work_without_ebsynth(tmp_path, monkeypatch):
+    import runpy
+
+    monkeypatch.delenv("EBSYNTH", raising=False)
+    script = SCRIPT.parent / "ebsynth_side_by_side.py"
+    side_by_side = runpy.run_path(str(script), run_name="side_by_side")
+    out = tmp_path / "out"
+    argv = [
+        "--sizes",
+        "40x30",
+        "--reps",
+        "1",
+        "--out",
+        str(out),
+        "--json",
+        str(tmp_path / "r.json"),
+    ]
+    assert side_by_side["main"](argv) == 2
+    assert side_by_side["main"]([*argv, "--ebsynth", str(tmp_path / "nothing")]) == 2
+    assert not out.exists() and not (tmp_path / "r.json").exists()
