@@ -284,6 +284,26 @@ def test_synthesize_cli_mesh_to_glb_obj_png(fish, tmp_path, capsys):
     assert code == 2 and "missing.glb: mesh file not found" in capsys.readouterr().err
 
 
+def test_mesh_command_writes_step_lines_the_addon_reads(fish, tmp_path, capsys):
+    """Issue #46 item 5: progress within one object, on stderr whatever it is (a pipe here)."""
+    from imagemap.blender.addon_tools import parse_progress
+
+    query = str(fish / "queries" / "fish_004.glb")
+    args = ["synthesize", query, "--db", str(fish / "db"), "--preset", "fish", "--size", "60x45"]
+    args += ["--views", "front,back", "--texture-size", "64", "-o", str(tmp_path / "a.glb")]
+    assert main(args) == 0
+    steps = [parse_progress(line) for line in capsys.readouterr().err.splitlines()]
+    found = [(s.step, s.total, s.text) for s in steps if s is not None]
+    assert found == [
+        (1, 4, "synthesizing view 0,0"),
+        (2, 4, "synthesizing view 180,0"),
+        (3, 4, "baking 2 views"),
+        (4, 4, "baking the examples' PBR maps"),
+    ]
+    assert main([*args[:-1], str(tmp_path / "b.glb"), "-q"]) == 0
+    assert capsys.readouterr().err == ""  # --quiet: none
+
+
 def test_data_gen_meshes_look_like_their_image_maps(tmp_path):
     from skimage.transform import resize
 

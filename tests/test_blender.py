@@ -146,13 +146,33 @@ def test_our_glb_imports_dielectric_smooth_and_alpha_masked(tmp_path):
     assert facts["backface_culling"] is False  # doubleSided
 
 
+#: A stand-in for the imagemap command: keeps what the add-on sent, then runs imagemap.
+RECORDING_COMMAND = textwrap.dedent(
+    """
+    import json, shutil, subprocess, sys
+    keep, args = sys.argv[1], sys.argv[2:]
+    shutil.copy(args[args.index("-o") - 1], keep + "/query.glb")
+    json.dump(args, open(keep + "/args.json", "w"))
+    sys.exit(subprocess.call([sys.executable, "-m", "imagemap", *args]))
+    """
+)
+
+
+@pytest.mark.slow
 def test_addon_operator_textures_the_selected_mesh_headless(tmp_path):
+    """Issue #46 item 5: the object's transform is applied to what is sent (a sphere
+    scaled 1.5 x 0.5 x 0.6 was textured as a ball) and undone on the result, and the
+    preset is the database's class."""
     from data_gen.dataset import write_class
 
     database = tmp_path / "db"
     write_class("fish", database, count=3, size=(80, 60), quiet=True)
     addon = build_zip(tmp_path / "imagemap_texture.zip")
-    command = shlex.join([sys.executable, "-m", "imagemap"])
+    keep = tmp_path / "sent"
+    keep.mkdir()
+    recorder = tmp_path / "recorder.py"
+    recorder.write_text(RECORDING_COMMAND)
+    command = shlex.join([sys.executable, str(recorder), str(keep)])
     facts = run_in_blender(
         tmp_path,
         """
@@ -163,11 +183,15 @@ def test_addon_operator_textures_the_selected_mesh_headless(tmp_path):
         imagemap_texture.register()
         bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
         obj = bpy.context.active_object
-        obj.scale = (1.6, 1.0, 0.7)  # the object's transform must survive
+        obj.scale = (1.5, 0.5, 0.6)  # applied to what is sent; the object keeps it
+        obj.rotation_euler = (0.0, 0.0, 0.5)
+        obj.location = (2.0, -1.0, 0.5)
         bpy.ops.object.shade_smooth()  # the artist's shading: the result must keep it
+        bpy.context.view_layer.update()
         before = [list(v.co) for v in obj.data.vertices]
+        world = [list(obj.matrix_world @ v.co) for v in obj.data.vertices]
         result = bpy.ops.imagemap.texture_from_examples(
-            database=database, preset="fish", views="front,back", command=command,
+            database=database, views="front,back", command=command,
             options="--size 80x60 --texture-size 128", wait=True,
         )
         found = facts(obj)
@@ -175,6 +199,9 @@ def test_addon_operator_textures_the_selected_mesh_headless(tmp_path):
         found["materials"] = len(obj.data.materials)
         found["low_before"] = [min(c[k] for c in before) for k in range(3)]
         found["high_before"] = [max(c[k] for c in before) for k in range(3)]
+        found["world_low"] = [min(c[k] for c in world) for k in range(3)]
+        found["world_high"] = [max(c[k] for c in world) for k in range(3)]
+        found["location"] = list(obj.location)
         json.dump(found, open(out, "w"))
         """,
         str(addon),
@@ -186,6 +213,16 @@ def test_addon_operator_textures_the_selected_mesh_headless(tmp_path):
     assert facts["metallic"] == 0.0
     assert facts["smooth"] == facts["faces"]
     assert facts["uv_layers"] >= 1
-    assert facts["scale"] == pytest.approx([1.6, 1.0, 0.7])
+    assert facts["scale"] == pytest.approx([1.5, 0.5, 0.6])
+    assert facts["location"] == pytest.approx([2.0, -1.0, 0.5])
+    # The result, in the object's own coordinates, is the sphere it was.
     np.testing.assert_allclose(facts["low"], facts["low_before"], atol=1e-4)
     np.testing.assert_allclose(facts["high"], facts["high_before"], atol=1e-4)
+    # What imagemap was sent is the object as seen: world coordinates (glTF is Y-up:
+    # Blender's x, z, -y), not the unit ball.
+    sent = trimesh.load(keep / "query.glb", force="mesh")
+    low, high = np.array(facts["world_low"]), np.array(facts["world_high"])
+    np.testing.assert_allclose(sent.bounds[0], [low[0], low[2], -high[1]], atol=1e-4)
+    np.testing.assert_allclose(sent.bounds[1], [high[0], high[2], -low[1]], atol=1e-4)
+    args = json.loads((keep / "args.json").read_text())
+    assert args[args.index("--preset") + 1] == "fish"  # "auto": the database's class

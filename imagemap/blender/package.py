@@ -1,9 +1,10 @@
 """``python -m imagemap.blender.package [-o imagemap_texture.zip]``: the installable add-on.
 
 The zip holds ``imagemap_texture/__init__.py`` (the add-on, with ``bl_info`` for
-Blender's Install from Disk) and ``imagemap_texture/blender_manifest.toml`` (for
-Blender 4.2+'s extensions). Install it in Blender: Edit > Preferences > Add-ons >
-Install from Disk, then set the add-on's "imagemap command".
+Blender's Install from Disk), ``imagemap_texture/addon_tools.py`` (its parts that need
+no Blender) and ``imagemap_texture/blender_manifest.toml`` (for Blender 4.2+'s
+extensions). Install it in Blender: Edit > Preferences > Add-ons > Install from Disk,
+then set the add-on's "imagemap command".
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from imagemap.blender import ADDON_SOURCE
+from imagemap.blender import ADDON_SOURCE, ADDON_TOOLS
 
 __all__ = ["MODULE_NAME", "build_zip"]
 
@@ -44,17 +45,17 @@ def build_zip(path: str | Path) -> Path:
     >>> import tempfile, zipfile
     >>> with tempfile.TemporaryDirectory() as folder:
     ...     names = zipfile.ZipFile(build_zip(Path(folder) / "a.zip")).namelist()
-    >>> names
-    ['imagemap_texture/__init__.py', 'imagemap_texture/blender_manifest.toml']
+    >>> [name.split("/")[1] for name in names]
+    ['__init__.py', 'addon_tools.py', 'blender_manifest.toml']
     """
     from imagemap.io import atomic_path  # deferred: standalone script
 
     path = Path(path)
-    source = ADDON_SOURCE.read_text()
     with atomic_path(path) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as archive:
             for name, text in (
-                (f"{MODULE_NAME}/__init__.py", source),
+                (f"{MODULE_NAME}/__init__.py", ADDON_SOURCE.read_text()),
+                (f"{MODULE_NAME}/addon_tools.py", ADDON_TOOLS.read_text()),
                 (f"{MODULE_NAME}/blender_manifest.toml", _MANIFEST),
             ):
                 info = zipfile.ZipInfo(name, date_time=(2026, 1, 1, 0, 0, 0))

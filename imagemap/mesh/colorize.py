@@ -16,6 +16,7 @@ Two paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -229,6 +230,7 @@ def colorize_mesh(
     seed: int = 0,
     examples: list[str] | None = None,
     quiet: bool = True,
+    step: Callable[[str], None] | None = None,
     **colorize_options,
 ) -> MeshResult:
     """Synthesize a texture for a mesh: in its UV atlas, or from views (see the module notes).
@@ -254,6 +256,10 @@ def colorize_mesh(
     preset, seed, examples, quiet, **colorize_options
         As :func:`imagemap.colorize`. Without ``examples``, the examples are chosen once
         for the object and every view uses them.
+    step : callable, optional
+        Called with a line of text as each long step begins: the synthesis in the atlas
+        (uv-space), or each view's synthesis and then the bake (views): one call per view
+        plus one (the mesh command's progress lines, :func:`imagemap.progress.step_line`).
 
     Returns
     -------
@@ -304,6 +310,8 @@ def colorize_mesh(
             ", ".join(e.name for e in uv_examples),
             texture_size,
         )
+        if step is not None:
+            step(f"synthesizing in the UV atlas ({texture_size}^2)")
         result = colorize_uv(
             mesh, uv_examples, config, size=int(texture_size), names=names, seed=seed, quiet=quiet
         )
@@ -328,12 +336,16 @@ def colorize_mesh(
     )
     results = []
     for render, examples_at_view in zip(renders, databases, strict=True):
+        if step is not None:
+            step(f"synthesizing view {render.view}")
         result = colorize(
             render.depth, examples_at_view, preset=config, seed=seed, quiet=quiet, examples=names
         )
         results.append(result)
         if names is not None and len(views) > 1:
             names = _by_use(results, names)
+    if step is not None:
+        step("projecting the view" if len(views) == 1 else f"baking {len(views)} views")
     if len(views) == 1:
         textured = project_texture(mesh, renders[0], results[0].image)
     else:

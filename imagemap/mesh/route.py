@@ -23,7 +23,7 @@ from imagemap.mesh.colorize import MeshResult, colorize_mesh, uv_layout_examples
 from imagemap.mesh.library import ExampleSet
 from imagemap.mesh.maps import mesh_maps, with_surface_maps
 from imagemap.outputs import exported
-from imagemap.progress import progress
+from imagemap.progress import progress, step_line
 from imagemap.scene.bake import bake_views, project_texture
 from imagemap.scene.coverage import choose_views
 from imagemap.scene.examples import MeshExample
@@ -190,6 +190,16 @@ def texture_mesh(
         say(f"views chosen by coverage: {'; '.join(str(v) for v in views)}")
     if views:
         _render_mesh_examples(examples, views, request.size, quiet)
+    # Step lines whatever stderr is (a program running the command reads them): the
+    # views (or the atlas), the bake, the PBR maps.
+    total = (len(views) + 1 if views else 1) + (1 if request.maps and views else 0)
+    done = 0
+
+    def step(text: str) -> None:
+        nonlocal done
+        done += 1
+        say(step_line(done, total, text))
+
     sizing = {"texture_size": request.texture_size} if request.texture_size else {}
     made = colorize_mesh(
         mesh,
@@ -201,10 +211,13 @@ def texture_mesh(
         examples=names,
         quiet=quiet or not sys.stderr.isatty(),
         uv_space=in_layout if in_layout is not None else False,
+        step=step,
         **sizing,
     )
     coloured, side = made.mesh, {}
     if request.maps:
+        if views:
+            step("baking the examples' PBR maps")
         coloured, side = _with_view_maps(made, mesh, examples, request.size)
     textured = keep_surface(coloured, mesh)
     return TexturedResult(made=made, textured=textured, views=views, side_maps=side)
