@@ -121,8 +121,10 @@ class Registration:
     deformation, fitted by Levenberg-Marquardt to a guide image of each object. Whether
     the ``register`` stage runs at all, and how strongly the engine holds the registered
     positions, are :class:`Guides` settings (``registration``,
-    ``registered_position_weight``). A field whose comment gives no measurement was set
-    when the fit was written (9718736, 16d4e17) and has not been swept since."""
+    ``registered_position_weight``). The fit's fields were set when it was written
+    (9718736, 16d4e17) and swept in #43: each comment's figures are the macro part
+    transfer of 12 generated fish and busts at 1x and the seam F1 of #42's relief plates
+    at 320x240, seed 0 unless said."""
 
     #: The working resolution: the object is about this many pixels across (square root
     #: of its area) while the warp is fitted. A smooth warp of a whole object needs no
@@ -132,16 +134,29 @@ class Registration:
     work_size: float = setting(64.0, minimum=1.0)
     #: Control points per side of the B-spline grids, coarse to fine (over the query
     #: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
+    #: Swept with grid_smoothing, seed 0 (12 fish/busts' macro part transfer; relief plates' seam F1
+    #: at 320x240): (4, 5) with (2, 1) -> 0.816/0.778, 0.955 (seed 1: 0.816/0.783); (4, 5, 7) ->
+    #: 0.806/0.775, 0.956 (seed 1: 0.810/0.789); (4, 5, 7, 10) with 0.25 added -> 0.810/0.773, 0.955
+    #: (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1 0.003).
     control_grids: tuple[int, ...] = (4, 5, 7)
     #: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture
     #: range first, the outline's detail last.
     grid_smoothing: tuple[float, ...] = (2.0, 1.0, 0.5)
     #: Levenberg-Marquardt iterations per grid at most.
+    #: Swept (as control_grids): 6 -> 0.809/0.775, 0.956; 12 -> 0.806/0.775, 0.956; 24 ->
+    #: 0.806/0.775, 0.956 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
+    #: 0.003); the busts' figures were the same at all three.
     fit_iterations: int = setting(12, kind="int", minimum=0)
     #: Weight of the control points' squared displacement against the mean squared guide
     #: difference: keeps the warp smooth where the guide says nothing (inside a flat body).
+    #: Swept (as control_grids): 1e-3 -> 0.803/0.765, 0.957; 1e-2 -> 0.806/0.775, 0.956; 1e-1 ->
+    #: 0.811/0.771, 0.957 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
+    #: 0.003).
     stiffness: float = setting(1e-2, minimum=0.0)
     #: Pixels of the working grid used for the fit at most (a regular subsample).
+    #: Swept (as control_grids): 1500 -> 0.807/0.775, 0.955; 3000 -> 0.806/0.775, 0.956; 6000 ->
+    #: 0.807/0.777, 0.955 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
+    #: 0.003).
     fit_pixels: int = setting(3000, kind="int", minimum=1)
     #: Weight of the relief's detail in the registration's guide image
     #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges
@@ -150,9 +165,16 @@ class Registration:
     #: The relief's detail is the relative depth less its Gaussian smoothing over this
     #: fraction of the object's size (square root of its area), in units of its 95th
     #: percentile inside the object: a feature's bulge, not the body's curvature.
+    #: Swept (as control_grids; it also sets the relief's scale for relief_disagreement and the
+    #: seams): 0.015 -> 0.807/0.777, 0.971 (seeds 1, 2: 0.964, 0.951); 0.03 -> 0.806/0.775, 0.956
+    #: (0.953, 0.953); 0.06 -> 0.790/0.780, 0.925, and a fish's eye in 12 not drawn (seed to seed at
+    #: the default, seeds 0-2: fish 0.004, busts 0.014, F1 0.003).
     relief_detail_scale: float = setting(0.03, minimum=0.0)
     #: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
     #: image: the outline and the band within a few percent of it lead the fit.
+    #: Swept (as control_grids): 0.02 -> 0.806/0.779, 0.956; 0.04 -> 0.806/0.775, 0.956; 0.08 ->
+    #: 0.809/0.776, 0.956 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
+    #: 0.003).
     outline_reach: float = setting(0.04, minimum=1e-6)
     #: The registration's detail works with the object about this many pixels across: the
     #: guide images (made from block averages, never at full size: at 2048x1536 the
