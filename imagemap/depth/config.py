@@ -134,10 +134,13 @@ class Registration:
     work_size: float = setting(64.0, minimum=1.0)
     #: Control points per side of the B-spline grids, coarse to fine (over the query
     #: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
-    #: Swept with grid_smoothing, seed 0 (12 fish/busts' macro part transfer; relief plates' seam F1
-    #: at 320x240): (4, 5) with (2, 1) -> 0.816/0.778, 0.955 (seed 1: 0.816/0.783); (4, 5, 7) ->
-    #: 0.806/0.775, 0.956 (seed 1: 0.810/0.789); (4, 5, 7, 10) with 0.25 added -> 0.810/0.773, 0.955
-    #: (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1 0.003).
+    #: Swept with grid_smoothing (12 fish/busts' macro part transfer, seeds 0-2; relief plates' seam
+    #: F1 at 320x240): (4, 5) with (2, 1) -> 0.816, 0.816, 0.814/0.778, 0.783, 0.781, F1 0.955,
+    #: 0.953, 0.949; 4x fish 0.868, 0.865, 4x busts 0.835 (every feature drawn), shells 0.864,
+    #: humans 0.864; (4, 5, 7) -> 0.806, 0.810, 0.807/0.775, 0.789, 0.781, F1 0.956, 0.953, 0.953;
+    #: 4x fish 0.861, 0.863, 4x busts 0.836 (10 of 12 with every feature), shells 0.864, humans
+    #: 0.868; (4, 5, 7, 10) with 0.25 added, seed 0 -> 0.810/0.773, F1 0.955 (seed to seed at the
+    #: default: fish 0.004, busts 0.014, F1 0.003).
     control_grids: tuple[int, ...] = (4, 5, 7)
     #: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture
     #: range first, the outline's detail last.
@@ -165,10 +168,12 @@ class Registration:
     #: The relief's detail is the relative depth less its Gaussian smoothing over this
     #: fraction of the object's size (square root of its area), in units of its 95th
     #: percentile inside the object: a feature's bulge, not the body's curvature.
-    #: Swept (as control_grids; it also sets the relief's scale for relief_disagreement and the
-    #: seams): 0.015 -> 0.807/0.777, 0.971 (seeds 1, 2: 0.964, 0.951); 0.03 -> 0.806/0.775, 0.956
-    #: (0.953, 0.953); 0.06 -> 0.790/0.780, 0.925, and a fish's eye in 12 not drawn (seed to seed at
-    #: the default, seeds 0-2: fish 0.004, busts 0.014, F1 0.003).
+    #: Swept (as control_grids, seed 0; it also sets the relief's scale for relief_disagreement and
+    #: the seams): 0.015 -> 0.807/0.777, F1 0.971 (seeds 1-4: 0.964, 0.951, 0.962, 0.962), shells
+    #: 0.879, humans 0.862, more fragments (plates 72-83, shells 88, humans 26); 0.03 ->
+    #: 0.806/0.775, F1 0.956 (0.953, 0.953, 0.957, 0.954), shells 0.864, humans 0.868 (fragments
+    #: 57-58, 67, 21); 0.06 -> 0.790/0.780, F1 0.925, a fish's eye in 12 not drawn (seed to seed at
+    #: the default: fish 0.004, busts 0.014, F1 0.004, shells 0.003, humans 0.003).
     relief_detail_scale: float = setting(0.03, minimum=0.0)
     #: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
     #: image: the outline and the band within a few percent of it lead the fit.
