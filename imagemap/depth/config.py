@@ -133,7 +133,8 @@ class Registration:
     #: (4x fish, docs/presets.md).
     work_size: float = setting(64.0, minimum=1.0)
     #: Control points per side of the B-spline grids, coarse to fine (over the query
-    #: object's box): 4 is nearly affine, 7 bends a body and its fins apart.
+    #: object's box): 4 is nearly affine, 5 bends a body; a third grid of 7 (the default
+    #: until #43's sweep) bent fins apart and lost fish 0.008 on every seed.
     #: Swept with grid_smoothing (12 fish/busts' macro part transfer, seeds 0-2; relief plates' seam
     #: F1 at 320x240): (4, 5) with (2, 1) -> 0.816, 0.816, 0.814/0.778, 0.783, 0.781, F1 0.955,
     #: 0.953, 0.949; 4x fish 0.868, 0.865, 4x busts 0.835 (every feature drawn), shells 0.864,
@@ -141,10 +142,10 @@ class Registration:
     #: 4x fish 0.861, 0.863, 4x busts 0.836 (10 of 12 with every feature), shells 0.864, humans
     #: 0.868; (4, 5, 7, 10) with 0.25 added, seed 0 -> 0.810/0.773, F1 0.955 (seed to seed at the
     #: default: fish 0.004, busts 0.014, F1 0.003).
-    control_grids: tuple[int, ...] = (4, 5, 7)
+    control_grids: tuple[int, ...] = (4, 5)
     #: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture
     #: range first, the outline's detail last.
-    grid_smoothing: tuple[float, ...] = (2.0, 1.0, 0.5)
+    grid_smoothing: tuple[float, ...] = (2.0, 1.0)
     #: Levenberg-Marquardt iterations per grid at most.
     #: Swept (as control_grids): 6 -> 0.809/0.775, 0.956; 12 -> 0.806/0.775, 0.956; 24 ->
     #: 0.806/0.775, 0.956 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
