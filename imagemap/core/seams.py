@@ -26,6 +26,8 @@ def place_seams(
     mask: np.ndarray | None = None,
     exemplar_masks: list[np.ndarray] | None = None,
     groups: np.ndarray | None = None,
+    coarse_above: int | None = None,
+    band: int = 4,
 ) -> np.ndarray:
     """A source map with fewer, cheaper seams, placed where the sources agree.
 
@@ -67,6 +69,16 @@ def place_seams(
         used at the start of the sweep: a feature copied in pieces from two
         examples can become one of its own copies, never a piece of its
         surroundings. Their seams with the surroundings are weighed like any other.
+    coarse_above : int, optional
+        Above this many pixels the labelling is solved coarse to fine (Lombaert et al.
+        2005, "A multilevel banded graph cuts method"): on the grid of 2x2 blocks
+        (each block's most common label, the exemplars block-averaged in the block's
+        phase, so that every coarse label is one fine label), recursively, then at
+        full resolution only within ``band`` pixels of the coarse seams, every other
+        label fixed. Default: always at full resolution.
+    band : int
+        Half-width, in pixels, of the band around the upsampled seams that is solved
+        again at each finer level (with ``coarse_above``).
 
     Returns
     -------
@@ -87,6 +99,39 @@ def place_seams(
     >>> np.unique(placed[..., 1] - rows).tolist()  # one offset left
     [8]
     """
+    if coarse_above is not None and source.shape[0] * source.shape[1] > coarse_above:
+        return _coarse_to_fine(
+            exemplars,
+            source,
+            reference,
+            smoothness=smoothness,
+            spread=spread,
+            sweeps=sweeps,
+            mask=mask,
+            exemplar_masks=exemplar_masks,
+            groups=groups,
+            coarse_above=coarse_above,
+            band=band,
+        )
+    return _solve(
+        exemplars, source, reference, smoothness, spread, sweeps, mask, exemplar_masks, groups
+    )
+
+
+def _solve(
+    exemplars,
+    source,
+    reference,
+    smoothness,
+    spread,
+    sweeps,
+    mask,
+    exemplar_masks,
+    groups,
+    free=None,
+):
+    """:func:`place_seams` at full resolution; with ``free`` (bool, (H, W)) only those
+    pixels may change (the others are fixed, their seams with the free pixels weighed)."""
     packed, shapes = _packed(exemplars)
     inside = np.zeros(packed.shape[:3], bool)
     for k, exemplar in enumerate(exemplars):
@@ -99,6 +144,9 @@ def place_seams(
     label_y = (source[..., 1] - yy).astype(np.int64)
     label_x = (source[..., 2] - xx).astype(np.int64)
     movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    # The labels that may move: with a band, only those of its pixels (a label outside
+    # it has nowhere to go), and their areas there set each move's reach.
+    held = movable if free is None else movable & free
     reference = np.ascontiguousarray(reference, dtype=np.float32)
     # The move after which each pixel last changed, and each label's last move: a
     # label's move is not repeated while nothing in or around its crop has changed
@@ -107,8 +155,8 @@ def place_seams(
     expanded_at: dict[tuple[int, ...], int] = {}
     moves = 0
     for _ in range(sweeps):
-        alphas, ids, areas, boxes = _label_table(label_e, label_y, label_x, movable)
-        in_groups = _group_labels(label_e, label_y, label_x, groups, movable)
+        alphas, ids, areas, boxes = _label_table(label_e, label_y, label_x, held)
+        in_groups = _group_labels(label_e, label_y, label_x, groups, held)
         for k in np.argsort(-areas, kind="stable"):  # largest first, ties in label order
             if areas[k] == 0:  # taken over by the others' moves
                 continue
@@ -126,6 +174,8 @@ def place_seams(
             if key in expanded_at and around.max() <= expanded_at[key]:
                 continue
             region = ndimage.maximum_filter(ids[rows, columns] == k + 1, size=2 * reach + 1)
+            if free is not None:
+                region &= free[rows, columns]
             moves += 1
             if groups is not None:  # a group's pixels only take its own labels
                 grouped = groups[rows, columns]
@@ -151,6 +201,138 @@ def place_seams(
             areas[k] += int(moved.sum())
             ids[rows, columns][moved] = k + 1
     return np.stack([label_e, label_y + yy, label_x + xx], axis=-1).astype(np.int32)
+
+
+def _coarse_to_fine(
+    exemplars,
+    source,
+    reference,
+    *,
+    smoothness,
+    spread,
+    sweeps,
+    mask,
+    exemplar_masks,
+    groups,
+    coarse_above,
+    band,
+):
+    """:func:`place_seams` solved on 2x2 blocks (recursively), then at full resolution in
+    a band of ``band`` pixels around the seams the blocks left (Lombaert et al. 2005).
+
+    A block's label is its pixels' most common one, offset (dy, dx) = 2 (DY, DX) +
+    (py, px): on the coarse grid it is the label (4 e + 2 py + px, DY, DX) of the
+    exemplar e block-averaged from row py, column px on (its *phase*), whose pixel at a
+    block's coarse position plus (DY, DX) is the mean of the block's four fine sources.
+    So every coarse label is exactly one fine label and the coarse copy shows the fine
+    copy's colours, averaged. Blocks with a pixel that may not move (outside the object
+    or ``mask``) are left out of the coarse solve and their movable pixels given to the
+    band. The weight of the seams is halved on the coarse grid: a block's data cost
+    stands for four pixels', a seam between blocks for two pixel pairs' (and the
+    per-size weight of :func:`imagemap.depth.finish` halves with the object's size).
+    """
+    height, width = source.shape[:2]
+    label_e = source[..., 0].astype(np.int64)
+    movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    yy, xx = np.ogrid[0:height, 0:width]
+    keys = np.full((height, width), -1, np.int64)
+    keys[movable] = _label_keys(
+        label_e,
+        (source[..., 1] - yy).astype(np.int64),
+        (source[..., 2] - xx).astype(np.int64),
+        movable,
+    )
+    # Odd sizes: one row / column of padding, never movable (its pixels keep theirs).
+    pad = ((0, height % 2), (0, width % 2))
+    keys = np.pad(keys, pad, constant_values=-1)
+    blocks = _blocks(keys)  # (H2, W2, 4)
+    covered = (blocks >= 0).all(axis=-1)
+    # The most common label of each block (the first of a tie, in raster order): counts
+    # by comparing the four keys pairwise.
+    counts = (blocks[..., :, None] == blocks[..., None, :]).sum(axis=-1)
+    common = np.take_along_axis(blocks, counts.argmax(axis=-1)[..., None], axis=-1)[..., 0]
+    e, dy, dx = _label_values(np.where(covered, common, 0).ravel()).T.reshape(3, *covered.shape)
+    coarse_height, coarse_width = covered.shape
+    rows, columns = np.ogrid[0:coarse_height, 0:coarse_width]
+    coarse_source = np.stack(
+        [np.where(covered, 4 * e + 2 * (dy % 2) + dx % 2, -1), rows + dy // 2, columns + dx // 2],
+        axis=-1,
+    )
+    phases, phase_masks = [], []
+    for k, exemplar in enumerate(exemplars):
+        for py in (0, 1):
+            for px in (0, 1):
+                phases.append(_blocks(_even(exemplar[py:, px:])).mean(axis=2, dtype=np.float32))
+                if exemplar_masks is not None:
+                    phase_masks.append(_blocks(_even(exemplar_masks[k][py:, px:])).all(axis=2))
+    coarse_reference = _blocks(np.pad(reference, pad + ((0, 0),), mode="edge")).mean(
+        axis=2, dtype=np.float32
+    )
+    coarse_groups = None if groups is None else _blocks(np.pad(groups, pad)).max(axis=2)
+    coarse = place_seams(
+        phases,
+        coarse_source,
+        coarse_reference,
+        smoothness=smoothness / 2.0,
+        spread=spread,
+        sweeps=sweeps,
+        mask=covered,
+        exemplar_masks=phase_masks if exemplar_masks is not None else None,
+        groups=coarse_groups,
+        coarse_above=coarse_above,
+        band=band,
+    )
+    del phases, phase_masks, coarse_reference
+    # Back to fine labels: phase p of exemplar e is label 4 e + p.
+    phase = coarse[..., 0] % 4
+    fine_e = coarse[..., 0] // 4
+    fine_dy = 2 * (coarse[..., 1] - rows) + phase // 2
+    fine_dx = 2 * (coarse[..., 2] - columns) + phase % 2
+    up = np.ones((2, 2), bool)
+    taken = np.kron(covered, up)[:height, :width]
+
+    def _up(values):
+        return np.repeat(np.repeat(values, 2, axis=0), 2, axis=1)[:height, :width]
+
+    fine = source.astype(np.int32, copy=True)
+    fine[..., 0][taken] = _up(fine_e)[taken]
+    fine[..., 1][taken] = (_up(fine_dy) + yy + np.zeros_like(xx))[taken]
+    fine[..., 2][taken] = (_up(fine_dx) + xx + np.zeros_like(yy))[taken]
+    del coarse, phase, fine_e, fine_dy, fine_dx
+    # The band: every pixel within ``band`` (Chebyshev) of a seam between movable
+    # pixels or of a movable pixel the coarse grid left out.
+    keys = np.full((height, width), -1, np.int64)
+    keys[movable] = _label_keys(
+        fine[..., 0].astype(np.int64),
+        (fine[..., 1] - yy).astype(np.int64),
+        (fine[..., 2] - xx).astype(np.int64),
+        movable,
+    )
+    seeds = movable & ~taken
+    across = (keys[1:] != keys[:-1]) & movable[1:] & movable[:-1]
+    seeds[1:] |= across
+    seeds[:-1] |= across
+    across = (keys[:, 1:] != keys[:, :-1]) & movable[:, 1:] & movable[:, :-1]
+    seeds[:, 1:] |= across
+    seeds[:, :-1] |= across
+    del keys, across
+    free = ndimage.maximum_filter(seeds, size=2 * band + 1) & movable
+    return _solve(
+        exemplars, fine, reference, smoothness, spread, sweeps, mask, exemplar_masks, groups, free
+    )
+
+
+def _blocks(values):
+    """The 2x2 blocks of an (H, W, ...) array of even H and W, as (H / 2, W / 2, 4, ...)."""
+    height, width = values.shape[:2]
+    rest = values.shape[2:]
+    split = values.reshape(height // 2, 2, width // 2, 2, *rest).swapaxes(1, 2)
+    return split.reshape(height // 2, width // 2, 4, *rest)
+
+
+def _even(values):
+    """The array cropped to an even number of rows and columns."""
+    return values[: values.shape[0] // 2 * 2, : values.shape[1] // 2 * 2]
 
 
 #: Cost of a seam besides the colour gap: between two sources that show the same

@@ -359,6 +359,12 @@ class Finish:
     #: own size (the square root of its area): a move's cost grows with its reach. On a
     #: 2048x1536 fish 1 / 2 / 3 left 74 / 35 / 31 fragments in 5.2 / 7.7 / 9.8 s.
     seam_spread: float = setting(2.0, minimum=0.0)
+    #: Above this many pixels the rearrangement is solved coarse to fine (on 2x2 blocks,
+    #: recursively, then at full size only in a band around the coarse seams; Lombaert et
+    #: al. 2005; 0: never). MEASURED_SWITCH
+    seam_coarse_above: int = setting(1 << 20, kind="int", minimum=0)
+    #: Half-width in pixels of that band, solved again at each finer level. MEASURED_BAND
+    seam_band: int = setting(4, kind="int", minimum=1)
     #: The relief's detail (units-free, in (-1, 1)) as one more channel, times this, of
     #: the colours the seams' graph cut compares: whole copies whose relief fits the
     #: query's win, and seams avoid crossing relief (a copy's groove lands on the query's

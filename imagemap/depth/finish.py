@@ -207,6 +207,8 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
         mask=state.mask,
         exemplar_masks=[example.mask for example in state.chosen],
         groups=ndimage.label(kept & state.mask)[0],
+        coarse_above=config.finish.seam_coarse_above or None,
+        band=config.finish.seam_band,
     )
     state.source, state.relief = new, None  # the relief: not held through the blend
     state.changed = f"{changed_pixels(old, new)} pixels take another source"
