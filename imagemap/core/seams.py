@@ -258,16 +258,28 @@ def _coarse_to_fine(
         [np.where(covered, 4 * e + 2 * (dy % 2) + dx % 2, -1), rows + dy // 2, columns + dx // 2],
         axis=-1,
     )
+    # Only the phases some block uses are averaged (a label never used at the start
+    # never is); the others are empty, so that the labels keep their numbers.
+    used = np.zeros(4 * len(exemplars), bool)
+    used[coarse_source[..., 0][covered]] = True
     phases, phase_masks = [], []
     for k, exemplar in enumerate(exemplars):
         for py in (0, 1):
             for px in (0, 1):
-                phases.append(_blocks(_even(exemplar[py:, px:])).mean(axis=2, dtype=np.float32))
+                if not used[4 * k + 2 * py + px]:
+                    phases.append(np.zeros((0, 0, exemplar.shape[2]), np.float32))
+                    phase_masks.append(np.zeros((0, 0), bool))
+                    continue
+                phases.append(_block_mean(exemplar[py:, px:]))
                 if exemplar_masks is not None:
-                    phase_masks.append(_blocks(_even(exemplar_masks[k][py:, px:])).all(axis=2))
-    coarse_reference = _blocks(np.pad(reference, pad + ((0, 0),), mode="edge")).mean(
-        axis=2, dtype=np.float32
-    )
+                    inside = _even(exemplar_masks[k][py:, px:])
+                    phase_masks.append(
+                        inside[0::2, 0::2]
+                        & inside[1::2, 0::2]
+                        & inside[0::2, 1::2]
+                        & inside[1::2, 1::2]
+                    )
+    coarse_reference = _block_mean(np.pad(reference, pad + ((0, 0),), mode="edge"))
     coarse_groups = None if groups is None else _blocks(np.pad(groups, pad)).max(axis=2)
     coarse = place_seams(
         phases,
@@ -328,6 +340,18 @@ def _blocks(values):
     rest = values.shape[2:]
     split = values.reshape(height // 2, 2, width // 2, 2, *rest).swapaxes(1, 2)
     return split.reshape(height // 2, width // 2, 4, *rest)
+
+
+def _block_mean(values):
+    """The float32 means of the 2x2 blocks of an (H, W, C) array (a last odd row or
+    column dropped): four strided sums, not a reshaped copy of the whole array."""
+    values = _even(values)
+    total = values[0::2, 0::2].astype(np.float32)
+    total += values[1::2, 0::2]
+    total += values[0::2, 1::2]
+    total += values[1::2, 1::2]
+    total *= 0.25
+    return total
 
 
 def _even(values):
