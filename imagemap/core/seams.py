@@ -100,7 +100,12 @@ def place_seams(
     [8]
     """
     if coarse_above is not None and source.shape[0] * source.shape[1] > coarse_above:
-        return _coarse_to_fine(
+        # Each level holds its own copy of the exemplars (block-averaged): only the part
+        # the labels can read is kept, as views (no copy): an example no pixel copies
+        # is dropped, and a large example is cut to its object.
+        corners, exemplars, exemplar_masks = _crops(exemplars, exemplar_masks, source, mask)
+        source = _shifted(source, -corners)
+        placed = _coarse_to_fine(
             exemplars,
             source,
             reference,
@@ -113,9 +118,72 @@ def place_seams(
             coarse_above=coarse_above,
             band=band,
         )
+        return _shifted(placed, corners)
     return _solve(
         exemplars, source, reference, smoothness, spread, sweeps, mask, exemplar_masks, groups
     )
+
+
+#: Margin in pixels kept around what the labels read of each exemplar (:func:`_crops`):
+#: a neighbour's label is read one pixel from its sources, and on the coarse grid a
+#: block's label at its other pixels (up to 2^levels - 1 pixels from them).
+_CROP_MARGIN = 8
+
+
+def _crops(exemplars, exemplar_masks, source, mask):
+    """Each exemplar cut to what a labelling can read: the box around the sources of
+    the movable pixels and, as a pixel only takes a new label whose source lies inside
+    the exemplar's object, around that object, plus ``_CROP_MARGIN``; empty where no
+    movable pixel copies the exemplar (its labels are not in use, so never read).
+    Reads past the box would lie outside the exemplar before too (the box is cut from
+    it), so the labelling's costs are unchanged.
+
+    Returns
+    -------
+    corners : ndarray of int, (n, 2)
+        Each crop's top-left corner in its exemplar.
+    exemplars, exemplar_masks : lists of views (masks None if not given)
+    """
+    label_e = source[..., 0]
+    movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    corners = np.zeros((len(exemplars), 2), np.int64)
+    crops, crop_masks = [], []
+    for k, exemplar in enumerate(exemplars):
+        height, width = exemplar.shape[:2]
+        copied = movable & (label_e == k)
+        if not copied.any():
+            crops.append(exemplar[:0, :0])
+            crop_masks.append(None if exemplar_masks is None else exemplar_masks[k][:0, :0])
+            continue
+        ys, xs = source[..., 1][copied], source[..., 2][copied]
+        box = [ys.min(), ys.max(), xs.min(), xs.max()]
+        if exemplar_masks is None:
+            box = [0, height - 1, 0, width - 1]
+        elif exemplar_masks[k].any():
+            rows = np.flatnonzero(exemplar_masks[k].any(axis=1))
+            columns = np.flatnonzero(exemplar_masks[k].any(axis=0))
+            box = [
+                min(box[0], rows[0]),
+                max(box[1], rows[-1]),
+                min(box[2], columns[0]),
+                max(box[3], columns[-1]),
+            ]
+        y0, x0 = max(int(box[0]) - _CROP_MARGIN, 0), max(int(box[2]) - _CROP_MARGIN, 0)
+        y1 = min(max(int(box[1]) + _CROP_MARGIN + 1, y0), height)
+        x1 = min(max(int(box[3]) + _CROP_MARGIN + 1, x0), width)
+        corners[k] = y0, x0
+        crops.append(exemplar[y0:y1, x0:x1])
+        crop_masks.append(None if exemplar_masks is None else exemplar_masks[k][y0:y1, x0:x1])
+    return corners, crops, None if exemplar_masks is None else crop_masks
+
+
+def _shifted(source, corners):
+    """The source map with each exemplar's positions moved by its ``corners`` row."""
+    label_e = source[..., 0]
+    shift = np.where((label_e >= 0)[..., None], corners[np.maximum(label_e, 0)], 0)
+    moved = source.copy()
+    moved[..., 1:] += shift.astype(source.dtype)
+    return moved
 
 
 def _solve(
