@@ -102,3 +102,24 @@ def test_from_a_fragmented_start_the_energy_stays_near_the_full_solves():
     for coarse_above in (101 * 97 // 4, 101 * 97 // 16):
         banded = place_seams(exemplars, source, reference, mask=mask, coarse_above=coarse_above)
         assert energy(exemplars, banded, reference, mask) <= 1.05 * full
+
+
+def test_coarse_to_fine_keeps_to_the_exemplars_objects_and_ignores_unused_ones():
+    exemplars, source, reference, mask, groups = problem()
+    objects = [np.ones(e.shape[:2], bool) for e in exemplars]
+    objects[1][:, :40] = False  # label 1's sources left of column 40: not to be taken
+    kwargs = dict(mask=mask, groups=groups, coarse_above=101 * 97 // 16)
+    banded = place_seams(exemplars, source, reference, exemplar_masks=objects, **kwargs)
+    changed = (banded != source).any(-1) & mask
+    e, y, x = banded[changed].T
+    assert changed.any() and all(objects[k][y[e == k], x[e == k]].all() for k in (0, 1))
+    # An example no pixel copies changes nothing (it is cut away).
+    unused = np.zeros((300, 300, 3), np.float32)
+    again = place_seams(
+        [*exemplars, unused],
+        source,
+        reference,
+        exemplar_masks=[*objects, np.ones((300, 300), bool)],
+        **kwargs,
+    )
+    np.testing.assert_array_equal(again, banded)

@@ -376,9 +376,16 @@ def _coarse_to_fine(
 
     fine = source.astype(np.int32, copy=True)
     fine[..., 0][taken] = _up(fine_e)[taken]
-    fine[..., 1][taken] = (_up(fine_dy) + yy + np.zeros_like(xx))[taken]
-    fine[..., 2][taken] = (_up(fine_dx) + xx + np.zeros_like(yy))[taken]
+    fine[..., 1][taken] = (_up(fine_dy) + yy)[taken]
+    fine[..., 2][taken] = (_up(fine_dx) + xx)[taken]
     del coarse, phase, fine_e, fine_dy, fine_dx
+    # A block's label reaches all its pixels; where it reads past the exemplar's object
+    # at a pixel whose own label it was not (the full solve only ever gives a pixel a
+    # new label that reads inside), the pixel keeps its own and is solved in the band.
+    own = (fine == source).all(axis=-1)
+    lost = taken & ~own & ~_reads_inside(exemplars, exemplar_masks, fine)
+    fine[lost] = source[lost]
+    taken &= ~lost
     # The band: every pixel within ``band`` (Chebyshev) of a seam between movable
     # pixels or of a movable pixel the coarse grid left out.
     keys = np.full((height, width), -1, np.int64)
@@ -400,6 +407,17 @@ def _coarse_to_fine(
     return _solve(
         exemplars, fine, reference, smoothness, spread, sweeps, mask, exemplar_masks, groups, free
     )
+
+
+def _reads_inside(exemplars, exemplar_masks, source):
+    """Whether each pixel's source lies inside its exemplar (and its object), (H, W)."""
+    label_e, ys, xs = source[..., 0], source[..., 1], source[..., 2]
+    inside = np.zeros(label_e.shape, bool)
+    for k, exemplar in enumerate(exemplars):
+        height, width = exemplar.shape[:2]
+        at = (label_e == k) & (ys >= 0) & (xs >= 0) & (ys < height) & (xs < width)
+        inside[at] = True if exemplar_masks is None else exemplar_masks[k][ys[at], xs[at]]
+    return inside
 
 
 def _blocks(values):
