@@ -113,9 +113,15 @@ def no_work(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("work started before the refusal")
 
+    # The mesh route binds colorize_mesh when it is first imported: imported here, before
+    # the patch, and patched by name too, so that a first import inside this fixture
+    # cannot keep `refuse` for the tests after it.
+    import imagemap.mesh.route
+
     monkeypatch.setattr(imagemap.depth.pipeline, "colorize", refuse)
     monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
     monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
+    monkeypatch.setattr(imagemap.mesh.route, "colorize_mesh", refuse)
     monkeypatch.setattr(imagemap.batch.work, "process_job", refuse)
 
 
