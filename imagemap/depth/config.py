@@ -77,6 +77,8 @@ class Selection:
     #: fish: macro part transfer 0.785 resampled, 0.80 not; the generated objects lie
     #: within 5 degrees and 0.85-1.2 of each other). Beyond, the pose is undone exactly.
     pose_turn_tolerance: float = setting(10.0, minimum=0.0, maximum=90.0)
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 1.1 -> 0.817/0.778 (fish fragments 16.5 against 20.5), 1.5 -> the default's figures.
     pose_scale_tolerance: float = setting(1.25, minimum=1.0)
 
     def __post_init__(self) -> None:
@@ -95,6 +97,8 @@ class Pyramid:
     grow: bool = setting(True, kind="bool")
     #: The coarsest level must see the object at least this many windows across: a window
     #: larger than the object matches nothing but the silhouette.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 0.75 -> the default's figures, 2.5 -> 0.816/0.778 (no measurable effect).
     min_windows_across: float = setting(1.25, minimum=0.0)
     #: A level is added while the next coarser one would still see the object this many
     #: windows across (the paper's objects are 2 to 3.5 windows across at its coarsest
@@ -224,9 +228,13 @@ class Guides:
     #: The detail band in units of its robust spread inside the object, soft-clipped at
     #: this many units (0: raw band): without it the silhouette's jump sets the band's
     #: scale and interior relief (sockets, lips, an eye's bulge) hardly counts.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 1.5 -> 0.818/0.781 (a bust's feature lost), 6 -> 0.812/0.767.
     detail_clip: float = setting(3.0, minimum=0.0)
     #: Percentile of |detail| inside the object taken as its unit: the relief that marks
     #: features, not the body's flat stretches, whose tiny values a median would blow up.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 90 -> 0.815/0.770, 99 -> 0.804/0.769 (a fish's feature in 12 lost).
     detail_percentile: float = setting(95.0, minimum=0.0, maximum=100.0)
     #: Weight of the silhouette band (signed distance to the outline); with it the depth
     #: is continued past the outline, so an eye 3 px from the outline matches the
@@ -234,8 +242,13 @@ class Guides:
     silhouette_weight: float = setting(0.5, minimum=0.0)
     #: The silhouette band saturates this many pixels of each level from the outline: it
     #: says "edge here" to a window, not how deep inside it is.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 1 -> 0.678/0.690 (half the fish's features lost), 4 -> 0.815/0.779 (24/9.5 fragments
+    #: for 90 % against 20.5/8.5).
     silhouette_range: float = setting(2.0, minimum=0.0)
     #: Smoothing (pixels) of the depth continued past the outline.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 1 -> 0.815/0.774, 4 -> 0.818/0.769.
     extension_sigma: float = setting(2.0, minimum=0.0)
     #: Weight of the position relative to the object's centroid, per RMS radius of the
     #: object (Table 1's relative position; fish 0.5, humans 3).
@@ -255,6 +268,9 @@ class Guides:
     #: ``registered_position_weight`` holds; at a level where the object is larger the
     #: weight grows with its size, so that a pixel of drift from the warp costs the same
     #: at any resolution (4x fish: 1,488 fragments without, about 50 with).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 50 -> 0.818/0.785 (fragments 18.5/6.5), 200 -> 0.816/0.777: within the busts' seed
+    #: spread (0.014).
     registered_reference_size: float = setting(100.0, minimum=0.0)
     #: Where none of the registered examples' relief agrees with the query's (a groove,
     #: ridge or bump that lies elsewhere or nowhere in them), the registered position
@@ -282,6 +298,8 @@ class Guides:
     #: weight) at levels finer than ``Pyramid.context_fraction``: a large map's fine
     #: levels keep the eyes, lips and palette the coarser levels chose (Cb and Cr too gave
     #: the same maps for 10 % more memory at 1024^2).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: 0.5 -> 0.816/0.779, 2 -> 0.817/0.777 (no measurable effect).
     context_weight: float = setting(1.0, minimum=0.0)
     #: The context's factor at the other levels but the coarsest: weak, so the level's
     #: own band still draws small features while coarser colours decide between examples
@@ -328,6 +346,9 @@ class Matching:
     example_preference: float = setting(30.0, minimum=0.0)
     #: Apply the preference at the feature level and finer too (the final reseed may
     #: still take a feature from another example, see ``Guides.free_final_reseed``).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
+    #: False -> 0.820/0.786 and ΔE00 33.06 against 33.62 on fish, fragments 21.5/9.5 against
+    #: 20.5/8.5: within the busts' spread, a candidate to look at with more seeds.
     preference_at_finest: bool = setting(True, kind="bool")
     #: Per level, where the propagated matches fit the depth worst, matches on depth and
     #: position alone replace them when they fit in less than this fraction of the
