@@ -90,3 +90,25 @@ def grey_sphere_files(tmp_path_factory):
     folder = tmp_path_factory.mktemp("grey_sphere")
     write_grey_sphere(folder, seed=0)
     return folder
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Any synthesis started is a failure: refusals come before the work."""
+    # The mesh route binds colorize_mesh when it is first imported: imported here, before
+    # the patch, and patched by name too, so that a first import inside this fixture
+    # cannot keep `refuse` for the tests after it.
+    import imagemap.batch.work
+    import imagemap.depth.pipeline
+    import imagemap.mesh
+    import imagemap.mesh.colorize
+    import imagemap.mesh.route
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("work started before the refusal")
+
+    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", refuse)
+    monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
+    monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
+    monkeypatch.setattr(imagemap.mesh.route, "colorize_mesh", refuse)
+    monkeypatch.setattr(imagemap.batch.work, "process_job", refuse)

@@ -71,19 +71,6 @@ def fish(tmp_path, tmp_path_factory, blob_database, monkeypatch):
     return {"root": tmp_path, "db": root, "holdout": holdout, "mesh": holdout / "meshes" / "q.glb"}
 
 
-@pytest.fixture
-def no_work(monkeypatch):
-    """Any synthesis started is a failure: refusals come before the work."""
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("work started before the refusal")
-
-    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", refuse)
-    monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
-    monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
-    monkeypatch.setattr(imagemap.batch.work, "process_job", refuse)
-
-
 def _depths(w, *names, db=None, extra=()):
     queries = [str(w["holdout"] / f"{n}_depth.png") for n in names]
     return ["synthesize", *queries, "--db", str(db or w["db"]), "-q", *extra]

@@ -106,25 +106,6 @@ def world(tmp_path, tmp_path_factory, blob_database, query_blob, monkeypatch):
     return {"root": root, "db": db, "q": q, "holdout": holdout, "meshes": meshes}
 
 
-@pytest.fixture
-def no_work(monkeypatch):
-    """Any synthesis started is a failure: refusals come before the work."""
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("work started before the refusal")
-
-    # The mesh route binds colorize_mesh when it is first imported: imported here, before
-    # the patch, and patched by name too, so that a first import inside this fixture
-    # cannot keep `refuse` for the tests after it.
-    import imagemap.mesh.route
-
-    monkeypatch.setattr(imagemap.depth.pipeline, "colorize", refuse)
-    monkeypatch.setattr(imagemap.mesh, "colorize_mesh", refuse, raising=False)
-    monkeypatch.setattr(imagemap.mesh.colorize, "colorize_mesh", refuse)
-    monkeypatch.setattr(imagemap.mesh.route, "colorize_mesh", refuse)
-    monkeypatch.setattr(imagemap.batch.work, "process_job", refuse)
-
-
 def mesh_synth(w, source, *extra):
     return ["synthesize", str(source), "--db", str(w["db"]), "-q", "--views", "front", *extra]
 
