@@ -145,7 +145,7 @@ def _crops(exemplars, exemplar_masks, source, mask):
     exemplars, exemplar_masks : lists of views (masks None if not given)
     """
     label_e = source[..., 0]
-    movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    movable = _movable(label_e, mask)
     corners = np.zeros((len(exemplars), 2), np.int64)
     crops, crop_masks = [], []
     for k, exemplar in enumerate(exemplars):
@@ -211,7 +211,7 @@ def _solve(
     label_e = source[..., 0].astype(np.int64)
     label_y = (source[..., 1] - yy).astype(np.int64)
     label_x = (source[..., 2] - xx).astype(np.int64)
-    movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    movable = _movable(label_e, mask)
     # The labels that may move: with a band, only those of its pixels (a label outside
     # it has nowhere to go), and their areas there set each move's reach.
     held = movable if free is None else movable & free
@@ -301,15 +301,9 @@ def _coarse_to_fine(
     """
     height, width = source.shape[:2]
     label_e = source[..., 0].astype(np.int64)
-    movable = label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+    movable = _movable(label_e, mask)
     yy, xx = np.ogrid[0:height, 0:width]
-    keys = np.full((height, width), -1, np.int64)
-    keys[movable] = _label_keys(
-        label_e,
-        (source[..., 1] - yy).astype(np.int64),
-        (source[..., 2] - xx).astype(np.int64),
-        movable,
-    )
+    keys = _key_map(source, movable)
     # Odd sizes: one row / column of padding, never movable (its pixels keep theirs).
     pad = ((0, height % 2), (0, width % 2))
     keys = np.pad(keys, pad, constant_values=-1)
@@ -339,14 +333,8 @@ def _coarse_to_fine(
                     phase_masks.append(np.zeros((0, 0), bool))
                     continue
                 phases.append(_block_mean(exemplar[py:, px:]))
-                if exemplar_masks is not None:
-                    inside = _even(exemplar_masks[k][py:, px:])
-                    phase_masks.append(
-                        inside[0::2, 0::2]
-                        & inside[1::2, 0::2]
-                        & inside[0::2, 1::2]
-                        & inside[1::2, 1::2]
-                    )
+                if exemplar_masks is not None:  # a block is inside where its 4 pixels are
+                    phase_masks.append(_blocks(_even(exemplar_masks[k][py:, px:])).all(axis=2))
     coarse_reference = _block_mean(np.pad(reference, pad + ((0, 0),), mode="edge"))
     coarse_groups = None if groups is None else _blocks(np.pad(groups, pad)).max(axis=2)
     coarse = place_seams(
@@ -388,13 +376,7 @@ def _coarse_to_fine(
     taken &= ~lost
     # The band: every pixel within ``band`` (Chebyshev) of a seam between movable
     # pixels or of a movable pixel the coarse grid left out.
-    keys = np.full((height, width), -1, np.int64)
-    keys[movable] = _label_keys(
-        fine[..., 0].astype(np.int64),
-        (fine[..., 1] - yy).astype(np.int64),
-        (fine[..., 2] - xx).astype(np.int64),
-        movable,
-    )
+    keys = _key_map(fine, movable)
     seeds = movable & ~taken
     across = (keys[1:] != keys[:-1]) & movable[1:] & movable[:-1]
     seeds[1:] |= across
@@ -463,6 +445,25 @@ def _group_labels(label_e, label_y, label_x, groups, movable):
     for label, group in zip(_label_values(pairs[:, 0]).tolist(), pairs[:, 1].tolist(), strict=True):
         table.setdefault(tuple(label), []).append(group)
     return {label: np.array(numbers) for label, numbers in table.items()}
+
+
+def _movable(label_e, mask):
+    """The pixels whose label may change: copied (label >= 0) and inside ``mask``."""
+    return label_e >= 0 if mask is None else np.asarray(mask, bool) & (label_e >= 0)
+
+
+def _key_map(source, movable):
+    """(H, W) :func:`_label_keys` of a source map's labels at ``movable``, -1 elsewhere."""
+    height, width = source.shape[:2]
+    yy, xx = np.ogrid[0:height, 0:width]
+    keys = np.full((height, width), -1, np.int64)
+    keys[movable] = _label_keys(
+        source[..., 0].astype(np.int64),
+        (source[..., 1] - yy).astype(np.int64),
+        (source[..., 2] - xx).astype(np.int64),
+        movable,
+    )
+    return keys
 
 
 def _label_keys(label_e, label_y, label_x, where):
