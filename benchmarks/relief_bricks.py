@@ -137,14 +137,10 @@ def mortar_scores(image, mask, centres, light_level, width):
     ``relief_plates.seam_scores`` with light for dark: the same recall (1 px) and the
     same precision reach (``max(2, width / 160)`` px).
     """
-    luma = color.rgb2gray(np.clip(image, 0, 1))
-    light = (luma > light_level) & mask
-    near_light = ndimage.binary_dilation(light, np.ones((3, 3), bool))
-    recall = float(near_light[centres].mean()) if centres.any() else float("nan")
-    reach = max(2.0, width / 160.0)
-    to_centre = ndimage.distance_transform_edt(~centres)
-    precision = float((to_centre[light] <= reach).mean()) if light.any() else 0.0
-    f1 = 2 * recall * precision / (recall + precision) if recall + precision > 0 else 0.0
+    from relief_plates import line_scores
+
+    light = (color.rgb2gray(np.clip(image, 0, 1)) > light_level) & mask
+    recall, precision, f1 = line_scores(light, centres, width)
     return {"mortar_recall": recall, "mortar_precision": precision, "mortar_f1": f1}
 
 

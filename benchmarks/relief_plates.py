@@ -105,15 +105,22 @@ def shell(width, height, *, a, b, cx, cy, seed, plate, seam):
 
 def seam_scores(image, mask, centres, dark_level, width):
     """Seam recall, precision and F1 of a map (see the module notes)."""
-    luma = color.rgb2gray(np.clip(image, 0, 1))
-    dark = (luma < dark_level) & mask
-    near_dark = ndimage.binary_dilation(dark, np.ones((3, 3), bool))
-    recall = float(near_dark[centres].mean()) if centres.any() else float("nan")
+    dark = (color.rgb2gray(np.clip(image, 0, 1)) < dark_level) & mask
+    recall, precision, f1 = line_scores(dark, centres, width)
+    return {"seam_recall": recall, "seam_precision": precision, "seam_f1": f1}
+
+
+def line_scores(marked, centres, width):
+    """Recall (the share of ``centres`` with a ``marked`` pixel within 1 px), precision
+    (the share of ``marked`` pixels within ``max(2, width / 160)`` px of a centre) and
+    their F1: the seams' scores here, the mortar's in ``relief_bricks.py``."""
+    near = ndimage.binary_dilation(marked, np.ones((3, 3), bool))
+    recall = float(near[centres].mean()) if centres.any() else float("nan")
     reach = max(2.0, width / 160.0)
     to_centre = ndimage.distance_transform_edt(~centres)
-    precision = float((to_centre[dark] <= reach).mean()) if dark.any() else 0.0
+    precision = float((to_centre[marked] <= reach).mean()) if marked.any() else 0.0
     f1 = 2 * recall * precision / (recall + precision) if recall + precision > 0 else 0.0
-    return {"seam_recall": recall, "seam_precision": precision, "seam_f1": f1}
+    return recall, precision, f1
 
 
 def make_task(width, height):
