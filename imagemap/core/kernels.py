@@ -709,6 +709,7 @@ def expansion_terms(
     alpha,
     smooth,
     floor,
+    weights,
 ):
     """The graph of one alpha-expansion move (Boykov, Veksler & Zabih 2001).
 
@@ -718,7 +719,8 @@ def expansion_terms(
     exemplar's object, ``inside``) keeps its label (x = 0) or takes ``alpha``
     (x = 1); all other pixels keep theirs. Costs: the squared distance of the
     copied colour to ``reference``, plus ``smooth`` times the seam costs
-    (:func:`_seam`). A pair of free neighbours
+    (:func:`_seam`), each seam's also times the mean of its two pixels' ``weights``
+    ((H, W)). A pair of free neighbours
     p, q costs E(xp, xq) = a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with
     a = seam(lp, lq), b = seam(lp, alpha), c = seam(alpha, lq); b + c >= a as the seam
     cost is a distance, so the move is a minimum cut (Kolmogorov & Zabih 2004).
@@ -789,19 +791,20 @@ def expansion_terms(
                 if ny < 0 or nx < 0 or ny >= height or nx >= width or not mask[ny, nx]:
                     continue
                 f, fy, fx = label_e[ny, nx], label_y[ny, nx], label_x[ny, nx]
+                pair = smooth * (0.5 * (weights[y, x] + weights[ny, nx]))
                 ci, cj = ny - y0, nx - x0
                 q = node[ci, cj] if 0 <= ci < h and 0 <= cj < w else -1
                 if q < 0:  # a fixed neighbour keeps its label: a unary term
-                    cost0[p] += smooth * _seam(
+                    cost0[p] += pair * _seam(
                         exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor
                     )
-                    cost1[p] += smooth * _seam(
+                    cost1[p] += pair * _seam(
                         exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor
                     )
                 elif (k == 0 or k == 2) and e == f and oy == fy and ox == fx:
                     # one label: no seam now, and alpha's seam on either side is the
                     # same (the same two gaps)
-                    b = smooth * (floor + to_alpha[p] + to_alpha[q])
+                    b = pair * (floor + to_alpha[p] + to_alpha[q])
                     cost1[p] += b
                     cost1[q] -= b
                     first[m] = p
@@ -809,13 +812,9 @@ def expansion_terms(
                     capacity[m] = b + b  # both seams' gaps are >= 0: no rounding guard
                     m += 1
                 elif k == 0 or k == 2:  # each pair of free pixels once
-                    a = smooth * _seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor)
-                    b = smooth * _seam(
-                        exemplars, shapes, e, oy, ox, ae, ay, ax, y, x, ny, nx, floor
-                    )
-                    c = smooth * _seam(
-                        exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor
-                    )
+                    a = pair * _seam(exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor)
+                    b = pair * _seam(exemplars, shapes, e, oy, ox, ae, ay, ax, y, x, ny, nx, floor)
+                    c = pair * _seam(exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor)
                     cost0[p] += a
                     cost1[p] += c
                     cost1[q] -= c

@@ -28,6 +28,7 @@ def place_seams(
     groups: np.ndarray | None = None,
     coarse_above: int | None = None,
     band: int = 4,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """A source map with fewer, cheaper seams, placed where the sources agree.
 
@@ -79,6 +80,11 @@ def place_seams(
     band : int
         Half-width, in pixels, of the band around the upsampled seams that is solved
         again at each finer level (with ``coarse_above``).
+    weights : ndarray, (H, W), optional
+        Per pixel, a factor on ``smoothness``: a seam between two pixels costs the mean
+        of their two factors times as much (default: 1 everywhere). Where a seam should
+        be cheaper (say, where the voted map follows the query's own relief rather than
+        one copy), the copies stay smaller there.
 
     Returns
     -------
@@ -117,10 +123,20 @@ def place_seams(
             groups=groups,
             coarse_above=coarse_above,
             band=band,
+            weights=weights,
         )
         return _shifted(placed, corners)
     return _solve(
-        exemplars, source, reference, smoothness, spread, sweeps, mask, exemplar_masks, groups
+        exemplars,
+        source,
+        reference,
+        smoothness,
+        spread,
+        sweeps,
+        mask,
+        exemplar_masks,
+        groups,
+        weights=weights,
     )
 
 
@@ -197,6 +213,7 @@ def _solve(
     exemplar_masks,
     groups,
     free=None,
+    weights=None,
 ):
     """:func:`place_seams` at full resolution; with ``free`` (bool, (H, W)) only those
     pixels may change (the others are fixed, their seams with the free pixels weighed)."""
@@ -216,6 +233,11 @@ def _solve(
     # it has nowhere to go), and their areas there set each move's reach.
     held = movable if free is None else movable & free
     reference = np.ascontiguousarray(reference, dtype=np.float32)
+    weights = (
+        np.ones((height, width), np.float32)
+        if weights is None
+        else np.ascontiguousarray(weights, dtype=np.float32)
+    )
     # The move after which each pixel last changed, and each label's last move: a
     # label's move is not repeated while nothing in or around its crop has changed
     # since (it would find the same cut), unless that move spread it.
@@ -257,6 +279,7 @@ def _solve(
                 region,
                 alpha,
                 smoothness,
+                weights,
             )
             if moved is None:
                 expanded_at[key] = moves
@@ -284,6 +307,7 @@ def _coarse_to_fine(
     groups,
     coarse_above,
     band,
+    weights=None,
 ):
     """:func:`place_seams` solved on 2x2 blocks (recursively), then at full resolution in
     a band of ``band`` pixels around the seams the blocks left (Lombaert et al. 2005).
@@ -337,6 +361,11 @@ def _coarse_to_fine(
                     phase_masks.append(_blocks(_even(exemplar_masks[k][py:, px:])).all(axis=2))
     coarse_reference = _block_mean(np.pad(reference, pad + ((0, 0),), mode="edge"))
     coarse_groups = None if groups is None else _blocks(np.pad(groups, pad)).max(axis=2)
+    coarse_weights = (
+        None
+        if weights is None
+        else _block_mean(np.pad(weights, pad, mode="edge")[..., None])[..., 0]
+    )
     coarse = place_seams(
         phases,
         coarse_source,
@@ -349,8 +378,9 @@ def _coarse_to_fine(
         groups=coarse_groups,
         coarse_above=coarse_above,
         band=band,
+        weights=coarse_weights,
     )
-    del phases, phase_masks, coarse_reference
+    del phases, phase_masks, coarse_reference, coarse_weights
     # Back to fine labels: phase p of exemplar e is label 4 e + p.
     phase = coarse[..., 0] % 4
     fine_e = coarse[..., 0] // 4
@@ -387,7 +417,17 @@ def _coarse_to_fine(
     del keys, across
     free = ndimage.maximum_filter(seeds, size=2 * band + 1) & movable
     return _solve(
-        exemplars, fine, reference, smoothness, spread, sweeps, mask, exemplar_masks, groups, free
+        exemplars,
+        fine,
+        reference,
+        smoothness,
+        spread,
+        sweeps,
+        mask,
+        exemplar_masks,
+        groups,
+        free,
+        weights,
     )
 
 
@@ -492,7 +532,7 @@ def _label_table(label_e, label_y, label_x, movable):
     return alphas, ids, areas.astype(np.int64), ndimage.find_objects(ids, max_label=len(keys))
 
 
-def _expand(exemplars, reference, labels, movable, crop, region, alpha, smoothness):
+def _expand(exemplars, reference, labels, movable, crop, region, alpha, smoothness, weights):
     """One alpha-expansion move over ``region`` (inside ``crop``), labels updated in place;
     the pixels that took ``alpha`` (in the crop), or None."""
     import maxflow  # deferred: start-up: only the copy's seams need it
@@ -517,6 +557,7 @@ def _expand(exemplars, reference, labels, movable, crop, region, alpha, smoothne
         alpha,
         float(smoothness),
         _SEAM_FLOOR,
+        weights,
     )
     n = len(cost0)
     if n == 0:

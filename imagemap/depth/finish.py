@@ -96,6 +96,9 @@ class SynthesisState:
     # The relief's detail of the query and of each example (a front end with depth sets
     # it): the seams then fall where the copies agree in colour and in relief.
     relief: tuple[np.ndarray, list[np.ndarray]] | None = None
+    # Per pixel, how well a registered example's relief agrees with the query's (1:
+    # agrees; :func:`imagemap.depth.register.relief_agreement`), or None.
+    agreement: np.ndarray | None = None
     image: np.ndarray | None = None
     changed: str = ""  # what the last stage changed, for the record
 
@@ -209,8 +212,14 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
         groups=ndimage.label(kept & state.mask)[0],
         coarse_above=config.finish.seam_coarse_above or None,
         band=config.finish.seam_band,
+        # Where no registered example's relief agrees with the query's, the matches follow
+        # the query's own relief (the position gave way there): the seams weigh as little
+        # as the registration does, and do not merge those matches back into the
+        # examples' layout.
+        weights=state.agreement,
     )
-    state.source, state.relief = new, None  # the relief: not held through the blend
+    # The relief and the agreement: not held through the blend.
+    state.source, state.relief, state.agreement = new, None, None
     state.changed = f"{changed_pixels(old, new)} pixels take another source"
     return state
 

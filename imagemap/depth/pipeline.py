@@ -96,6 +96,7 @@ from imagemap.depth.register import (
     position_scales,
     register,
     registered_positions,
+    relief_agreement,
     relief_detail,
 )
 from imagemap.depth.selection import poses_against, select_examples, select_with_poses
@@ -235,16 +236,19 @@ def _bands(state: State, config: DepthConfig) -> State:
         )
         example_positions = list(registered)
     params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
-    scales = position_scales(
+    state.agreement = relief_agreement(
         state.mask,
         state.warps,
+        config.guides.relief_disagreement,
+        config.registration.relief_detail_scale,
+    )
+    scales = position_scales(
+        state.agreement,
         [
             plan.position_weight if plan.position_weight is not None else params.position_weight
             for plan in params.level_plans(levels)
         ],
         config.guides.position_weight,
-        config.guides.relief_disagreement,
-        config.registration.relief_detail_scale,
     )
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(

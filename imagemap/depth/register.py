@@ -494,24 +494,15 @@ def registered_positions(
     return query_levels, example_levels
 
 
-def position_scales(
-    mask: np.ndarray,
-    warps: list[Warp],
-    level_weights: list[float],
-    relative_weight: float,
-    disagreement: float,
-    reach: float,
-) -> list[np.ndarray | None] | None:
-    """Per pyramid level, the query's factor on the position term's weight: where none of
-    the registered examples' relief agrees with the query's own (a groove, a ridge, a bump
-    that lies elsewhere or nowhere in them), the registered position gives way to the
-    paper's relative position (weight ``relative_weight`` against the level's own
-    ``level_weights[l]``), and the windows follow the query's relief.
-
-    With agreement ``a = 1 / (1 + D / disagreement)`` (``D`` the smallest over the examples
-    of :attr:`Warp.relief_residual`, averaged over ``reach`` of the object's size), the
-    factor is ``a + (1 - a) * min(1, relative_weight / level_weights[l])``: 1 where the
-    relief agrees. None when no warp has a residual or ``disagreement`` is 0.
+def relief_agreement(
+    mask: np.ndarray, warps: list[Warp], disagreement: float, reach: float
+) -> np.ndarray | None:
+    """Per query pixel, how well the relief of the best-fitting registered example agrees
+    with the query's own: ``1 / (1 + D / disagreement)``, ``D`` the smallest over the
+    examples of :attr:`Warp.relief_residual` averaged over ``reach`` of the object's
+    size. 1 where some example's relief lies where the query's does; towards 0 where
+    the query's groove, ridge or bump lies elsewhere or nowhere in them. None when no
+    warp has a residual or ``disagreement`` is 0.
     """
     residuals = [w for w in warps if w.relief_residual is not None]
     if not residuals or disagreement <= 0:
@@ -529,7 +520,21 @@ def position_scales(
         full = ndimage.map_coordinates(smooth, [gy, gx], order=1, mode="nearest")
         smallest = full if smallest is None else np.minimum(smallest, full)
     assert smallest is not None
-    agreement = (1.0 / (1.0 + smallest / disagreement)).astype(np.float32)
+    return (1.0 / (1.0 + smallest / disagreement)).astype(np.float32)
+
+
+def position_scales(
+    agreement: np.ndarray | None, level_weights: list[float], relative_weight: float
+) -> list[np.ndarray | None] | None:
+    """Per pyramid level, the query's factor on the position term's weight: where none of
+    the registered examples' relief agrees with the query's own (:func:`relief_agreement`
+    ``a``), the registered position gives way to the paper's relative position (weight
+    ``relative_weight`` against the level's own ``level_weights[l]``), and the windows
+    follow the query's relief: ``a + (1 - a) * min(1, relative_weight / level_weights[l])``,
+    1 where the relief agrees. None without an agreement.
+    """
+    if agreement is None:
+        return None
     from imagemap.core.pyramid import gaussian_pyramid  # deferred: as the guides' own
 
     return [
