@@ -155,3 +155,22 @@ def test_a_feature_copied_in_pieces_becomes_one_of_its_own_copies():
     placed = place_seams([first, second], source, missed, groups=groups)
     assert {tuple(v) for v in labels_of(placed)[13:19, 13:19].reshape(-1, 3)} <= spot_labels
     assert colours([first, second], placed)[0][13:19, 13:19].max() < 0.1
+
+
+def test_seams_weigh_nothing_where_their_weights_are_zero():
+    """A piece of stripes copied 3 rows off, which the voted map shows: strong seams make
+    it give way to the large copy around it; with the seams' weights 0 around it (where
+    the query's relief says the matches, not the registered copy, know best) it stays,
+    and weights of 1 everywhere are no weights at all."""
+    image = stripes()
+    source = shifted((32, 32), 0)
+    source[11:21, 11:21, 1] += 3
+    voted = image[source[..., 1], source[..., 2]].astype(np.float64)
+    merged = place_seams([image], source, voted, smoothness=5.0)
+    assert np.unique(labels_of(merged)[..., 1]).tolist() == [8]
+    weights = np.ones((32, 32), np.float32)
+    weights[9:23, 9:23] = 0.0
+    kept = place_seams([image], source, voted, smoothness=5.0, weights=weights)
+    np.testing.assert_array_equal(kept, source)
+    ones = place_seams([image], source, voted, smoothness=5.0, weights=np.ones((32, 32)))
+    np.testing.assert_array_equal(ones, merged)
