@@ -96,9 +96,10 @@ class SynthesisState:
     # The relief's detail of the query and of each example (a front end with depth sets
     # it): the seams then fall where the copies agree in colour and in relief.
     relief: tuple[np.ndarray, list[np.ndarray]] | None = None
-    # Per pixel, how well a registered example's relief agrees with the query's (1:
-    # agrees; :func:`imagemap.depth.register.relief_agreement`), or None.
-    agreement: np.ndarray | None = None
+    # Per pixel, the finest level's factor on the position term (1 where a registered
+    # example's relief agrees with the query's, less where the windows follow the query's
+    # own relief; :func:`imagemap.depth.register.position_scales`), or None.
+    position_factor: np.ndarray | None = None
     image: np.ndarray | None = None
     changed: str = ""  # what the last stage changed, for the record
 
@@ -213,13 +214,12 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
         coarse_above=config.finish.seam_coarse_above or None,
         band=config.finish.seam_band,
         # Where no registered example's relief agrees with the query's, the matches follow
-        # the query's own relief (the position gave way there): the seams weigh as little
-        # as the registration does, and do not merge those matches back into the
-        # examples' layout.
-        weights=state.agreement,
+        # the query's own relief (the position gave way there): the seams weigh as the
+        # position did, and do not merge those matches back into the examples' layout.
+        weights=state.position_factor,
     )
-    # The relief and the agreement: not held through the blend.
-    state.source, state.relief, state.agreement = new, None, None
+    # The relief and the factor: not held through the blend.
+    state.source, state.relief, state.position_factor = new, None, None
     state.changed = f"{changed_pixels(old, new)} pixels take another source"
     return state
 

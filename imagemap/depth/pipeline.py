@@ -236,20 +236,20 @@ def _bands(state: State, config: DepthConfig) -> State:
         )
         example_positions = list(registered)
     params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
-    state.agreement = relief_agreement(
-        state.mask,
-        state.warps,
-        config.guides.relief_disagreement,
-        config.registration.relief_detail_scale,
-    )
     scales = position_scales(
-        state.agreement,
+        relief_agreement(
+            state.mask,
+            state.warps,
+            config.guides.relief_disagreement,
+            config.registration.relief_detail_scale,
+        ),
         [
             plan.position_weight if plan.position_weight is not None else params.position_weight
             for plan in params.level_plans(levels)
         ],
         config.guides.position_weight,
     )
+    state.position_factor = None if scales is None else scales[0]
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions, scales)
