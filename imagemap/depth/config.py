@@ -128,7 +128,8 @@ class Registration:
     ``registered_position_weight``). The fit's fields were set when it was written
     (9718736, 16d4e17) and swept in #43: each comment's figures are the macro part
     transfer of 12 generated fish and busts at 1x and the seam F1 of #42's relief plates
-    at 320x240, seed 0 unless said."""
+    at 320x240, seed 0 unless said. The fit's iterations, its pixels and the outline's
+    clip made no measurable difference: constants of :mod:`imagemap.depth.register`."""
 
     #: The working resolution: the object is about this many pixels across (square root
     #: of its area) while the warp is fitted. A smooth warp of a whole object needs no
@@ -150,22 +151,12 @@ class Registration:
     #: Gaussian smoothing (working pixels) of the guide images per grid: a wide capture
     #: range first, the outline's detail last.
     grid_smoothing: tuple[float, ...] = (2.0, 1.0)
-    #: Levenberg-Marquardt iterations per grid at most.
-    #: Swept (as control_grids): 6 -> 0.809/0.775, 0.956; 12 -> 0.806/0.775, 0.956; 24 ->
-    #: 0.806/0.775, 0.956 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
-    #: 0.003); the busts' figures were the same at all three.
-    fit_iterations: int = setting(12, kind="int", minimum=0)
     #: Weight of the control points' squared displacement against the mean squared guide
     #: difference: keeps the warp smooth where the guide says nothing (inside a flat body).
     #: Swept (as control_grids): 1e-3 -> 0.803/0.765, 0.957; 1e-2 -> 0.806/0.775, 0.956; 1e-1 ->
     #: 0.811/0.771, 0.957 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
     #: 0.003).
     stiffness: float = setting(1e-2, minimum=0.0)
-    #: Pixels of the working grid used for the fit at most (a regular subsample).
-    #: Swept (as control_grids): 1500 -> 0.807/0.775, 0.955; 3000 -> 0.806/0.775, 0.956; 6000 ->
-    #: 0.807/0.777, 0.955 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
-    #: 0.003).
-    fit_pixels: int = setting(3000, kind="int", minimum=1)
     #: Weight of the relief's detail in the registration's guide image
     #: (:func:`imagemap.depth.register.registration_guide`): eyes, lips and brow ridges
     #: pull the warp into place (12 busts' macro part transfer 0.779 -> 0.789 at 0.5).
@@ -180,12 +171,6 @@ class Registration:
     #: 57-58, 67, 21); 0.06 -> 0.790/0.780, F1 0.925, a fish's eye in 12 not drawn (seed to seed at
     #: the default: fish 0.004, busts 0.014, F1 0.004, shells 0.003, humans 0.003).
     relief_detail_scale: float = setting(0.03, minimum=0.0)
-    #: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
-    #: image: the outline and the band within a few percent of it lead the fit.
-    #: Swept (as control_grids): 0.02 -> 0.806/0.779, 0.956; 0.04 -> 0.806/0.775, 0.956; 0.08 ->
-    #: 0.809/0.776, 0.956 (seed to seed at the default, seeds 0-2: fish 0.004, busts 0.014, F1
-    #: 0.003).
-    outline_reach: float = setting(0.04, minimum=1e-6)
     #: The registration's detail works with the object about this many pixels across: the
     #: guide images (made from block averages, never at full size: at 2048x1536 the
     #: full-size guides, distance transforms and smoothing of 3 million pixels four per

@@ -14,8 +14,9 @@ to a guide image of each object: its signed distance to the outline (soft-clippe
 and its depth relative to its own deepest point, so that depth units do not
 matter. It is fitted at a working resolution where the object is
 ``work_size`` pixels across, coarse to fine over control grids of growing
-density, and evaluated at any resolution. Every setting of the fit is a field of
-:class:`imagemap.depth.config.Registration`, with its reason.
+density, and evaluated at any resolution. Every setting of the fit whose value matters
+is a field of :class:`imagemap.depth.config.Registration`, with its reason; the three whose
+value did not (``FIT_ITERATIONS``, ``FIT_PIXELS``, ``OUTLINE_REACH``) are constants here.
 
 Examples
 --------
@@ -51,6 +52,16 @@ __all__ = [
 
 #: The defaults of every setting of the fit (a :class:`DepthConfig`'s ``registration``).
 _REGISTRATION = Registration()
+#: Levenberg-Marquardt iterations per grid at most (swept in #43, 12 fish/busts at 1x and the
+#: plates' seam F1: 6, 12 and 24 within the seed spread).
+FIT_ITERATIONS = 12
+#: Pixels of the working grid the fit uses at most (a regular subsample): bounds its cost
+#: (swept in #43: 1500, 3000 and 6000 within the seed spread).
+FIT_PIXELS = 3000
+#: Soft clip (tanh, fraction of the object's size) of the signed distance in the guide
+#: image: the outline and the band within a few percent of it lead the fit (swept in #43:
+#: 0.02, 0.04 and 0.08 within the seed spread).
+OUTLINE_REACH = 0.04
 
 
 def registration_guide(
@@ -59,14 +70,13 @@ def registration_guide(
     relief_weight: float = _REGISTRATION.registration_relief,
     *,
     relief_scale: float = _REGISTRATION.relief_detail_scale,
-    outline_reach: float = _REGISTRATION.outline_reach,
 ) -> np.ndarray:
     """The image the warp is fitted on: soft-clipped signed distance to the outline plus
     the depth relative to the object's deepest point (both in [-0.5, 1]), plus
     ``relief_weight`` times the relief's detail (the relative depth less its smoothing
     over ``relief_scale`` of the object's size, soft-clipped at its 95th percentile
-    inside the object). ``outline_reach``: the signed distance's soft clip, as a
-    fraction of the object's size (see :class:`~imagemap.depth.config.Registration`).
+    inside the object). The signed distance is soft-clipped at ``OUTLINE_REACH`` of the
+    object's size.
 
     Examples
     --------
@@ -77,7 +87,7 @@ def registration_guide(
     """
     size = max(float(np.sqrt(mask.sum())), 1.0)
     signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
-    outline = np.tanh(signed / (outline_reach * size))
+    outline = np.tanh(signed / (OUTLINE_REACH * size))
     deepest = float(depth[mask].max()) if mask.any() else 1.0
     relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
     guide = 0.5 * outline + 0.5 * relief
@@ -216,7 +226,7 @@ def _fit(
     scale = np.sqrt(abs(np.linalg.det(linear)))
     region = ndimage.binary_dilation(fixed_mask, iterations=3)
     ys, xs = np.nonzero(region)
-    step = max(1, int(np.ceil(len(ys) / registration.fit_pixels)))
+    step = max(1, int(np.ceil(len(ys) / FIT_PIXELS)))
     ys, xs = ys[::step].astype(np.float64), xs[::step].astype(np.float64)
     box = (ys.min() - 2.0, ys.max() + 2.0, xs.min() - 2.0, xs.max() + 2.0)
     displacement = None
@@ -242,7 +252,7 @@ def _fit(
 
         r, wy, wx, energy = residual(coefficients)
         damping = 1e-3
-        for _ in range(registration.fit_iterations):
+        for _ in range(FIT_ITERATIONS):
             iy = ndimage.map_coordinates(grad_y, [wy, wx], order=1, mode="nearest")
             ix = ndimage.map_coordinates(grad_x, [wy, wx], order=1, mode="nearest")
             # The image's gradient carried back through the affine part (chain rule).
@@ -309,7 +319,6 @@ def register(
             mask,
             registration.registration_relief,
             relief_scale=registration.relief_detail_scale,
-            outline_reach=registration.outline_reach,
         )
         scale = zoom * block
         if scale >= 1.0:
