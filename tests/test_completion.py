@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from imagemap.core.blend import copy_through
-from imagemap.depth.completion import complete_features, small_features
+from imagemap.depth.completion import DOUBLE_SHIFT, complete_features, small_features
 from imagemap.depth.config import Completion
 
 SKIN = 0.5
@@ -354,7 +354,7 @@ def test_a_feature_copied_twice_over_itself_is_drawn_once():
     # a double, left to the seams.
     ragged = _identity(80)
     ragged[42:48, :, 1] -= 2
-    assert 2 < Completion().double_shift * 13
+    assert 2 < DOUBLE_SHIFT * 13
     kept, _ = complete_features([exemplar], ragged, features, mask, [mask])
     np.testing.assert_array_equal(kept[42:48], ragged[42:48])
 

@@ -74,6 +74,17 @@ log = logging.getLogger(__name__)
 
 #: The defaults of every threshold (a :class:`DepthConfig`'s ``completion``).
 _COMPLETION = Completion()
+#: Two copies of one feature at offsets this share of its width apart (and more than
+#: ``DOUBLE_TOLERANCE`` px) that copy some of the same pixels draw it twice (an eye with two
+#: pupils, seen at 512x512 on an ellipsoid fish); 0.15 and 0.4 gave the same figures (#43).
+DOUBLE_SHIFT = 0.25
+#: Offsets within this many pixels of the main copy's belong to it (#43: 4 gave the same
+#: figures; 1 cost 12 fish 0.005 of macro part transfer, their seed spread 0.004).
+DOUBLE_TOLERANCE = 2
+#: A double is redrawn from its main copy only when that copy holds at least this share
+#: of the feature (and under ``complete_share``: a whole copy with a few displaced pixels
+#: is a ragged edge, left to the seams); 0.35 and 0.65 within the seed spread (#43).
+DOUBLE_MAIN = 0.5
 
 
 def small_features(
@@ -428,7 +439,7 @@ def complete_features(
         The exemplars' objects: a completed feature's rim must come from inside.
     completion : Completion
         The thresholds (``complete_share``, ``partial_share``, ``feature_contrast``,
-        ``rim``, ``rim_agreement``, the doubles' and the skipped features').
+        ``rim``, ``rim_agreement``, the skipped features').
 
     Returns
     -------
@@ -547,17 +558,18 @@ def _undouble(source, instances, features, object_mask, exemplar_masks, completi
     around them copied at its offset within a quarter of the feature's width, take
     the main copy's offset (the one most of the feature's pixels came from). The
     main copy is then completed like any cut feature. ``instances``: the map's
-    :func:`_instances`; ``completion``: the thresholds (``double_shift``,
-    ``double_tolerance``, ``double_main``, ``complete_share``, ``partial_share``)."""
+    :func:`_instances`; ``completion``: the thresholds (``complete_share``,
+    ``partial_share``, ``rim``; the doubles' own are ``DOUBLE_SHIFT``, ``DOUBLE_TOLERANCE``
+    and ``DOUBLE_MAIN``)."""
     height, width = source.shape[:2]
-    tolerance = completion.double_tolerance
+    tolerance = DOUBLE_TOLERANCE
     recopied = 0
     for item in instances:
         k, ys, xs = item.k, item.ys, item.xs
         offsets = np.stack([source[ys, xs, 1] - ys, source[ys, xs, 2] - xs], axis=1)
         distinct, counts = np.unique(offsets, axis=0, return_counts=True)
         main = distinct[np.argmax(counts)]
-        threshold = max(tolerance + 1, item.span * completion.double_shift)
+        threshold = max(tolerance + 1, item.span * DOUBLE_SHIFT)
         far = np.abs(offsets - main).max(1) >= threshold
         if not far.any():
             continue
@@ -568,7 +580,7 @@ def _undouble(source, instances, features, object_mask, exemplar_masks, completi
         ]
         doubled = np.intersect1d(covers[0], covers[1], assume_unique=True).size
         main_copy, whole = len(covers[0]), completion.complete_share
-        if not completion.double_main * item.size <= main_copy < whole * item.size:
+        if not DOUBLE_MAIN * item.size <= main_copy < whole * item.size:
             continue
         if doubled < completion.partial_share * item.size:
             continue  # the displaced copy fills in what the main one lacks: no double

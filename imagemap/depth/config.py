@@ -447,7 +447,8 @@ class Completion:
     fish, seed 0, every value on the same synthesis (the stages up to the copy run once),
     so that the differences are the completion's own; from seed to seed the figure moves by
     0.014, 0.001 and 0.004 (3 seeds, 2 at 4x). Features drawn: 1.00, 0.97 and 1.00 unless
-    said."""
+    said. The doubles' thresholds made no measurable difference: constants of
+    :mod:`imagemap.depth.completion`."""
 
     #: A feature is at most this share of the object's size (square root of its area)
     #: across: an eye, lips, a brow; not a stripe, a sleeve or hair (0.15 or 0.25 moved
@@ -500,23 +501,6 @@ class Completion:
     #: from its surroundings in the map: something is drawn there (it refused a blue-grey
     #: eye over busts_008's own brown one).
     skipped_place_shown: float = setting(0.3, minimum=0.0, maximum=1.0)
-    #: Two copies of one feature at offsets this share of its width apart (and more than
-    #: ``double_tolerance`` px) that copy some of the same pixels draw it twice (an eye
-    #: with two pupils, seen at 512x512 on an ellipsoid fish with a large eye).
-    #: Swept (busts 1x/4x, fish, see above): 0.15 and 0.4 gave the default's figures to the last
-    #: digit (0.775/0.836/0.806) (seed to seed: 0.014, 0.001, 0.004).
-    double_shift: float = setting(0.25, minimum=0.0)
-    #: Offsets within this many pixels of the main copy's belong to it.
-    #: Swept (busts 1x/4x, fish, see above): 1 -> 0.775/0.836/0.801; 2 -> 0.775/0.836/0.806; 4 ->
-    #: 0.775/0.836/0.806 (seed to seed: 0.014, 0.001, 0.004).
-    double_tolerance: int = setting(2, kind="int", minimum=0)
-    #: A double is redrawn from its main copy only when that copy holds at least this
-    #: share of the feature (and under ``complete_share``: a whole copy with a few
-    #: displaced pixels is a ragged edge, left to the seams), and the copies overlap in at
-    #: least ``partial_share`` of it.
-    #: Swept (busts 1x/4x, fish, see above): 0.35 -> 0.775/0.839/0.806; 0.5 -> 0.775/0.836/0.806;
-    #: 0.65 -> the default's figures to the last digit (seed to seed: 0.014, 0.001, 0.004).
-    double_main: float = setting(0.5, minimum=0.0, maximum=1.0)
     #: Pixels of surroundings copied with the feature around it.
     #: Swept (busts 1x/4x, fish, see above): 1 -> 0.780/0.833/0.806; 2 -> 0.775/0.836/0.806; 4 ->
     #: 0.773/0.839/0.806 (seed to seed: 0.014, 0.001, 0.004).
