@@ -402,7 +402,6 @@ def test_guide_reseed_must_be_a_fraction():
         ("guide_reseed", 1.0),
         ("final_reseed", 1.0),
         ("final_reseed", -0.1),
-        ("context_weight", -1.0),
         ("wide_context_weight", -0.25),
         ("edge_support", 1.5),
         ("edge_support", float("nan")),

@@ -281,17 +281,14 @@ class Guides:
     #: not apply to it), while the EM keeps each region's example (12 busts: brows 0.50
     #: -> 0.53 of their pixels from brows).
     free_final_reseed: bool = setting(True, kind="bool")
-    #: Weight of the coarser levels' luminance as an extra guide band (times the Y
-    #: weight) at levels finer than ``Pyramid.context_fraction``: a large map's fine
-    #: levels keep the eyes, lips and palette the coarser levels chose (Cb and Cr too gave
-    #: the same maps for 10 % more memory at 1024^2).
-    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
-    #: 0.5 -> 0.816/0.779, 2 -> 0.817/0.777 (no measurable effect).
-    context_weight: float = setting(1.0, minimum=0.0)
-    #: The context's factor at the other levels but the coarsest: weak, so the level's
-    #: own band still draws small features while coarser colours decide between examples
-    #: whose bands fit alike (200x150 busts with every feature 75 -> 83 %; full weight
-    #: lost fish eyes).
+    #: The coarser levels' luminance is an extra guide band, weighted like Y at levels
+    #: finer than ``Pyramid.context_fraction`` (a large map's fine levels keep the eyes,
+    #: lips and palette the coarser levels chose; Cb and Cr too gave the same maps for 10 %
+    #: more memory at 1024^2; a weight of its own, 0.5 or 2 times Y, made no measurable
+    #: difference, #43). This is its factor at the other levels but the coarsest: weak, so
+    #: the level's own band still draws small features while coarser colours decide between
+    #: examples whose bands fit alike (200x150 busts with every feature 75 -> 83 %; full
+    #: weight lost fish eyes).
     wide_context_weight: float = setting(0.25, minimum=0.0)
 
     def __post_init__(self) -> None:

@@ -84,7 +84,7 @@ def context_level_weights(
     """Which levels see the coarser levels' colours, and how strongly.
 
     Returns the number of the finest levels with context and a factor per level
-    (finest first) on ``Guides.context_weight``: 1 where a window spans less than
+    (finest first) on the context band's weight (the Y weight): 1 where a window spans less than
     ``context_fraction`` of the object (its own band holds almost nothing of the
     object's structure there), ``wide`` at the other levels but the coarsest.
 
@@ -243,8 +243,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
     count, factors = context_level_weights(
         mask, pyramid.patch_sizes, guides.wide_context_weight, pyramid.context_fraction
     )
-    luma_context = guides.context_weight * matching.luma_weight
-    with_context = bool(guides.context_weight) and count > 0
+    with_context = count > 0
     # The mean vote's map is the EM's own vote: matches changed after it would describe
     # (source, provenance) a map that was not made from them.
     final_reseed = matching.final_reseed if config.finish.vote != "mean" else 0.0
@@ -256,7 +255,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
         )
         context: tuple[float, ...] = ()
         if with_context and factors[level] > 0 and level < n_levels - 1:
-            context = (factors[level] * luma_context, 0.0, 0.0)
+            context = (factors[level] * matching.luma_weight, 0.0, 0.0)
         plans.append(
             LevelPlan(
                 patch_size=k,
