@@ -95,11 +95,6 @@ class Pyramid:
     #: the paper's does at 200x150; False keeps the preset's levels (still dropping
     #: levels for small objects).
     grow: bool = setting(True, kind="bool")
-    #: The coarsest level must see the object at least this many windows across: a window
-    #: larger than the object matches nothing but the silhouette.
-    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
-    #: 0.75 -> the default's figures, 2.5 -> 0.816/0.778 (no measurable effect).
-    min_windows_across: float = setting(1.25, minimum=0.0)
     #: A level is added while the next coarser one would still see the object this many
     #: windows across (the paper's objects are 2 to 3.5 windows across at its coarsest
     #: level; 3.5 left 4x busts with hair over the brows, docs/presets.md).
@@ -312,12 +307,6 @@ class Matching:
     #: seam F1 0.97 / 0.96; the finest level had run 6-8 iterations, a fifth of the time.
     max_iterations: int = setting(5, kind="int", minimum=0)
     tolerance: float = setting(2e-3, minimum=0.0)
-    #: EM iterations at the levels finer than the feature level: they refine the layout
-    #: that level drew (a long EM there wore brows that touch the hair down into it).
-    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
-    #: 1 and 4 give the default's figures to the last digit: the per-level plan decides (a
-    #: candidate for removal).
-    refine_iterations: int = setting(2, kind="int", minimum=1)
     #: "gaussian": each level matches and copies its plain YCbCr colours, so a copied
     #: pixel keeps the colour the coarser levels chose (busts' macro part transfer 0.71 ->
     #: 0.81); "laplacian": the paper's bands, collapsed at the end.
@@ -340,12 +329,6 @@ class Matching:
     #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
     #: 0.25 -> 0.817/0.786, 0.75 -> 0.815/0.778 (busts' seed spread 0.014).
     guide_reseed: float = setting(0.5, minimum=0.0, below=1.0)
-    #: After the feature level's EM, the same for a quarter of the windows, when the new
-    #: match also carries as much colour detail (0: off; not with the mean vote): 36
-    #: busts drew 91 % of eyes, brows and lips instead of 83 %.
-    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.816/0.778):
-    #: 0.5 -> 0.816/0.777, 0.85 -> 0.816/0.778 (no measurable effect).
-    final_reseed: float = setting(0.7, minimum=0.0, below=1.0)
 
     def __post_init__(self) -> None:
         check_settings(self)

@@ -51,6 +51,17 @@ __all__ = [
 
 _PYRAMID = Pyramid()
 _GUIDES = Guides()
+#: The coarsest level must see the object at least this many windows across (a window
+#: larger than the object matches nothing but the silhouette): with windows 7, 11, 9 only
+#: objects under 45 px across lose a level (0.75 and 2.5 left 1x fish and busts as they were, #43).
+MIN_WINDOWS_ACROSS = 1.25
+#: EM iterations at most at the levels finer than the feature level: they refine the layout
+#: that level drew (a long EM there wore brows that touch the hair down into it). Only large
+#: maps have such levels (none at 1x, where #43's sweep of 1 and 4 changed nothing).
+REFINE_ITERATIONS = 2
+#: The feature level's final reseed (:class:`~imagemap.core.params.LevelPlan`): 36 busts
+#: drew 91 % of eyes, brows and lips instead of 83 % (0.5 and 0.85 within the seed spread, #43).
+FINAL_RESEED = 0.7
 
 
 def context_levels(
@@ -110,14 +121,13 @@ def pyramid_levels(
     mask: np.ndarray,
     patch_sizes: tuple[int, ...],
     grow: bool = True,
-    min_windows_across: float = _PYRAMID.min_windows_across,
     add_windows_across: float = _PYRAMID.add_windows_across,
 ) -> int:
     """How many pyramid levels the object's size calls for.
 
     The object's size is the square root of its area. A preset's coarsest level
     is dropped while the object, at that level, is less than
-    ``min_windows_across`` windows across (a window larger than the object
+    ``MIN_WINDOWS_ACROSS`` windows across (a window larger than the object
     matches nothing but the silhouette); levels are added while the next coarser
     level would still see the object ``add_windows_across`` windows across, so that
     the coarsest level sees the object's layout at any resolution as at the paper's
@@ -136,7 +146,7 @@ def pyramid_levels(
     """
     size = float(np.sqrt(mask.sum()))
     levels = len(patch_sizes)
-    while levels > 1 and size / 2 ** (levels - 1) < min_windows_across * patch_sizes[levels - 1]:
+    while levels > 1 and size / 2 ** (levels - 1) < MIN_WINDOWS_ACROSS * patch_sizes[levels - 1]:
         levels -= 1
     if grow and levels == len(patch_sizes):
         while size / 2**levels >= add_windows_across * patch_sizes[-1]:
@@ -176,7 +186,6 @@ def sized_pyramid(mask: np.ndarray, pyramid: Pyramid) -> Pyramid:
         mask,
         pyramid.patch_sizes,
         grow=pyramid.grow,
-        min_windows_across=pyramid.min_windows_across,
         add_windows_across=pyramid.add_windows_across,
     )
     if levels == pyramid.levels:
@@ -184,7 +193,6 @@ def sized_pyramid(mask: np.ndarray, pyramid: Pyramid) -> Pyramid:
     return Pyramid(
         patch_sizes=level_patch_sizes(pyramid.patch_sizes, levels),
         grow=pyramid.grow,
-        min_windows_across=pyramid.min_windows_across,
         add_windows_across=pyramid.add_windows_across,
         context_fraction=pyramid.context_fraction,
     )
@@ -221,7 +229,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
     - the coarser levels prefer the nearest examples (``example_preference`` per
       rank), so that each region comes from one example where it fits nearly as well;
     - the levels finer than the feature level refine its layout
-      (``refine_iterations``);
+      (at most ``REFINE_ITERATIONS``);
     - the levels whose windows span little of the object see the coarser levels'
       luminance as context, the others but the coarsest weakly
       (:func:`context_level_weights`).
@@ -246,7 +254,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
     with_context = count > 0
     # The mean vote's map is the EM's own vote: matches changed after it would describe
     # (source, provenance) a map that was not made from them.
-    final_reseed = matching.final_reseed if config.finish.vote != "mean" else 0.0
+    final_reseed = FINAL_RESEED if config.finish.vote != "mean" else 0.0
     size = float(np.sqrt(mask.sum()))
     plans = []
     for level, k in enumerate(pyramid.patch_sizes):
@@ -260,7 +268,7 @@ def level_plans(config: DepthConfig, mask: np.ndarray, n_examples: int) -> tuple
             LevelPlan(
                 patch_size=k,
                 max_iterations=(
-                    min(matching.max_iterations, matching.refine_iterations)
+                    min(matching.max_iterations, REFINE_ITERATIONS)
                     if level < feature
                     else matching.max_iterations
                 ),
