@@ -261,9 +261,9 @@ class Guides:
     #: (:func:`imagemap.depth.register.position_scales`; 0: off). #42's plates (seam F1
     #: at 320x240 / 768x576, with the seams' relief at 0.5): 0.77 / 0.69 off, 0.97 / 0.94
     #: at 0.05, 0.97 / 0.93 at 0.1; 12 humans: fragments for 90 % 22 / 20, macro part
-    #: transfer 0.862 / 0.866 at 0.05 / 0.1. The same agreement weighs the seams' graph
-    #: cut per pixel, so that it does not merge the relief-following matches back into
-    #: the examples' layout (#42's scales at 768x576: rim F1 0.892 -> 0.973).
+    #: transfer 0.862 / 0.866 at 0.05 / 0.1. The same factor (its square root) weighs the
+    #: seams' graph cut per pixel, so that it does not merge the relief-following matches
+    #: back into the examples' layout (#42's scales at 768x576: rim F1 0.89 -> 0.95).
     relief_disagreement: float = setting(0.1, minimum=0.0)
     #: Factor on the registered position weight at the feature level, where the final
     #: reseed draws the small features by their relief, and at the finer levels of a large

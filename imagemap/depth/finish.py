@@ -96,10 +96,11 @@ class SynthesisState:
     # The relief's detail of the query and of each example (a front end with depth sets
     # it): the seams then fall where the copies agree in colour and in relief.
     relief: tuple[np.ndarray, list[np.ndarray]] | None = None
-    # Per pixel, the finest level's factor on the position term (1 where a registered
-    # example's relief agrees with the query's, less where the windows follow the query's
-    # own relief; :func:`imagemap.depth.register.position_scales`), or None.
-    position_factor: np.ndarray | None = None
+    # Per pixel, a factor on the seams' weight: 1 where a registered example's relief
+    # agrees with the query's, less where the windows follow the query's own relief (from
+    # the finest level's factor on the position term,
+    # :func:`imagemap.depth.register.position_scales`), or None.
+    seam_weights: np.ndarray | None = None
     image: np.ndarray | None = None
     changed: str = ""  # what the last stage changed, for the record
 
@@ -214,12 +215,12 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
         coarse_above=config.finish.seam_coarse_above or None,
         band=config.finish.seam_band,
         # Where no registered example's relief agrees with the query's, the matches follow
-        # the query's own relief (the position gave way there): the seams weigh as the
-        # position did, and do not merge those matches back into the examples' layout.
-        weights=state.position_factor,
+        # the query's own relief (the position gave way there): the seams weigh less, and
+        # do not merge those matches back into the examples' layout.
+        weights=state.seam_weights,
     )
-    # The relief and the factor: not held through the blend.
-    state.source, state.relief, state.position_factor = new, None, None
+    # The relief and the weights: not held through the blend.
+    state.source, state.relief, state.seam_weights = new, None, None
     state.changed = f"{changed_pixels(old, new)} pixels take another source"
     return state
 
