@@ -168,6 +168,8 @@ def _child(class_dir: str, save: str | None, library: bool) -> dict:
         from imagemap.io import write_image
 
         write_image(save, result.rgba)
+        # The source map beside it (example, y, x per pixel: the fragments can be drawn).
+        np.save(Path(save).with_suffix(".source.npy"), result.source)
     return {
         "class_dir": class_dir,
         "shape": list(depth.shape),

@@ -309,3 +309,46 @@ def test_window_blocks_are_gathered_without_a_second_copy():
             want = want * np.repeat(scale.astype(np.float32), 121)
         assert np.array_equal(block, want)
         assert peak < 1.75 * block.nbytes, (peak, block.nbytes)  # was 2 to 2.5 blocks
+
+
+@pytest.mark.parametrize("coarse_above", [None, 2000])
+def test_seam_channels_added_after_the_crop_give_the_concatenated_result(coarse_above):
+    """place_seams(exemplar_channels=...) adds the relief and preference channels to the
+    exemplars once cut (no full-size copies with them): the same labels as the
+    exemplars concatenated with them beforehand."""
+    from test_seams_banded import problem
+
+    from imagemap.core.seams import place_seams, with_channels
+
+    exemplars, source, reference, mask, groups = problem(seed=1)
+    rng = np.random.default_rng(1)
+    reliefs = [rng.random(e.shape[:2]).astype(np.float32) for e in exemplars]
+    planes = [[(0.7, relief), (float(rank), None)] for rank, relief in enumerate(reliefs)]
+    reference = with_channels(reference, [(0.7, rng.random(reference.shape[:2])), (0.0, None)])
+    options = dict(
+        smoothness=0.5,
+        mask=mask,
+        groups=groups,
+        exemplar_masks=[e[..., 0] > 1.5 for e in exemplars],
+        coarse_above=coarse_above,
+    )
+    joined = [
+        np.concatenate([e, 0.7 * r[..., None], np.full(r.shape + (1,), rank, np.float32)], -1)
+        for rank, (e, r) in enumerate(zip(exemplars, reliefs, strict=True))
+    ]
+    whole = place_seams(joined, source, reference, **options)
+    cut = place_seams(exemplars, source, reference, exemplar_channels=planes, **options)
+    assert (whole == cut).all()
+    assert (whole != source).any()  # the labels moved: the channels had a say
+
+
+def test_rgb_in_row_blocks_equals_the_whole_conversion():
+    """to_rgb converts 256 rows at a time (no full-size float64 copies): the same bytes as
+    skimage on the whole image."""
+    from skimage import color
+
+    from imagemap.depth.guides import to_rgb
+
+    ycbcr = np.random.default_rng(0).random((600, 70, 3)).astype(np.float32)
+    whole = np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0, 1).astype(np.float32)
+    assert to_rgb(ycbcr).tobytes() == whole.tobytes()

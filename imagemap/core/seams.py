@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["place_seams"]
+__all__ = ["place_seams", "with_channels"]
 
 
 def place_seams(
@@ -29,6 +29,7 @@ def place_seams(
     coarse_above: int | None = None,
     band: int = 4,
     weights: np.ndarray | None = None,
+    exemplar_channels: list[list[tuple[float, np.ndarray | None]]] | None = None,
 ) -> np.ndarray:
     """A source map with fewer, cheaper seams, placed where the sources agree.
 
@@ -85,6 +86,12 @@ def place_seams(
         of their two factors times as much (default: 1 everywhere). Where a seam should
         be cheaper (say, where the voted map follows the query's own relief rather than
         one copy), the copies stay smaller there.
+    exemplar_channels : list of lists of (scale, values), optional
+        More channels of each exemplar, after its own (``reference`` has them all):
+        ``scale * values`` (values (H_e, W_e)) or, with values None, the constant
+        ``scale`` (:func:`with_channels`). They are added once the exemplars are cut to
+        what the labels can read (with ``coarse_above``): the full-size exemplars with
+        them are never made.
 
     Returns
     -------
@@ -110,6 +117,13 @@ def place_seams(
         # the labels can read is kept, as views (no copy): an example no pixel copies
         # is dropped, and a large example is cut to its object.
         corners, exemplars, exemplar_masks = _crops(exemplars, exemplar_masks, source, mask)
+        if exemplar_channels is not None:
+            exemplars = [
+                with_channels(
+                    crop, [(scale, _crop_like(values, crop, corner)) for scale, values in planes]
+                )
+                for crop, corner, planes in zip(exemplars, corners, exemplar_channels, strict=True)
+            ]
         source = _shifted(source, -corners)
         placed = _coarse_to_fine(
             exemplars,
@@ -126,6 +140,11 @@ def place_seams(
             weights=weights,
         )
         return _shifted(placed, corners)
+    if exemplar_channels is not None:
+        exemplars = [
+            with_channels(exemplar, planes)
+            for exemplar, planes in zip(exemplars, exemplar_channels, strict=True)
+        ]
     return _solve(
         exemplars,
         source,
@@ -138,6 +157,34 @@ def place_seams(
         groups,
         weights=weights,
     )
+
+
+def with_channels(values: np.ndarray, planes: list[tuple[float, np.ndarray | None]]) -> np.ndarray:
+    """``values`` (H, W, C) with one more channel per plane, ``(scale, plane)``: ``scale *
+    plane`` ((H, W)) or, with plane None, the constant ``scale``; float32, as
+    ``np.concatenate`` of them would be, in one allocation (no copy per channel added).
+
+    Examples
+    --------
+    >>> out = with_channels(np.zeros((2, 3, 3), np.float32), [(2.0, np.ones((2, 3))), (0.5, None)])
+    >>> out.shape, out[0, 0].tolist()
+    ((2, 3, 5), [0.0, 0.0, 0.0, 2.0, 0.5])
+    """
+    own = values.shape[2]
+    out = np.empty(values.shape[:2] + (own + len(planes),), np.float32)
+    out[..., :own] = values
+    for index, (scale, plane) in enumerate(planes):
+        out[..., own + index] = scale if plane is None else scale * plane
+    return out
+
+
+def _crop_like(values, crop, corner):
+    """``values`` (an exemplar's (H_e, W_e) plane, or None) cut as ``crop`` was, from
+    ``corner``."""
+    if values is None:
+        return None
+    y0, x0 = int(corner[0]), int(corner[1])
+    return values[y0 : y0 + crop.shape[0], x0 : x0 + crop.shape[1]]
 
 
 #: Margin in pixels kept around what the labels read of each exemplar (:func:`_crops`):
@@ -225,9 +272,11 @@ def _solve(
         )
     height, width = source.shape[:2]
     yy, xx = np.ogrid[0:height, 0:width]
-    label_e = source[..., 0].astype(np.int64)
-    label_y = (source[..., 1] - yy).astype(np.int64)
-    label_x = (source[..., 2] - xx).astype(np.int64)
+    # int32 labels (a source map's own type; offsets and indices < 2^31): the move's
+    # kernel widens them as it reads them, and three int64 maps would be 24 bytes a pixel.
+    label_e = source[..., 0].astype(np.int32)
+    label_y = (source[..., 1] - yy).astype(np.int32)
+    label_x = (source[..., 2] - xx).astype(np.int32)
     movable = _movable(label_e, mask)
     # The labels that may move: with a band, only those of its pixels (a label outside
     # it has nowhere to go), and their areas there set each move's reach.
@@ -241,7 +290,7 @@ def _solve(
     # The move after which each pixel last changed, and each label's last move: a
     # label's move is not repeated while nothing in or around its crop has changed
     # since (it would find the same cut), unless that move spread it.
-    changed_at = np.zeros((height, width), np.int64)
+    changed_at = np.zeros((height, width), np.int32)  # move numbers: far below 2^31
     expanded_at: dict[tuple[int, ...], int] = {}
     moves = 0
     for _ in range(sweeps):
@@ -291,7 +340,15 @@ def _solve(
             areas -= np.bincount(losers - 1, minlength=len(areas))[: len(areas)]
             areas[k] += int(moved.sum())
             ids[rows, columns][moved] = k + 1
-    return np.stack([label_e, label_y + yy, label_x + xx], axis=-1).astype(np.int32)
+    del ids, changed_at, held
+    # Written into the int32 map a channel at a time: no (H, W, 3) int64 stack beside it.
+    placed = np.empty((height, width, 3), np.int32)
+    placed[..., 0] = label_e
+    placed[..., 1] = label_y
+    placed[..., 1] += yy
+    placed[..., 2] = label_x
+    placed[..., 2] += xx
+    return placed
 
 
 def _coarse_to_fine(
@@ -324,8 +381,7 @@ def _coarse_to_fine(
     per-size weight of :func:`imagemap.depth.finish` halves with the object's size).
     """
     height, width = source.shape[:2]
-    label_e = source[..., 0].astype(np.int64)
-    movable = _movable(label_e, mask)
+    movable = _movable(source[..., 0], mask)
     yy, xx = np.ogrid[0:height, 0:width]
     keys = _key_map(source, movable)
     # Odd sizes: one row / column of padding, never movable (its pixels keep theirs).
@@ -344,6 +400,9 @@ def _coarse_to_fine(
         [np.where(covered, 4 * e + 2 * (dy % 2) + dx % 2, -1), rows + dy // 2, columns + dx // 2],
         axis=-1,
     )
+    # The blocks' keys and counts (16 bytes a fine pixel) are not held through the coarse
+    # and the fine solves below, where the stage's peak is.
+    del keys, blocks, counts, common, e, dy, dx
     # Only the phases some block uses are averaged (a label never used at the start
     # never is); the others are empty, so that the labels keep their numbers.
     used = np.zeros(4 * len(exemplars), bool)
@@ -380,7 +439,7 @@ def _coarse_to_fine(
         band=band,
         weights=coarse_weights,
     )
-    del phases, phase_masks, coarse_reference, coarse_weights
+    del phases, phase_masks, coarse_reference, coarse_source, coarse_groups, coarse_weights
     # Back to fine labels: phase p of exemplar e is label 4 e + p.
     phase = coarse[..., 0] % 4
     fine_e = coarse[..., 0] // 4
@@ -416,6 +475,7 @@ def _coarse_to_fine(
     seeds[:, :-1] |= across
     del keys, across
     free = ndimage.maximum_filter(seeds, size=2 * band + 1) & movable
+    del seeds, own, lost, taken, covered, movable
     return _solve(
         exemplars,
         fine,
@@ -509,8 +569,10 @@ def _key_map(source, movable):
 def _label_keys(label_e, label_y, label_x, where):
     """One integer per label of the pixels ``where``: offsets fit in 20 bits whatever the
     image size (< 2^19 px)."""
-    key = (label_e[where] << 40) | ((label_y[where] + (1 << 19)) << 20)
-    return key | (label_x[where] + (1 << 19))
+    key = (label_e[where].astype(np.int64, copy=False) << 40) | (
+        (label_y[where].astype(np.int64, copy=False) + (1 << 19)) << 20
+    )
+    return key | (label_x[where].astype(np.int64, copy=False) + (1 << 19))
 
 
 def _label_values(keys):
@@ -526,7 +588,7 @@ def _label_table(label_e, label_y, label_x, movable):
     keys, inverse, areas = np.unique(
         _label_keys(label_e, label_y, label_x, movable), return_inverse=True, return_counts=True
     )
-    ids = np.zeros(movable.shape, np.int64)
+    ids = np.zeros(movable.shape, np.int32)  # label numbers: far below 2^31
     ids[movable] = inverse.ravel() + 1
     alphas = _label_values(keys)
     return alphas, ids, areas.astype(np.int64), ndimage.find_objects(ids, max_label=len(keys))

@@ -30,7 +30,7 @@ from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineResult, ReleasableLevels
 from imagemap.core.poisson import seamless_copy
 from imagemap.core.pyramid import collapse_laplacian
-from imagemap.core.seams import place_seams
+from imagemap.core.seams import place_seams, with_channels
 from imagemap.core.stages import Stage
 from imagemap.depth import completion
 from imagemap.depth.config import DepthConfig
@@ -175,34 +175,29 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
     del shown
     size = float(np.sqrt(state.mask.sum()))
     reference = state.made("ycbcr")
+    # The extra channels of each copy, added by place_seams once it has cut the copies to
+    # what the labels can read (full-size copies with five channels were the stage's
+    # peak at 4096^2), and of the reference, in one allocation.
+    extra: list[list] = [[] for _ in exemplars]
+    reference_extra: list = []
     weight = config.finish.seam_relief_weight
     if state.relief is not None and weight > 0:
         # The relief as one more channel of the copies and of the reference: a copy whose
         # relief disagrees with the query's costs, and so does a seam across relief.
         query_relief, example_reliefs = state.relief
-        exemplars = [
-            np.concatenate([colours, weight * relief[..., None]], axis=-1)
-            for colours, relief in zip(exemplars, example_reliefs, strict=True)
-        ]
-        reference = np.concatenate([reference, weight * query_relief[..., None]], axis=-1)
+        for planes, relief in zip(extra, example_reliefs, strict=True):
+            planes.append((weight, relief))
+        reference_extra.append((weight, query_relief))
     preference = config.finish.seam_example_preference
     if preference > 0 and len(exemplars) > 1:
         # The examples' order as one more channel, constant per example (sqrt of its rank
         # times the preference; the reference's 0): a copy from a later example costs that
         # much a pixel, so the relief alone does not hand a part to another palette.
-        exemplars = [
-            np.concatenate(
-                [
-                    colours,
-                    np.full(colours.shape[:2] + (1,), np.sqrt(preference * rank), np.float32),
-                ],
-                axis=-1,
-            )
-            for rank, colours in enumerate(exemplars)
-        ]
-        reference = np.concatenate(
-            [reference, np.zeros(reference.shape[:2] + (1,), np.float32)], -1
-        )
+        for rank, planes in enumerate(extra):
+            planes.append((np.sqrt(preference * rank), None))
+        reference_extra.append((0.0, None))
+    if reference_extra:
+        reference = with_channels(reference, reference_extra)
     new = place_seams(
         exemplars,
         old,
@@ -218,6 +213,7 @@ def _seams(state: SynthesisState, config: DepthConfig) -> SynthesisState:
         # the query's own relief (the position gave way there): the seams weigh less, and
         # do not merge those matches back into the examples' layout.
         weights=state.seam_weights,
+        exemplar_channels=extra if reference_extra else None,
     )
     # The relief and the weights: not held through the blend.
     state.source, state.relief, state.seam_weights = new, None, None

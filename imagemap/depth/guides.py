@@ -431,7 +431,13 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
     >>> bool(np.allclose(to_rgb(to_ycbcr(rgb)), rgb, atol=1e-5))
     True
     """
-    return np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0.0, 1.0).astype(np.float32)
+    # In blocks of rows, as to_ycbcr: skimage's float64 copies of a 4096^2 map were
+    # several 400 MB arrays at once, at the end of the pipeline.
+    out = np.empty(ycbcr.shape, dtype=np.float32)
+    for y in range(0, ycbcr.shape[0], _ROWS):
+        block = ycbcr[y : y + _ROWS].astype(np.float64) * 255.0
+        out[y : y + _ROWS] = np.clip(color.ycbcr2rgb(block), 0.0, 1.0)
+    return out
 
 
 def example_ycbcr(example: Example) -> np.ndarray:

@@ -21,6 +21,7 @@ stage                  what it does
 ``collapse``           the voted map at the finest level
 ``copy``               every pixel's source: the pixel its windows agree on
 ``complete_features``  small features the copy cut, copied whole
+``relief``             the relief's detail of query and examples, for the seams
 ``seams``              a few whole copies, their seams where they agree
 ``outside``            the blend's reference outside the object: the copy
 ``blend``              the seams blended in the gradient domain
@@ -258,12 +259,6 @@ def _bands(state: State, config: DepthConfig) -> State:
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions, scales)
     )
-    if config.finish.seam_relief_weight > 0:
-        scale = config.registration.relief_detail_scale
-        state.relief = (
-            relief_detail(state.depth, state.mask, scale),
-            [relief_detail(e.depth, e.mask, scale) for e in state.chosen],
-        )
     state.exemplar_levels = [
         ReleasableLevels(
             example_mappings(
@@ -333,6 +328,23 @@ def _complete_features(state: State, config: DepthConfig) -> State:
     return state
 
 
+def _relief(state: State, config: DepthConfig) -> State:
+    # Made here, for the seams, and not with the bands: three full-size maps (the query's
+    # and each example's, 12 bytes a pixel with two examples) held through the synthesis,
+    # where the peak memory is, for nothing.
+    scale = config.registration.relief_detail_scale
+    state.relief = (
+        relief_detail(state.depth, state.mask, scale),
+        [relief_detail(e.depth, e.mask, scale) for e in state.chosen],
+    )
+    state.changed = f"the relief's detail of the query and {len(state.chosen)} examples"
+    return state
+
+
+def _wants_relief(config: DepthConfig) -> bool:
+    return bool(SEAMS.wanted(config) and config.finish.seam_relief_weight > 0)
+
+
 def _unpose(state: State, config: DepthConfig) -> State:
     # The map back in the query's frame, and every source in its example's own pixels.
     frame: CanonicalFrame = state.made("frame")
@@ -389,6 +401,7 @@ STAGES: tuple[Stage[State, DepthConfig], ...] = (
         _complete_features,
         lambda c: c.finish.copies and c.finish.complete_features,
     ),
+    Stage("relief", _relief, _wants_relief),
     SEAMS,
     OUTSIDE,
     BLEND,
