@@ -210,6 +210,31 @@ def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
     assert more.levels == pyramid_levels(depth > 0, patch_sizes) > with_band.pyramid.levels
 
 
+#: Fresh-process runs of ``benchmarks/memory.py`` (generated fish, m = 2, 2026-11-28, load
+#: 4-5): the guard's inputs (query shape, object and border pixels, the two largest
+#: examples', the window sizes, PCA fraction, guide bands), the peak RSS the call added
+#: (MB) and its CPU seconds.
+MEASURED_RUNS = [
+    (((1024, 1024), 185723, 3384, [((1024, 1024), 133698, 3102), ((1024, 1024), 169081, 3496)],
+      (7, 7, 11, 9), 0.2, 3), 241, 22.2),
+    (((2048, 2048), 742912, 6784, [((2048, 2048), 534808, 6230), ((2048, 2048), 676361, 6982)],
+      (7, 7, 7, 11, 9), 0.2, 3), 726, 87.6),
+    (((4096, 4096), 2971692, 13576,
+      [((4096, 4096), 2139318, 12476), ((4096, 4096), 2705426, 13986)],
+      (7, 7, 7, 7, 11, 9), 0.2, 3), 2702, 383.6),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("inputs, peak_mb, cpu_seconds", MEASURED_RUNS)
+def test_memory_estimate_is_within_a_quarter_of_measured_runs(inputs, peak_mb, cpu_seconds):
+    """The guard's estimate (#44 item 3: within 25 % of the measured peak and time)."""
+    from imagemap.depth import budget
+
+    estimate = budget.estimate_colorize(*inputs)
+    assert 0.75 < estimate.bytes / 2**20 / peak_mb < 1.25
+    assert 0.75 < estimate.seconds / cpu_seconds < 1.25
+
+
 def _pyramid_scene(size, seed, n_levels=2):
     """A query pyramid and two exemplar pyramids (fresh arrays, held by the lists alone)."""
     from imagemap.core.pyramid import gaussian_pyramid

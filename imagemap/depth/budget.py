@@ -59,6 +59,9 @@ log = logging.getLogger("imagemap")
 # the copy finish worked a channel and a side at a time, the same measure: 200x150 82 MB
 # measured / 86 estimated, 512^2 154 / 125, 1024^2 242 / 255 (m = 1: 196 / 229), 2048^2
 # 650 / 771, the 2000x1500 query with 200x150 examples 385 / 451 (-19 % to +19 %).
+# Checked (#44 item 3) in fresh processes (benchmarks/memory.py, VmHWM minus VmRSS before
+# the call, fish, m = 2) once the seams stage's peak came down: 1024^2 241 MB measured /
+# 254 estimated, 2048^2 726 / 766, 4096^2 2702 / 2805 (+4 % to +5 %; no refit needed).
 _QUERY_CENTRE_BYTES = 55  # coordinates (frame and packed), positions, matches, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
 _QUERY_PIXEL_BYTES = 60  # lookup, vote buffers, dense maps, the copy finish
@@ -69,7 +72,15 @@ _QUERY_LEVEL_BYTES = 13  # a level of the query's pyramid: guide bands, mask
 _EXEMPLAR_LEVEL_BYTES = 25  # a level of an example's pyramid: guide and colour bands, mask
 _OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
 _MEMORY_FACTOR = 0.8
-_SECONDS_PER_FEATURE = 4.0e-7  # per window centre, per feature dimension, all iterations
+# Seconds per window centre and feature dimension, all iterations, the whole pipeline
+# (engine and finish) in one figure: the CPU seconds of fresh-process runs of
+# benchmarks/memory.py (generated fish, m = 2, 2026-11-28, load 4-5 on the shared 2-core
+# machine, where the wall time was within 5 % of the CPU time) over the work: 3.1x,
+# 3.4x and 3.9x the earlier 4.0e-7 at 1024^2, 2048^2 and 4096^2 (22.2, 87.6 and 384 s);
+# 1.4e-6 is about the middle (the estimate 25.4, 90.6 and 348 s: +14 %, +3 %, -9 %). An
+# idle machine runs the engine's two threads at once: earlier quiet runs took about
+# 0.7x the CPU time (the estimate errs long there).
+_SECONDS_PER_FEATURE = 1.4e-6
 _SECONDS_OVERHEAD = 0.3
 
 #: Runs estimated to take longer than this are announced with a warning (not refused).
