@@ -78,8 +78,8 @@ _MEMORY_FACTOR = 0.8
 # machine, where the wall time was within 5 % of the CPU time) over the work: 3.1x,
 # 3.4x and 3.9x the earlier 4.0e-7 at 1024^2, 2048^2 and 4096^2 (22.2, 87.6 and 384 s);
 # 1.4e-6 is about the middle (the estimate 25.4, 90.6 and 348 s: +14 %, +3 %, -9 %). An
-# idle machine runs the engine's two threads at once: earlier quiet runs took about
-# 0.7x the CPU time (the estimate errs long there).
+# idle machine runs the engine's two threads at once: earlier quiet runs of older code
+# took 0.65-0.77x these CPU times (the estimate errs long there).
 _SECONDS_PER_FEATURE = 1.4e-6
 _SECONDS_OVERHEAD = 0.3
 
