@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -440,6 +441,18 @@ def test_summary_intervals_hold_the_means(class_evaluation):
             if not math.isnan(row[key]):
                 assert low - 1e-9 <= row[key] <= high + 1e-9, (method, key)
     assert "% intervals of these means" in summary_markdown(class_evaluation)
+
+
+def test_summary_names_the_code_that_ran(class_evaluation):
+    # Two reports of one command and seed differed (fish 0.816 and 0.812) because one was
+    # started inside another checkout, whose package ``python -m imagemap`` imported
+    # before PYTHONPATH's: the summary says which package folder made it.
+    import imagemap
+    from imagemap.report import summary_markdown
+
+    folder = Path(imagemap.__file__).resolve().parent
+    lines = summary_markdown(class_evaluation).splitlines()
+    assert f"Code: imagemap {imagemap.__version__} from `{folder}`." in lines
 
 
 def test_paired_intervals_see_a_difference_the_marginal_ones_hide():

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from imagemap.report.statistics import (
@@ -74,6 +75,18 @@ def _summary_cells(row: dict, columns: tuple = SUMMARY_COLUMNS) -> list[str]:
     return cells
 
 
+def code_line() -> str:
+    """Which imagemap made the report: its package folder and version. Two runs of one
+    command can run different code: ``python -m imagemap`` imports the package from the
+    current folder before ``PYTHONPATH``, so a run started inside another checkout runs
+    that checkout's code (two fish reports of one seed, 0.812 and 0.816, were two
+    checkouts, not two outcomes of one)."""
+    import imagemap  # deferred: the package itself, for its folder
+
+    folder = Path(imagemap.__file__).resolve().parent
+    return f"Code: imagemap {imagemap.__version__} from `{folder}`."
+
+
 def summary_markdown(evaluation: Evaluation) -> str:
     """The per-class summary tables as Markdown."""
     table = summarize(evaluation)
@@ -85,6 +98,8 @@ def summary_markdown(evaluation: Evaluation) -> str:
         f"seed {evaluation.seed}, {evaluation.workers} worker(s), "
         f"{evaluation.seconds:.0f} s in all."
     )
+    lines.append("")
+    lines.append(code_line())
     lines.append("")
     lines.append(
         "ΔE00: mean CIEDE2000 over the object (lower is better). SSIM: luminance SSIM "
