@@ -21,7 +21,7 @@ stage                  what it does
 ``collapse``           the voted map at the finest level
 ``copy``               every pixel's source: the pixel its windows agree on
 ``complete_features``  small features the copy cut, copied whole
-``relief``             the relief's detail of query and examples, for the seams
+``relief``             the relief's detail and the seams' weights, for the seams
 ``seams``              a few whole copies, their seams where they agree
 ``outside``            the blend's reference outside the object: the copy
 ``blend``              the seams blended in the gradient domain
@@ -237,24 +237,7 @@ def _bands(state: State, config: DepthConfig) -> State:
         )
         example_positions = list(registered)
     params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
-    scales = position_scales(
-        relief_agreement(
-            state.mask,
-            state.warps,
-            config.guides.relief_disagreement,
-            config.registration.relief_detail_scale,
-        ),
-        [
-            plan.position_weight if plan.position_weight is not None else params.position_weight
-            for plan in params.level_plans(levels)
-        ],
-        config.guides.position_weight,
-    )
-    # The seams weigh halfway (geometrically) between the registration's full weight and
-    # the matching's factor: with the factor itself 12 humans' fragments for 90 % rose
-    # from 20-23 to 24-26 (seeds 0-2; the target is 25), with its square root 23-24, and
-    # the scales at 768x576 keep a rim F1 of 0.95 (0.97 with the factor, 0.89 without).
-    state.seam_weights = None if scales is None or scales[0] is None else np.sqrt(scales[0])
+    scales = _position_factors(state, config, params, levels)
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions, scales)
@@ -328,21 +311,53 @@ def _complete_features(state: State, config: DepthConfig) -> State:
     return state
 
 
-def _relief(state: State, config: DepthConfig) -> State:
-    # Made here, for the seams, and not with the bands: three full-size maps (the query's
-    # and each example's, 12 bytes a pixel with two examples) held through the synthesis,
-    # where the peak memory is, for nothing.
-    scale = config.registration.relief_detail_scale
-    state.relief = (
-        relief_detail(state.depth, state.mask, scale),
-        [relief_detail(e.depth, e.mask, scale) for e in state.chosen],
+def _position_factors(
+    state: State, config: DepthConfig, params: EngineParams, levels: int
+) -> list[np.ndarray | None] | None:
+    """Per level of ``levels`` (finest first), the query's factor on the position term:
+    1 where a registered example's relief agrees with the query's, less where the windows
+    are to follow the query's own relief (:func:`position_scales`); None without it."""
+    return position_scales(
+        relief_agreement(
+            state.mask,
+            state.warps,
+            config.guides.relief_disagreement,
+            config.registration.relief_detail_scale,
+        ),
+        [
+            plan.position_weight if plan.position_weight is not None else params.position_weight
+            for plan in params.level_plans(levels)
+        ],
+        config.guides.position_weight,
     )
-    state.changed = f"the relief's detail of the query and {len(state.chosen)} examples"
+
+
+def _relief(state: State, config: DepthConfig) -> State:
+    # Made here, for the seams, and not with the bands: full-size maps (the query's and
+    # each example's relief, 12 bytes a pixel with two examples, and the seams' weights)
+    # held through the synthesis, where the peak memory is, for nothing.
+    if config.finish.seam_relief_weight > 0:
+        scale = config.registration.relief_detail_scale
+        state.relief = (
+            relief_detail(state.depth, state.mask, scale),
+            [relief_detail(e.depth, e.mask, scale) for e in state.chosen],
+        )
+    # The seams weigh halfway (geometrically) between the registration's full weight and
+    # the finest level's factor on the position term: with the factor itself 12 humans'
+    # fragments for 90 % rose from 20-23 to 24-26 (seeds 0-2; the target is 25), with its
+    # square root 23-24, and the scales at 768x576 keep a rim F1 of 0.95 (0.97 with the
+    # factor, 0.89 at full weight everywhere).
+    levels = sized_config(config, state.mask).pyramid.levels
+    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
+    factors = _position_factors(state, config, params, levels)
+    finest = None if factors is None else factors[0]
+    state.seam_weights = None if finest is None else np.sqrt(finest)
+    state.changed = (
+        f"the relief's detail of the query and {len(state.chosen)} examples"
+        if state.relief is not None
+        else "no relief channel"
+    ) + (", the seams' weights" if finest is not None else "")
     return state
-
-
-def _wants_relief(config: DepthConfig) -> bool:
-    return bool(SEAMS.wanted(config) and config.finish.seam_relief_weight > 0)
 
 
 def _unpose(state: State, config: DepthConfig) -> State:
@@ -401,7 +416,7 @@ STAGES: tuple[Stage[State, DepthConfig], ...] = (
         _complete_features,
         lambda c: c.finish.copies and c.finish.complete_features,
     ),
-    Stage("relief", _relief, _wants_relief),
+    Stage("relief", _relief, SEAMS.wanted),
     SEAMS,
     OUTSIDE,
     BLEND,
