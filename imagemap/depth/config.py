@@ -448,15 +448,22 @@ class Completion:
     #: not a blush, nor a shirt's corner cut by a neckline (one put an orange glow into
     #: busts_003's V-neck at 4x). On a ground of several colours (an eye across a fish's
     #: bands), the share of them that must step away from the feature's edge instead.
+    #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.6 ->
+    #: 0.774/0.840/0.812; 0.95 -> 0.772/0.841/0.814: within the spread.
     surround_share: float = setting(0.8, minimum=0.0, maximum=1.0)
     #: A feature on a ground of several colours has no more pixels of its colour than its
     #: own within this many of its widths around it: not a check of a shirt, nor a piece
     #: of a stripe between others (at 1 width, pieces of fish_007's tail stripes were
     #: features; at 2, the 48 generated examples gained 28: 8 eyes, a fish's eye with the
     #: band around it, a brow, 11 shoes and 7 small pieces of fins, clothes and skin).
+    #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 1 ->
+    #: 0.776/0.840/0.812; 4 -> 0.776/0.840/0.814: within the spread.
     rare_reach: float = setting(2.0, minimum=0.0)
     #: The share of those pixels that must lie inside the object: a shirt's stripe cut by
     #: the neckline, completed into a smudge at busts_000's neck at 4x, is no feature.
+    #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.4 ->
+    #: 0.776/0.840/0.814 (one 4x bust's map moved, 0.8402 against 0.8401); 0.95 ->
+    #: 0.776/0.840/0.814: no measurable effect.
     inside_share: float = setting(0.75, minimum=0.0, maximum=1.0)
     #: The host colour's median window, in pixels of the resolution it is taken at: the
     #: host varies slowly, and a large window's median is slow.
@@ -476,10 +483,16 @@ class Completion:
     #: copies at least this share of its ring (the pixels within half its width around it)
     #: at offsets near one another: its surroundings were taken and it was skipped
     #: (busts_003's eye at 4x: 0.31; busts_009's lips: between 0.2 and 0.3).
+    #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.1 and 0.4 ->
+    #: 0.776/0.840/0.814, every figure as at 0.2: no measurable effect (nor with no skipped
+    #: feature completed at all, ``skipped_place_shown`` 0).
     skipped_ring_share: float = setting(0.2, minimum=0.0, maximum=1.0)
     #: A skipped feature is not completed where this share of its place already stands out
     #: from its surroundings in the map: something is drawn there (it refused a blue-grey
     #: eye over busts_008's own brown one).
+    #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.15 and 0.6 ->
+    #: 0.776/0.840/0.814, every figure as at 0.3: no measurable effect; 0 (no skipped feature
+    #: completed) too.
     skipped_place_shown: float = setting(0.3, minimum=0.0, maximum=1.0)
     #: Pixels of surroundings copied with the feature around it.
     #: Swept (busts 1x/4x, fish, see above): 1 -> 0.780/0.833/0.806; 2 -> 0.775/0.836/0.806; 4 ->
@@ -488,6 +501,9 @@ class Completion:
     #: The rim's largest mean colour difference (YCbCr) from what the map shows there
     #: (without it an orange glow went into a V-neck; at 0.14 every 4x bust drew every
     #: feature, but a brow's skin rim glowed as a light patch).
+    #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.035 ->
+    #: 0.776/0.840/0.814; 0.14 -> 0.777/0.846/0.814 (beyond the 4x spread, but 1x busts' parts with
+    #: one palette 99 -> 97 %).
     rim_agreement: float = setting(0.07, minimum=0.0)
 
     def __post_init__(self) -> None:
