@@ -139,7 +139,7 @@ class Registration:
     #: F1 at 320x240): (4, 5) with (2, 1) -> 0.816, 0.816, 0.814/0.778, 0.783, 0.781, F1 0.955,
     #: 0.953, 0.949; 4x fish 0.868, 0.865, 4x busts 0.835 (every feature drawn), shells 0.864,
     #: humans 0.864; (4, 5, 7) -> 0.806, 0.810, 0.807/0.775, 0.789, 0.781, F1 0.956, 0.953, 0.953;
-    #: 4x fish 0.861, 0.863, 4x busts 0.836 (10 of 12 with every feature), shells 0.864, humans
+    #: 4x fish 0.861, 0.863, 4x busts 0.836 (5 of 6 with every feature), shells 0.864, humans
     #: 0.868; (4, 5, 7, 10) with 0.25 added, seed 0 -> 0.810/0.773, F1 0.955 (seed to seed at the
     #: default: fish 0.004, busts 0.014, F1 0.003).
     control_grids: tuple[int, ...] = (4, 5)
@@ -423,7 +423,7 @@ class Completion:
     on or off: ``Finish.complete_features``). ``docs/presets.md`` ("Small features copied
     whole") has the measurements, on the 12 generated objects per class unless said; a
     field whose comment gives no measurement was set with its step and not swept. A
-    "Swept" line (#43) gives the macro part transfer of 12 busts at 1x and at 4x and of 12
+    "Swept" line (#43) gives the macro part transfer of 12 busts at 1x, 6 at 4x and 12
     fish, seed 0, every value on the same synthesis (the stages up to the copy run once),
     so that the differences are the completion's own; from seed to seed the figure moves by
     0.014, 0.001 and 0.004 (3 seeds, 2 at 4x). Features drawn: 1.00, 0.97 and 1.00 unless
@@ -473,8 +473,8 @@ class Completion:
     #: An instance that copies at least this share of the feature's pixels counts as drawn
     #: whole and is left alone.
     #: Swept (busts 1x/4x, fish, see above): 0.7 -> 0.775/0.831/0.806; 0.8 -> 0.775/0.836/0.806; 0.9
-    #: -> 0.776/0.836/0.801, and every 4x bust with every feature (12 of 12, features 1.00, against
-    #: 10 and 0.97) (seed to seed: 0.014, 0.001, 0.004).
+    #: -> 0.776/0.836/0.801, and every 4x bust with every feature (6 of 6, features 1.00, against
+    #: 5 and 0.97) (seed to seed: 0.014, 0.001, 0.004).
     complete_share: float = setting(0.8, minimum=0.0, maximum=1.0)
     #: An instance copying less than this share is a stray fragment, not an attempt to draw
     #: the feature: left alone too (0.2, 0.3 and 0.4 gave the same macro part transfer).
