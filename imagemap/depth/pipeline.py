@@ -236,8 +236,7 @@ def _bands(state: State, config: DepthConfig) -> State:
             grid_points=int(config.registration.detail_size),
         )
         example_positions = list(registered)
-    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
-    scales = _position_factors(state, config, params, levels)
+    scales = _position_factors(state, config, levels)
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions, scales)
@@ -312,11 +311,17 @@ def _complete_features(state: State, config: DepthConfig) -> State:
 
 
 def _position_factors(
-    state: State, config: DepthConfig, params: EngineParams, levels: int
+    state: State, config: DepthConfig, levels: int, *, finest_only: bool = False
 ) -> list[np.ndarray | None] | None:
-    """Per level of ``levels`` (finest first), the query's factor on the position term:
-    1 where a registered example's relief agrees with the query's, less where the windows
-    are to follow the query's own relief (:func:`position_scales`); None without it."""
+    """Per level of ``levels`` (finest first; only the finest with ``finest_only``), the
+    query's factor on the position term: 1 where a registered example's relief agrees
+    with the query's, less where the windows are to follow the query's own relief
+    (:func:`position_scales`); None without it."""
+    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
+    weights = [
+        plan.position_weight if plan.position_weight is not None else params.position_weight
+        for plan in params.level_plans(levels)
+    ]
     return position_scales(
         relief_agreement(
             state.mask,
@@ -324,10 +329,7 @@ def _position_factors(
             config.guides.relief_disagreement,
             config.registration.relief_detail_scale,
         ),
-        [
-            plan.position_weight if plan.position_weight is not None else params.position_weight
-            for plan in params.level_plans(levels)
-        ],
+        weights[:1] if finest_only else weights,  # the coarser levels' pyramid: not made
         config.guides.position_weight,
     )
 
@@ -348,8 +350,7 @@ def _relief(state: State, config: DepthConfig) -> State:
     # square root 23-24, and the scales at 768x576 keep a rim F1 of 0.95 (0.97 with the
     # factor, 0.89 at full weight everywhere).
     levels = sized_config(config, state.mask).pyramid.levels
-    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
-    factors = _position_factors(state, config, params, levels)
+    factors = _position_factors(state, config, levels, finest_only=True)
     finest = None if factors is None else factors[0]
     state.seam_weights = None if finest is None else np.sqrt(finest)
     state.changed = (
