@@ -68,9 +68,7 @@ def test_position_term_makes_synthesis_non_stationary():
     accuracy = {}
     for weight in (1.0, 0.0):
         # The paper's relative position (centroid frame), not the registered one.
-        params = DepthConfig().replace_fields(
-            m=2, position_weight=weight, backend="exact", registration=False
-        )
+        params = DepthConfig().replace_fields(m=2, position_weight=weight, registration=False)
         image = colorize(depth, db, params).image
         red = image[..., 0] > image[..., 2]
         accuracy[weight] = float((red == left)[inner].mean())
