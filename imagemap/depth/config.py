@@ -65,10 +65,15 @@ class Selection:
 
     #: Examples chosen automatically, nearest in shape (paper, Sec. 2.3; Table 1: 1 for
     #: humans, 2 for busts and fish).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 1 -> 0.810/0.764 (a bust's feature not drawn); 3 -> 0.816/0.778, one
+    #: more example registered and searched.
     m: int = setting(2, kind="int", minimum=1)
     #: Try every example mirrored too (the fit decides): a fish facing the other way
     #: than its examples is made from them mirrored. Off for a class that is not
     #: mirror-symmetric (writing on a label, a heart on the left).
+    #: Measured (#42, docs/shape.md): a held-out fish mirrored gave the mirrored map (equivariance
+    #: 1.8 ΔE00) where without it the map kept the examples' side (19).
     mirror: bool = setting(True, kind="bool")
     #: A turn up to this many degrees and a scale within this factor of the first
     #: example's are left to the registration's warp (which absorbs them): the query is
@@ -90,6 +95,8 @@ class Pyramid:
     """How many pyramid levels, and their windows."""
 
     #: Window width per level, fine to coarse, for the paper's 200x150 objects (Table 1).
+    #: Tried (docs/presets.md): a finest window of 5 was a little better on fish and humans, but
+    #: busts lost features (88 % drawn, 67 % of busts complete).
     patch_sizes: tuple[int, ...] = setting((7, 11, 9), kind="odd_widths")
     #: Add finer levels for large objects so that the coarsest level sees the object as
     #: the paper's does at 200x150; False keeps the preset's levels (still dropping
@@ -131,6 +138,8 @@ class Registration:
     #: more, and a 4x map costs what a 1x one does (0.05-0.2 s per pair). Registering at
     #: 128 px with a 10-point grid did not bring the examples' eyes into place either
     #: (4x fish, docs/presets.md).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 32 -> 0.815/0.772; 128 -> 0.814/0.774 (fragments 21.5/9.5).
     work_size: float = setting(64.0, minimum=1.0)
     #: Control points per side of the B-spline grids, coarse to fine (over the query
     #: object's box): 4 is nearly affine, 5 bends a body; a third grid of 7 (the default
@@ -202,8 +211,14 @@ class Guides:
     standard deviation so that depth in metres, millimetres or [0, 1] gives one result)."""
 
     #: Weight of the depth's Gaussian level.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 0.5 -> 0.814/0.773 (fragments for 90 % 23.5/9 against 20.5/8.5); 2 ->
+    #: 0.804/0.755, a fish's and a bust's feature not drawn.
     depth_weight: float = setting(1.0, minimum=0.0)
     #: Weight of the depth's detail (Laplacian) band.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 1 -> 0.808/0.758, a fish's eye not drawn; 4 -> 0.802/0.769, busts'
+    #: features 93 %, fragments 26.5/10.
     depth_detail_weight: float = setting(2.0, minimum=0.0)
     #: The detail band in units of its robust spread inside the object, soft-clipped at
     #: this many units (0: raw band): without it the silhouette's jump sets the band's
@@ -219,6 +234,9 @@ class Guides:
     #: Weight of the silhouette band (signed distance to the outline); with it the depth
     #: is continued past the outline, so an eye 3 px from the outline matches the
     #: examples' eyes, not their outlines; 0 keeps the paper's bands.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 0.25 -> 0.814/0.779 (fragments 23/10.5); 1 -> 0.815/0.772: within the
+    #: spread; it is kept for the eyes beside the outline (docs/presets.md).
     silhouette_weight: float = setting(0.5, minimum=0.0)
     #: The silhouette band saturates this many pixels of each level from the outline: it
     #: says "edge here" to a window, not how deep inside it is.
@@ -295,17 +313,28 @@ class Matching:
     """The engine's matching: colour bands, search and the EM."""
 
     #: Weight of Y, and of Cb and Cr, per band standard deviation.
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): Y 0.5 -> 0.818/0.766 (busts' features 93 %), 2 -> 0.813/0.774; Cb, Cr
+    #: 0.25 -> 0.815/0.776, 1 -> 0.810/0.786 (within the busts' spread).
     luma_weight: float = setting(1.0, minimum=0.0)
     chroma_weight: float = setting(0.5, minimum=0.0)
     #: Fraction of the PCA basis kept, for guide and colour windows (the paper: a fifth).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 0.1 -> 0.816/0.768; 0.4 -> 0.814/0.783 in 1.5-2x the time.
     pca_fraction: float = setting(0.2, minimum=1e-6, maximum=1.0)
     #: Nearest-neighbour search (patchmatch: fastest; exact: the reference).
+    #: Exact search lowers the final target by 6-9 % at 10-30x the time and moves SSIM by at most
+    #: 0.003 (docs/performance.md, docs/presets.md); pynndescent compiles for about 90 s in every
+    #: new process here.
     backend: str = setting("patchmatch", kind="choice", choices=BACKENDS)
     #: EM iterations per level at most, and the relative decrease of the target below
     #: which a level stops. 5 against 8 (12 objects per class, 2026-11-28): macro part
     #: transfer fish 0.809 / 0.808, busts 0.788 / 0.789, humans 0.866 / 0.866, plates'
     #: seam F1 0.97 / 0.96; the finest level had run 6-8 iterations, a fifth of the time.
     max_iterations: int = setting(5, kind="int", minimum=0)
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): (tolerance) 0.001 -> 0.813/0.775, 0.004 -> 0.814/0.774: the iteration
+    #: cap decides.
     tolerance: float = setting(2e-3, minimum=0.0)
     #: "gaussian": each level matches and copies its plain YCbCr colours, so a copied
     #: pixel keeps the colour the coarser levels chose (busts' macro part transfer 0.71 ->
@@ -342,6 +371,8 @@ class Finish:
     #: seams blended in the gradient domain (crisp); "mean": the paper's M-step (the
     #: Gaussian-weighted mean of the windows: smooth, blurred where they disagree);
     #: "mode": copying inside the EM iterations too.
+    #: The evaluation's mean_vote against full (docs/quality.md, 12 per class): blur ratio 0.61/0.73
+    #: against 0.99/0.97 on fish/busts, a quarter of busts missing a feature.
     vote: str = setting("copy", kind="choice", choices=VOTES)
     #: Weight of the seam costs, per 100 px of the object's size, when the copy's sources
     #: are rearranged by graph cuts so that a few large copies remain and seams fall
@@ -349,6 +380,9 @@ class Finish:
     #: grow with a copy's area, its seams with its length only, so a fixed weight would
     #: merge less the finer the map. 12 fish: 1.4 lost 1 eye in 12, 0.14 left 13
     #: fragments, 0.4 draws every eye with 14.5 (ICM, before: 20).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014): 0.2 -> 0.813/0.775 (fragments 24.5/8); 0.8 -> 0.815/0.779 (fragments
+    #: 19/8.5, fish parts in one palette 96 % against 99 %).
     seam_smoothness: float = setting(0.4, minimum=0.0)
     #: How far one move of that rearrangement may spread a copy, in units of the copy's
     #: own size (the square root of its area): a move's cost grows with its reach. On a
@@ -437,6 +471,9 @@ class Completion:
     #: Its colour stands out from its surroundings' (their median) by at least this much
     #: (YCbCr distance; lips on skin 0.09, an eye 0.3, shading under 0.03; at 0.1 the
     #: busts' lips were no longer features).
+    #: Swept (docs/presets.md, the engine of 2026-11-25; 12 fish / 12 busts / busts at 4x):
+    #: 0.05 -> 0.777/0.824/0.818 against 0.778/0.817/0.806, nearer the blushes' and
+    #: shading's contrasts; 0.1 -> the lips (0.09) no longer features.
     feature_contrast: float = setting(0.07, minimum=0.0)
     #: More components of one colour than this are a texture's elements, not features (a
     #: checked shirt's squares were "completed" at 4x without it).
@@ -484,15 +521,17 @@ class Completion:
     #: at offsets near one another: its surroundings were taken and it was skipped
     #: (busts_003's eye at 4x: 0.31; busts_009's lips: between 0.2 and 0.3).
     #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.1 and 0.4 ->
-    #: 0.776/0.840/0.814, every figure as at 0.2: no measurable effect (nor with no skipped
-    #: feature completed at all, ``skipped_place_shown`` 0).
+    #: 0.776/0.840/0.814, every figure as at 0.2 (nor with no skipped feature completed at
+    #: all, ``skipped_place_shown`` 0). The step acts on 2 of 36 busts of seed 1 (busts_012's
+    #: and busts_025's brows, drawn only by it; looked at): their macro part transfer 0.721
+    #: at 0.1 and 0.2, 0.718 at 0.4 and with the step off (features 90.6 against 91.1 %).
     skipped_ring_share: float = setting(0.2, minimum=0.0, maximum=1.0)
     #: A skipped feature is not completed where this share of its place already stands out
     #: from its surroundings in the map: something is drawn there (it refused a blue-grey
     #: eye over busts_008's own brown one).
     #: Swept (busts 1x/4x, fish, see above; the default now 0.776/0.840/0.814): 0.15 and 0.6 ->
-    #: 0.776/0.840/0.814, every figure as at 0.3: no measurable effect; 0 (no skipped feature
-    #: completed) too.
+    #: 0.776/0.840/0.814, every figure as at 0.3; 0 (no skipped feature completed) too. 36
+    #: busts of seed 1: 0.15 and 0.6 as at 0.3 (0.721), 0 -> 0.718 (two brows not drawn).
     skipped_place_shown: float = setting(0.3, minimum=0.0, maximum=1.0)
     #: Pixels of surroundings copied with the feature around it.
     #: Swept (busts 1x/4x, fish, see above): 1 -> 0.780/0.833/0.806; 2 -> 0.775/0.836/0.806; 4 ->
