@@ -122,6 +122,13 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
     views = views_of(args)
     quiet = bool(args.quiet)
     mesh = load_mesh(source)  # bad input stops here, before any work
+    if args.size is None:
+        # Views at least as fine as the texels they fill (issue #46: stair steps).
+        from imagemap.scene.bake import view_size_for
+
+        args.size = view_size_for(mesh, views, args.texture_size)
+        if not quiet:
+            print(f"imagemap: views at {args.size[0]}x{args.size[1]}", file=sys.stderr)
     database = Database.from_directory(args.db, view=views[0], size=args.size)
     if args.exclude:
         database = database.without(*[n.strip() for n in args.exclude.split(",")])

@@ -101,9 +101,13 @@ def _positive_float(text: str) -> float:
 UNIT_NAMES = ("m", "cm", "mm", "in", "ft")
 
 
-def add_mesh_options(parser: argparse.ArgumentParser, uv_space: bool = False) -> None:
+def add_mesh_options(
+    parser: argparse.ArgumentParser, uv_space: bool = False, fine_views: bool = False
+) -> None:
     """--view, --views, --size, --texture-size, --units, --scale: how meshes are seen,
-    textured and written; with ``uv_space``, --uv-space and --no-uv-space too."""
+    textured and written; with ``uv_space``, --uv-space and --no-uv-space too; with
+    ``fine_views``, --size's default (None) is each mesh's own
+    (:func:`imagemap.scene.bake.view_size_for`), else 200x150."""
     group = parser.add_argument_group("meshes (input .glb .obj .ply ...; output .glb or .obj)")
     if uv_space:
         both = group.add_mutually_exclusive_group()  # both given: refused, not the last wins
@@ -141,8 +145,13 @@ def add_mesh_options(parser: argparse.ArgumentParser, uv_space: bool = False) ->
     group.add_argument(
         "--size",
         type=parse_size,
-        default=(200, 150),
-        help="WIDTHxHEIGHT of each view's depth map (default 200x150)",
+        default=None if fine_views else (200, 150),
+        help="WIDTHxHEIGHT of each view's depth map (default: 200x150 made finer, its "
+        "aspect kept, until one view pixel covers no more of the surface than one texel of "
+        "the texture (--texture-size, else the mesh's own texture), up to 317x238: views "
+        "coarser than the texels draw their pixels' stair steps into the texture)"
+        if fine_views
+        else "WIDTHxHEIGHT of each view's depth map (default 200x150)",
     )
     group.add_argument(
         "--texture-size",

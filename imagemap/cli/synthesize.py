@@ -112,7 +112,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "estimate)",
     )
     before = {action.dest for action in p._actions}
-    add_mesh_options(p, uv_space=True)  # mesh input and .glb/.obj output: imagemap/cli/mesh.py
+    # Mesh input and .glb/.obj output: imagemap/cli/mesh.py.
+    add_mesh_options(p, uv_space=True, fine_views=True)
     MESH_FLAGS.update(
         {a.dest: "/".join(a.option_strings) for a in p._actions if a.dest not in before}
     )

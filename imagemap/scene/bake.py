@@ -29,9 +29,19 @@ from scipy import ndimage
 
 from imagemap.io import InputError
 from imagemap.scene.files import textured_mesh
-from imagemap.scene.views import MeshRender, fill_from_nearest, sample_pixels, texture_image
+from imagemap.scene.views import (
+    DEFAULT_MARGIN,
+    DEFAULT_SIZE,
+    MeshRender,
+    View,
+    fill_from_nearest,
+    parse_view,
+    sample_pixels,
+    texture_image,
+)
 
 __all__ = [
+    "view_size_for",
     "bake_views",
     "blend_chosen_views",
     "covered_texels",
@@ -279,6 +289,78 @@ def texture_size_for(mesh, pixel_size: float | None = None) -> int:
     wanted = TEXELS_PER_PIXEL * np.sqrt(world_per_uv(vertices, faces, uv)) / pixel_size
     size = 2 ** int(np.ceil(np.log2(max(wanted, 1.0))))
     return int(np.clip(size, MIN_TEXTURE_SIZE, MAX_TEXTURE_SIZE))
+
+
+#: The most pixels a view gets by :func:`view_size_for` (the default ``--size``): 2.5x
+#: :data:`~imagemap.scene.views.DEFAULT_SIZE`'s, 317x237. The exact rule asks more of a
+#: fine atlas (the 2 m fish of issue #46 at 512^2: 734x550, 13x the pixels, one texel per
+#: pixel); the cap keeps that fish within 1.5x of its time at 200x150 (350x262 took
+#: 1.48x, on a shared machine; docs/meshes.md).
+MAX_VIEW_PIXELS = 5 * DEFAULT_SIZE[0] * DEFAULT_SIZE[1] // 2
+
+
+def view_size_for(
+    mesh,
+    views,
+    texture_size: int | None,
+    base: tuple[int, int] = DEFAULT_SIZE,
+    max_pixels: int = MAX_VIEW_PIXELS,
+) -> tuple[int, int]:
+    """Each view's size (width, height) so that one view pixel covers no more of the
+    surface than one texel of the atlas it is baked into (the default ``--size``).
+
+    A view coarser than the texels it fills draws its pixels' steps into the texture
+    (issue #46: a stair-stepped gill line and seam at 512^2). The texel's side on the
+    surface is ``sqrt(world area / UV area) / texture_size``; each view's pixel is its
+    extent across the picture over the size (as :func:`render_mesh` frames it). ``base``
+    is scaled up (never down, its aspect kept) until the coarsest of ``views`` is that
+    fine, but to at most ``max_pixels`` pixels (the time grows with them).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        With UV coordinates (without them: ``base``).
+    views : list of View or str
+        The views (with ``--views auto``: the candidates).
+    texture_size : int or None
+        The atlas's side; None: the mesh's own texture's, and ``base`` when it has none
+        (the atlas is then sized from the views, :func:`texture_size_for`).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> plane = trimesh.creation.box(extents=(2.0, 2.0, 0.01))  # UVs over 2 x 2 units
+    >>> plane.visual = trimesh.visual.TextureVisuals(uv=plane.vertices[:, :2] / 2 + 0.5)
+    >>> view_size_for(plane, ["front"], 64)  # texels of ~2/64: 200x150 is finer already
+    (200, 150)
+    >>> view_size_for(plane, ["front"], 200)  # pixels of 2 / (150 * 0.84), texels of ~2/200
+    (316, 237)
+    >>> view_size_for(plane, ["front"], 4096)  # the cap: 2.5x the base's pixels
+    (317, 238)
+    """
+    base = (int(base[0]), int(base[1]))
+    if texture_size is None:
+        own = texture_image(mesh) if getattr(mesh.visual, "uv", None) is not None else None
+        if own is None or max(own.shape[:2]) < MIN_TEXTURE_SIZE:
+            return base
+        texture_size = int(max(own.shape[:2]))
+    try:
+        vertices, faces, uv, _ = uv_atlas(mesh)
+        texel = float(np.sqrt(world_per_uv(vertices, faces, uv))) / int(texture_size)
+    except (InputError, AttributeError):  # no usable UVs: nothing to be fine for
+        return base
+    points = np.asarray(mesh.vertices, dtype=np.float64)
+    usable = 1.0 - 2.0 * DEFAULT_MARGIN
+    pixel = 0.0
+    for view in views:
+        view = view if isinstance(view, View) else parse_view(view)
+        extent = np.ptp(points @ view.rotation().T, axis=0)
+        pixel = max(pixel, extent[0] / (base[0] * usable), extent[1] / (base[1] * usable))
+    factor = pixel / texel if texel > 0 else 1.0
+    factor = min(factor, float(np.sqrt(max_pixels / (base[0] * base[1]))))
+    if factor <= 1.0:
+        return base
+    return (int(np.ceil(base[0] * factor - 1e-9)), int(np.ceil(base[1] * factor - 1e-9)))
 
 
 def view_scores(
