@@ -401,15 +401,15 @@ def atlas_normals_to_view(encoded: np.ndarray, mesh, faces: np.ndarray, bary: np
     """A mesh's UV tangent-space normals at surface points, in a picture's tangent frame.
 
     The inverse of :func:`view_normals_to_atlas` for a mesh's own UVs: ``faces``
-    and ``bary`` name the points (as a render's hit faces and barycentrics).
+    and ``bary`` name the points (as a render's hit faces and barycentrics). The
+    atlas' frames are the mesh's MikkTSpace tangents (glTF's rule for a file without
+    ``TANGENT``, and what :func:`~imagemap.scene.files.export_textured` writes).
     """
-    normals = _surface_normals(mesh, faces, bary)
-    tangent, bitangent = uv_frames(mesh.vertices, mesh.faces, mesh.visual.uv)
+    from imagemap.scene.tangents import corner_tangents, tangent_frames  # deferred: cycle
+
+    tangents = corner_tangents(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.visual.uv)
+    t, b, normals = tangent_frames(tangents, mesh.vertex_normals, mesh.faces, faces, bary)
     local = decode_normals(encoded).astype(np.float64)
-    t = tangent[faces] - np.einsum("ij,ij->i", tangent[faces], normals)[:, None] * normals
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-    handed = np.sign(np.einsum("ij,ij->i", np.cross(normals, t), bitangent[faces]))
-    b = np.cross(normals, t) * np.where(handed == 0, 1.0, handed)[:, None]
     world = local[:, :1] * t + local[:, 1:2] * b + local[:, 2:] * normals
     p_t, p_b = _picture_frame(view.rotation(), normals)
     out = np.stack(

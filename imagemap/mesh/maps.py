@@ -15,10 +15,10 @@ from imagemap.materials import (
     decode_normals,
     encode_normals,
     transfer_maps,
-    uv_frames,
 )
 from imagemap.scene.bake import rasterize_uv
 from imagemap.scene.files import _base_colour_texture, material_of, textured_mesh
+from imagemap.scene.tangents import corner_tangents, tangent_frames
 from imagemap.scene.views import fill_from_nearest
 
 __all__ = ["SIDE_MAPS", "bake_maps", "mesh_maps", "with_mesh_maps", "with_surface_maps"]
@@ -49,9 +49,11 @@ def bake_maps(
         The bake that made the colour's texture (same atlas for any images); one that
         returns the texture itself keeps the maps' precision (a 16-bit height map).
     textured : trimesh.Trimesh
-        The colour's textured mesh (its UVs give the atlas' tangent frames).
+        The mesh the maps are for: its UVs, vertex normals and MikkTSpace tangents
+        give the normal map's tangent frames (the colour's textured mesh, or the
+        mesh as written, :func:`imagemap.scene.surface.kept_geometry`: same UVs).
     projection : bool
-        ``bake`` projects one view (projection UVs): normals need no turning.
+        ``bake`` projects one view (projection UVs, the texture is the view's picture).
 
     Returns
     -------
@@ -72,48 +74,74 @@ def bake_maps(
         baked = _baked(bake(images))
         for channel, kind in enumerate(group):
             out[kind] = baked[..., channel]
-    if any("normal" in m for m in view_maps) and projection:
-        # Projection UVs are the picture's own axes: its tangent frame is the atlas'.
-        flat = [m.get("normal", np.broadcast_to(NEUTRAL["normal"], r.depth.shape + (3,)))
-                for m, r in zip(view_maps, renders, strict=True)]  # fmt: skip
-        out["normal"] = _baked(bake(flat))
-    elif any("normal" in m for m in view_maps):
-        images = []
-        for maps, render in zip(view_maps, renders, strict=True):
-            world = np.zeros(render.depth.shape + (3,), dtype=np.float32)
-            world[..., 2] = 1.0
-            pixels = np.flatnonzero(render.mask)
-            if "normal" in maps and pixels.size:
-                faces = render.face.flat[pixels]
-                bary = render.barycentric.reshape(-1, 3)[pixels].astype(np.float64)
-                normals = _surface_normals(mesh, faces, bary)
-                local = decode_normals(maps["normal"].reshape(-1, 3)[pixels]).astype(np.float64)
-                p_t, p_b = _picture_frame(render.view.rotation(), normals)
-                vectors = local[:, :1] * p_t + local[:, 1:2] * p_b + local[:, 2:] * normals
-                world.reshape(-1, 3)[pixels] = vectors
-            images.append(encode_normals(world))
-        baked = _baked(bake(images))
-        size = baked.shape[0]
-        texel, face, bary = rasterize_uv(np.asarray(textured.visual.uv), textured.faces, size)
-        tangent, bitangent = uv_frames(textured.vertices, textured.faces, textured.visual.uv)
-        surface = _surface_normals(textured, face, bary)
-        world = decode_normals(baked.reshape(-1, 3)[texel]).astype(np.float64)
-        t = tangent[face] - np.einsum("ij,ij->i", tangent[face], surface)[:, None] * surface
-        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-        handed = np.sign(np.einsum("ij,ij->i", np.cross(surface, t), bitangent[face]))
-        b = np.cross(surface, t) * np.where(handed == 0, 1.0, handed)[:, None]
-        local = np.stack([np.einsum("ij,ij->i", world, v) for v in (t, b, surface)], axis=1)
-        local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-12)
-        # A texel whose baked normal leans too far from its surface came from another
-        # surface (a hidden fin back filled from its front): flat there.
-        local[local[:, 2] < MIN_NORMAL_Z] = (0.0, 0.0, 1.0)
-        texture = np.zeros((size, size, 3), dtype=np.float32)
-        texture[..., 2] = 1.0
-        texture.reshape(-1, 3)[texel] = local
-        covered = np.zeros((size, size), dtype=bool)
-        covered.flat[texel] = True
-        out["normal"] = encode_normals(fill_from_nearest(texture, covered))
+    if any("normal" in m for m in view_maps):
+        out["normal"] = _baked_normals(mesh, renders, view_maps, bake, textured, projection)
     return out
+
+
+def _world_normals(mesh, render, maps: dict) -> np.ndarray:
+    """A view's normal map turned into world directions at its pixels (H, W, 3); +z
+    where the view sees nothing or has no normal map."""
+    world = np.zeros(render.depth.shape + (3,), dtype=np.float64)
+    world[..., 2] = 1.0
+    pixels = np.flatnonzero(render.mask)
+    if "normal" in maps and pixels.size:
+        faces = render.face.flat[pixels]
+        bary = render.barycentric.reshape(-1, 3)[pixels].astype(np.float64)
+        normals = _surface_normals(mesh, faces, bary)
+        local = decode_normals(maps["normal"].reshape(-1, 3)[pixels]).astype(np.float64)
+        p_t, p_b = _picture_frame(render.view.rotation(), normals)
+        vectors = local[:, :1] * p_t + local[:, 1:2] * p_b + local[:, 2:] * normals
+        world.reshape(-1, 3)[pixels] = vectors
+    return world
+
+
+def _to_tangent_space(world: np.ndarray, textured, face: np.ndarray, bary: np.ndarray):
+    """World normals (N, 3) at surface points of ``textured`` in its MikkTSpace frames
+    (the frames its GLB's ``TANGENT`` gives a renderer), unit; flat where a normal
+    leans more than :data:`MIN_NORMAL_Z` allows from its surface."""
+    tangents = corner_tangents(
+        textured.vertices, textured.faces, textured.vertex_normals, textured.visual.uv
+    )
+    frame = tangent_frames(tangents, textured.vertex_normals, textured.faces, face, bary)
+    local = np.stack([np.einsum("ij,ij->i", world, v) for v in frame], axis=1)
+    local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-12)
+    # A texel whose baked normal leans too far from its surface came from another
+    # surface (a hidden fin back filled from its front): flat there.
+    local[local[:, 2] < MIN_NORMAL_Z] = (0.0, 0.0, 1.0)
+    return local
+
+
+def _baked_normals(mesh, renders, view_maps, bake, textured, projection: bool) -> np.ndarray:
+    """The views' normal maps as one tangent-space normal texture of ``textured``'s UVs,
+    in the frames of its MikkTSpace tangents (:func:`imagemap.scene.tangents.mikk_tangents`,
+    what :func:`~imagemap.scene.files.export_textured` writes as ``TANGENT``).
+
+    Each view's normals go to world directions, through the colour's ``bake``, and
+    into the tangent frame at each texel's surface point. With ``projection`` (one
+    view, its projection UVs) texels are the view's pixels: each takes the frame at
+    the surface point the view sees there.
+    """
+    pairs = zip(renders, view_maps, strict=True)
+    images = [encode_normals(_world_normals(mesh, render, maps)) for render, maps in pairs]
+    baked = _baked(bake(images))
+    if projection:
+        render = renders[0]
+        texel = np.flatnonzero(render.mask)
+        face = render.face.flat[texel]
+        bary = render.barycentric.reshape(-1, 3)[texel].astype(np.float64)
+    else:
+        texel, face, bary = rasterize_uv(
+            np.asarray(textured.visual.uv), textured.faces, baked.shape[0]
+        )
+    world = decode_normals(baked.reshape(-1, 3)[texel]).astype(np.float64)
+    local = _to_tangent_space(world, textured, face, bary)
+    texture = np.zeros(baked.shape[:2] + (3,), dtype=np.float32)
+    texture[..., 2] = 1.0
+    texture.reshape(-1, 3)[texel] = local
+    covered = np.zeros(baked.shape[:2], dtype=bool)
+    covered.flat[texel] = True
+    return encode_normals(fill_from_nearest(texture, covered))
 
 
 def mesh_maps(

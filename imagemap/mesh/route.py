@@ -28,7 +28,7 @@ from imagemap.scene.bake import bake_views, project_texture
 from imagemap.scene.coverage import choose_views
 from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import export_textured
-from imagemap.scene.surface import keep_surface
+from imagemap.scene.surface import frame_mesh, keep_surface
 from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
 
 __all__ = [
@@ -148,8 +148,11 @@ def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
             return bake_views(mesh, renders, images, width, texture_only=True)
 
     databases = [examples.at_view(r.view, size) for r in renders]
+    # The normal map in the frames of the mesh as written (keep_surface's normals), the
+    # frames of the TANGENTs export_textured writes beside them.
+    frames = frame_mesh(made.mesh, mesh)
     maps = mesh_maps(
-        made.mesh, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
+        frames, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
     )
     side = {kind: maps.pop(kind) for kind in SIDE_MAPS if kind in maps}
     return with_surface_maps(made.mesh, maps), side

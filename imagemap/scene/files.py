@@ -486,13 +486,43 @@ def unit_scale(units: str | None = None, scale: float | None = None) -> float:
     return 1.0
 
 
+#: The custom vertex attribute trimesh writes the tangents as, renamed ``TANGENT``.
+_TANGENT = "_TANGENT"
+
+
+def _with_tangents(mesh, normals: np.ndarray, uv: np.ndarray):
+    """``mesh`` with glTF's TANGENT (MikkTSpace, the frames the route bakes normal maps
+    in) as the custom attribute trimesh writes (renamed ``TANGENT`` on export), its
+    vertices split where UV triangles of both orientations meet (two tangents)."""
+    import trimesh  # deferred: start-up (trimesh)
+
+    from imagemap.scene.tangents import mikk_tangents, tangent_split  # deferred: start-up
+
+    faces, origin = tangent_split(mesh.faces, uv)
+    if len(origin) > len(mesh.vertices):
+        visual = trimesh.visual.TextureVisuals(uv=uv[origin], material=mesh.visual.material)
+        split = trimesh.Trimesh(
+            np.asarray(mesh.vertices)[origin], faces, visual=visual, process=False
+        )
+        split.metadata.update(mesh.metadata)
+        mesh = split
+        normals = normals[origin]
+        mesh.vertex_normals = normals  # type: ignore[method-assign]
+    tangents = mikk_tangents(mesh.vertices, mesh.faces, normals, uv[origin])
+    mesh.vertex_attributes[_TANGENT] = tangents.astype(np.float32)
+    return mesh
+
+
 def export_textured(mesh, path: str | os.PathLike, *, scale: float = 1.0) -> list[Path]:
     """Write a textured mesh as ``.glb`` (one file) or ``.obj`` + ``.mtl`` + ``.png``.
 
     Every file is written atomically; for OBJ the ``.obj`` is written last, so its
     presence means the set is complete. Vertex normals are written (computed when
     the mesh has none); ``scale`` multiplies the coordinates (glTF is in metres:
-    see :func:`unit_scale`) and is recorded in the GLB's ``asset.extras``.
+    see :func:`unit_scale`) and is recorded in the GLB's ``asset.extras``. A GLB
+    whose material has a normal texture gets a vertex ``TANGENT`` in the MikkTSpace
+    convention (:func:`imagemap.scene.tangents.mikk_tangents`), the frame the mesh
+    route bakes normal maps in; OBJ has no slot for tangents (a viewer computes its own).
     Returns the paths written.
     """
     check_mesh(mesh, "export_textured: mesh", paths=False)  # None or a Scene: InputError
@@ -509,10 +539,20 @@ def export_textured(mesh, path: str | os.PathLike, *, scale: float = 1.0) -> lis
         mesh.vertices = np.asarray(mesh.vertices) * scale
     mesh.vertex_normals = normals
     if suffix == ".glb":
+        material = getattr(mesh.visual, "material", None)
+        uv = getattr(mesh.visual, "uv", None)
+        tangents = getattr(material, "normalTexture", None) is not None and uv is not None
+        if tangents:
+            mesh = _with_tangents(mesh, normals, np.asarray(uv))
 
         def stated(tree: dict) -> None:
             extras = tree.setdefault("asset", {}).setdefault("extras", {})
             extras["imagemap"] = {"scale_to_metres": scale, "generator": "imagemap"}
+            for written in tree.get("meshes", []):
+                for primitive in written.get("primitives", []):
+                    attributes = primitive.get("attributes", {})
+                    if _TANGENT in attributes:
+                        attributes["TANGENT"] = attributes.pop(_TANGENT)
 
         data = mesh.export(file_type="glb", include_normals=True, tree_postprocessor=stated)
         with atomic_path(path) as tmp:

@@ -23,7 +23,7 @@ from imagemap.scene.files import (
 )
 from imagemap.scene.views import fill_from_nearest, sample_image
 
-__all__ = ["keep_surface"]
+__all__ = ["frame_mesh", "keep_surface", "kept_geometry"]
 
 
 def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
@@ -58,19 +58,8 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
     (24, True)
     """
     settings = material if material is not None else material_of(source)
-    vertices = np.asarray(textured.vertices, dtype=np.float64)
-    faces = np.asarray(textured.faces, dtype=np.int64)
-    uv = np.asarray(textured.visual.uv, dtype=np.float64)
-    same = len(source.faces) == len(faces)
-    if same and source.metadata.get("file_normals") and "vertex_normals" in source._cache:
-        corners = np.asarray(source.vertex_normals, dtype=np.float64)[source.faces]
-    elif same:
-        corners = corner_normals(source.vertices, source.faces)
-    else:
-        corners = corner_normals(vertices, faces)
-    new_faces, origin = _split_by_normals(faces, corners)
-    normals = np.zeros((len(origin), 3))
-    normals[new_faces.ravel()] = corners.reshape(-1, 3)
+    vertices, new_faces, uv, normals = kept_geometry(textured, source)
+    same = len(source.faces) == len(new_faces)
     image = _base_colour_texture(textured, "keep_surface: textured")
     alpha = _carried_alpha(textured, source, image.shape[:2]) if same else None
     if alpha is None:
@@ -88,14 +77,50 @@ def keep_surface(textured, source, *, material: SurfaceMaterial | None = None):
                 if carried is not None:
                     maps[kind] = carried
     return textured_mesh(
-        vertices[origin],
+        vertices,
         new_faces,
-        uv[origin],
+        uv,
         image,
         normals=normals,
         maps=maps,
         material=settings,
     )
+
+
+def kept_geometry(textured, source) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The vertices, faces, UVs and normals :func:`keep_surface` gives ``textured``.
+
+    The normals are ``source``'s own where its file had them, else smooth with creases
+    (:func:`~imagemap.scene.files.corner_normals`); vertices are split where a
+    vertex's corners disagree. Faces stay in their order.
+    """
+    vertices = np.asarray(textured.vertices, dtype=np.float64)
+    faces = np.asarray(textured.faces, dtype=np.int64)
+    uv = np.asarray(textured.visual.uv, dtype=np.float64)
+    same = len(source.faces) == len(faces)
+    if same and source.metadata.get("file_normals") and "vertex_normals" in source._cache:
+        corners = np.asarray(source.vertex_normals, dtype=np.float64)[source.faces]
+    elif same:
+        corners = corner_normals(source.vertices, source.faces)
+    else:
+        corners = corner_normals(vertices, faces)
+    new_faces, origin = _split_by_normals(faces, corners)
+    normals = np.zeros((len(origin), 3))
+    normals[new_faces.ravel()] = corners.reshape(-1, 3)
+    return vertices[origin], new_faces, uv[origin], normals
+
+
+def frame_mesh(textured, source):
+    """A mesh of :func:`kept_geometry` (UVs and vertex normals as written): the
+    frames a normal map is baked in (``textured``'s texture is not carried)."""
+    import trimesh  # deferred: start-up (trimesh)
+
+    vertices, faces, uv, normals = kept_geometry(textured, source)
+    mesh = trimesh.Trimesh(
+        vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv), process=False
+    )
+    mesh.vertex_normals = normals  # type: ignore[method-assign]
+    return mesh
 
 
 def _carried_alpha(textured, source, shape: tuple[int, int]) -> np.ndarray | None:
