@@ -230,3 +230,13 @@ def test_khronos_validator_finds_no_error(tmp_path):
     )
     issues = json.loads(out.stdout)
     assert issues["numErrors"] == 0, issues["messages"][:5]
+    # With a normal map (issue #46 item 4): TANGENT written, so no warning that the
+    # viewer must make its own tangent space (MESH_PRIMITIVE_GENERATED_TANGENT_SPACE).
+    flat = np.full((32, 32, 3), [0.5, 0.5, 1.0])
+    mapped = textured_mesh(kept.vertices, kept.faces, kept.visual.uv, flat, maps={"normal": flat})
+    path = export_textured(keep_surface(mapped, source), tmp_path / "n.glb")[0]
+    out = subprocess.run(
+        [*command, str(path)], cwd=folder, capture_output=True, text=True, check=True
+    )
+    issues = json.loads(out.stdout)
+    assert issues["numErrors"] == issues["numWarnings"] == 0, issues["messages"][:5]
