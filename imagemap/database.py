@@ -297,18 +297,26 @@ def database_at_view(
     return Database(examples, source=database.source)
 
 
-def prepare_database(database: Database) -> Database:
+def prepare_database(database: Database, loaded: dict[int, Example] | None = None) -> Database:
     """Load every example's arrays now, so the database pickles with its data.
 
     Returns a database of in-memory examples (the same names and arrays): shipped
-    to workers once, it is never read from disk or rendered again.
+    to workers once, it is never read from disk or rendered again. ``loaded`` (by
+    ``id`` of the example) shares the prepared copy of an example that several
+    databases hold (a picture example at every view and size).
     """
+    loaded = {} if loaded is None else loaded
     examples = []
     for example in database:
+        if id(example) in loaded:
+            examples.append(loaded[id(example)])
+            continue
         prepared = Example.from_arrays(example.name, example.depth, example.image, example.labels)
         prepared.__dict__["info"] = dict(example.info)
         maps = example_maps(example)  # PBR maps travel with the colour
         if maps:
             prepared._arrays["maps"] = dict(maps)
+        if not isinstance(example, MeshExample):
+            loaded[id(example)] = prepared
         examples.append(prepared)
     return Database(examples, source=database.source)

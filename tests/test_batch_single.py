@@ -14,7 +14,7 @@ import pytest
 from data_gen import CLASSES
 from data_gen.core import make_instance
 from data_gen.dataset import write_instance
-from imagemap.batch import BatchOptions, run_batch
+from imagemap.batch import BatchOptions, plan_jobs, run_batch
 from imagemap.cli import main
 from imagemap.io import write_image
 from imagemap.scene import export_textured, load_mesh
@@ -214,11 +214,15 @@ def test_the_input_roughness_map_is_kept_where_the_examples_have_none():
     assert middle == pytest.approx(expected, abs=0.03)
 
 
-@pytest.mark.parametrize("path", ["views auto", "uv-space"])
+@pytest.mark.parametrize(
+    "path", ["views auto", "uv-space", pytest.param("default size", marks=pytest.mark.slow)]
+)
 def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tmp_path):
-    """``--views auto`` (each mesh chooses among the six candidates the batch prepared) and
-    the uv-space path (the batch ships its mesh examples' meshes): the batch's GLB is the
-    single command's, byte for byte, and the path is the one asked for."""
+    """``--views auto`` (each mesh chooses among the six candidates the batch prepared),
+    the uv-space path (the batch ships its mesh examples' meshes) and no ``--size`` (views
+    as fine as the texels, each mesh its own, issue #46 item 2: the fin at 256² asks for
+    317x238): the batch's GLB is the single command's, byte for byte, and the path is the
+    one asked for."""
     import shutil
 
     queries, db = tmp_path / "queries", tmp_path / "db"
@@ -228,6 +232,10 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
         shutil.copy(shared_heads / "head_00.glb", db)
         shutil.copy(shared_heads / "head_01.glb", queries / "query.glb")
         options = ["--preset", "busts", "--texture-size", "64", "--uv-space", "-q"]
+    elif path == "default size":
+        shutil.copytree(routes / "db", db, dirs_exist_ok=True)
+        shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
+        options = ["--preset", "fish", "--texture-size", "256", "--views", "front,back", "-q"]
     else:
         shutil.copytree(routes / "db", db, dirs_exist_ok=True)
         shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
@@ -244,5 +252,32 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
     report = json.loads((tmp_path / "report.json").read_text())
     if path == "uv-space":
         assert report["path"] == "uv-space" and report["views"] == []
+    elif path == "default size":
+        assert report["path"] == "views" and len(report["views"]) == 2
+        assert tuple(report["size"]) == (317, 238)
     else:  # the fin is seen by some of the six, not all
         assert report["path"] == "views" and 1 < len(report["views"]) < 6
+
+
+def test_batch_chooses_each_meshs_views_as_synthesize_does(tmp_path):
+    """Issue #46 item 2: without ``--size`` both commands make a mesh's views as fine as
+    its texels (the fin at 256²: 317x238, the cap); the batch kept 200x150, so its
+    bytes differed from the single command's."""
+    from imagemap.batch.run import _view_size
+    from imagemap.cli import build_parser
+    from imagemap.scene.bake import view_size_for
+    from imagemap.scene.views import parse_view
+
+    parser = build_parser()
+    for command in (["batch", "IN"], ["synthesize", "q.glb"]):
+        args = parser.parse_args([*command, "--db", "DB", "-o", "OUT"])
+        assert args.size is None  # each mesh's own
+    (tmp_path / "in").mkdir()
+    export_textured(fin_mesh(), tmp_path / "in" / "fin.glb")
+    views = (parse_view("front"), parse_view("back"))
+    options = BatchOptions(preset="fish", texture_size=256, views=views)
+    (job,) = plan_jobs(tmp_path / "in", tmp_path / "out", options)
+    single = view_size_for(load_mesh(tmp_path / "in" / "fin.glb"), list(views), 256)
+    assert _view_size(job, options) == single == (317, 238)
+    fixed = BatchOptions(preset="fish", size=SIZE, texture_size=256, views=views)
+    assert _view_size(job, fixed) == SIZE

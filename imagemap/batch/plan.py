@@ -16,7 +16,7 @@ from imagemap.database import Database
 from imagemap.depth.config import DepthConfig, resolve_config
 from imagemap.io import InputError
 from imagemap.outputs import OutputPlan, check_output_directory, resolve, written_companions
-from imagemap.scene import DEFAULT_SIZE, FRONT, MESH_SUFFIXES, View, file_digest, parse_views
+from imagemap.scene import FRONT, MESH_SUFFIXES, View, file_digest, parse_views
 from imagemap.validate import check_float, check_int, check_seed
 
 __all__ = [
@@ -46,7 +46,9 @@ class BatchOptions:
     sees mesh examples as ``imagemap synthesize`` shows them to it: from the front at
     the default size), and with ``auto_views`` they are the candidates each mesh
     chooses from by coverage (``--views auto``); ``texture_size`` None: each mesh's
-    own atlas resolution; ``scale`` multiplies the written coordinates
+    own atlas resolution; ``size`` None: each mesh's views as fine as its texels
+    (:func:`imagemap.scene.bake.view_size_for`, the default of ``imagemap synthesize
+    MESH``; :attr:`Job.size`); ``scale`` multiplies the written coordinates
     (``--units``/``--scale``); ``uv_space`` as ``--uv-space``/``--no-uv-space`` (None:
     detected); ``maps`` False writes the colour only (``--no-maps``); ``background``
     None writes RGBA maps with a transparent background, else RGB on that colour.
@@ -60,7 +62,7 @@ class BatchOptions:
     options: Any = ()
     seed: int = 0
     views: tuple[View, ...] = (FRONT,)
-    size: tuple[int, int] = DEFAULT_SIZE
+    size: tuple[int, int] | None = None
     texture_size: int | None = None
     mesh_format: str = "glb"
     background: tuple[float, float, float] | None = None
@@ -91,10 +93,11 @@ class BatchOptions:
             raise InputError("views: at least one view is needed")
         if len(set(self.views)) != len(self.views):
             raise InputError(f"views: a view is given twice in {[str(v) for v in self.views]}")
-        if not (isinstance(self.size, tuple | list) and len(self.size) == 2):
-            raise InputError(f"size: expected (width, height), got {self.size!r}")
-        size = tuple(check_int("size", v, minimum=MIN_VIEW_SIDE) for v in self.size)
-        object.__setattr__(self, "size", size)
+        if self.size is not None:
+            if not (isinstance(self.size, tuple | list) and len(self.size) == 2):
+                raise InputError(f"size: expected (width, height) or None, got {self.size!r}")
+            size = tuple(check_int("size", v, minimum=MIN_VIEW_SIDE) for v in self.size)
+            object.__setattr__(self, "size", size)
         if self.texture_size is not None:
             check_int("texture_size", self.texture_size, minimum=1)
         scale = check_float("scale", self.scale, 0.0, float("inf"))
@@ -134,15 +137,28 @@ class BatchOptions:
         """The :class:`~imagemap.depth.config.DepthConfig` every object is made with."""
         return resolve_config(self.preset, **self.colorize_options())
 
-    def mesh_request(self):
-        """The :class:`~imagemap.mesh.route.MeshRequest` every mesh is made with: the one
-        ``imagemap synthesize MESH`` builds from the same options."""
+    def view_size(self, mesh) -> tuple[int, int]:
+        """The views' size for ``mesh``: ``size``, else the one ``imagemap synthesize
+        MESH`` chooses for it by default (:func:`imagemap.scene.bake.view_size_for`)."""
+        if self.size is not None:
+            return (int(self.size[0]), int(self.size[1]))
+        from imagemap.scene.bake import view_size_for  # deferred: start-up (trimesh)
+
+        return view_size_for(mesh, self.views, self.texture_size)
+
+    def mesh_request(self, size: tuple[int, int] | None = None):
+        """The :class:`~imagemap.mesh.route.MeshRequest` a mesh is made with: the one
+        ``imagemap synthesize MESH`` builds from the same options; ``size`` is the
+        mesh's views' (:meth:`view_size`; needed when ``self.size`` is None)."""
         from imagemap.mesh.route import MeshRequest  # deferred: start-up (workers only)
 
+        size = size if size is not None else self.size
+        if size is None:
+            raise InputError("mesh_request: size None: give the mesh's (BatchOptions.view_size)")
         return MeshRequest(
             views=tuple(self.views),
             auto_views=self.auto_views,
-            size=(int(self.size[0]), int(self.size[1])),
+            size=(int(size[0]), int(size[1])),
             texture_size=self.texture_size,
             config=self.config(),
             seed=self.seed,
@@ -164,6 +180,9 @@ class Job:
     # BatchOptions.key() as the batch's process computed it: a worker started later would
     # digest the engine's files as they are then (an upgrade mid-batch), not as they were.
     options_key: str = ""
+    # A mesh's views' size (BatchOptions.view_size), chosen where the database is
+    # prepared for it; None: BatchOptions.size.
+    size: tuple[int, int] | None = None
 
 
 def plan_jobs(

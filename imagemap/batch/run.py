@@ -127,8 +127,6 @@ def run_batch(
 
         jobs = with_map_companions(jobs, database_map_kinds(database))
     check_outputs(jobs, database, out_dir, database_dir)  # before any work
-    if any(job.kind == "mesh" for job in jobs):  # the views and texture every mesh will have
-        guard_mesh(options.size, len(options.views), options.texture_size or 512, "each mesh")
     workers = _usable_workers(workers, len(jobs))
     summary = BatchSummary()
     todo = []
@@ -139,7 +137,13 @@ def run_batch(
         else:
             todo.append(job)
     key = options.key()
-    todo = [dataclasses.replace(job, options_key=key) for job in todo]
+    todo = [
+        dataclasses.replace(job, options_key=key, size=_view_size(job, options)) for job in todo
+    ]
+    sizes = [job.size for job in todo if job.kind == "mesh" and job.size is not None]
+    if sizes:  # the views and texture every mesh will have (the largest views)
+        largest = max(sizes, key=lambda s: s[0] * s[1])
+        guard_mesh(largest, len(options.views), options.texture_size or 512, "each mesh")
     # The scheduler answers (or not) before anything is written into the output folder.
     client, own = _connect(scheduler) if scheduler is not None and todo else (None, False)
     start = time.perf_counter()
@@ -171,6 +175,22 @@ def run_batch(
         if own and client is not None:  # own: _connect opened client
             client.close()
     return summary
+
+
+def _view_size(job: Job, options: BatchOptions) -> tuple[int, int] | None:
+    """A mesh job's views' size (:meth:`BatchOptions.view_size`: ``imagemap synthesize
+    MESH``'s default when ``options.size`` is None); None for a depth map, or a mesh
+    that does not load (its worker reports why)."""
+    if job.kind != "mesh":
+        return None
+    if options.size is not None:
+        return options.size
+    from imagemap.scene.files import load_mesh  # deferred: start-up (trimesh)
+
+    try:
+        return options.view_size(load_mesh(job.source))
+    except InputError:
+        return None
 
 
 def _collect(

@@ -73,8 +73,12 @@ def prepare_databases(
     for the uv-space path, and the front at the default size when a job is a depth map."""
     kinds = {job.kind for job in jobs} if jobs is not None else {"mesh", "depth"}
     views = options.views if "mesh" in kinds else ()
+    # Each mesh's views' size (Job.size, chosen by run_batch when options.size is None).
+    sizes = sorted({job.size or options.size for job in jobs or () if job.kind == "mesh"} - {None})
+    if not sizes:
+        sizes = [options.size or DEFAULT_SIZE]
     return ExampleSet.of(database).prepared(
-        views, options.size, meshes="mesh" in kinds, pictures="depth" in kinds
+        views, sizes, meshes="mesh" in kinds, pictures="depth" in kinds
     )
 
 
@@ -113,9 +117,10 @@ def process_job(job: Job, databases: ExampleSet, options: BatchOptions) -> dict:
         from imagemap.mesh.route import mesh_writers, texture_mesh  # deferred: start-up
 
         mesh = load_mesh(job.source)
+        size = job.size or options.view_size(mesh)
         # This mesh's texture (chosen from its own when not given): refused here, reported.
-        guard_mesh(options.size, len(options.views), _texture_size(mesh, options), job.name)
-        done = texture_mesh(mesh, ExampleSet.of(databases), options.mesh_request())
+        guard_mesh(size, len(options.views), _texture_size(mesh, options, size), job.name)
+        done = texture_mesh(mesh, ExampleSet.of(databases), options.mesh_request(size))
         writers, cleanup = mesh_writers(done, job.output, job.companions, options.scale)
         try:
             written = write_all(writers)
@@ -140,8 +145,9 @@ def process_job(job: Job, databases: ExampleSet, options: BatchOptions) -> dict:
     return {"status": "done", **record}
 
 
-def _texture_size(mesh, options: BatchOptions) -> int:
-    """The texture side the bake will choose for ``mesh`` (``options.texture_size`` if set)."""
+def _texture_size(mesh, options: BatchOptions, size: tuple[int, int]) -> int:
+    """The texture side the bake will choose for ``mesh`` seen at ``size``
+    (``options.texture_size`` if set)."""
     import numpy as np  # deferred: start-up (the parent of a pool never needs it here)
 
     from imagemap.scene.bake import texture_size_for  # deferred: start-up (workers only)
@@ -151,7 +157,7 @@ def _texture_size(mesh, options: BatchOptions) -> int:
         return int(options.texture_size)
     extent = float(np.ptp(np.asarray(mesh.vertices), axis=0).max())
     try:
-        return texture_size_for(mesh, extent / (min(options.size) * (1 - 2 * DEFAULT_MARGIN)))
+        return texture_size_for(mesh, extent / (min(size) * (1 - 2 * DEFAULT_MARGIN)))
     except InputError:  # no usable UVs: the bake says so itself
         return 512
 

@@ -94,7 +94,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "imagemap synthesize carries them (depth maps: NAME_normal.png, _roughness ... beside "
         "NAME_image.png; meshes: in the GLB's material)",
     )
-    add_mesh_options(p, uv_space=True)
+    add_mesh_options(p, uv_space=True, fine_views=True)  # --size: each mesh's, as synthesize
     add_common_options(p)
     p.set_defaults(func=run_batch_cli)
 

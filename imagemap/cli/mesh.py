@@ -186,6 +186,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
             "output": str(output),
             "path": made.path,
             "views": [str(v) for v in views],
+            "size": list(args.size),  # each view's (the default: imagemap.scene.bake.view_size_for)
             "examples": [r.example_names for r in made.results],
             "seconds": seconds,
             "preset": args.preset,

@@ -13,7 +13,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from imagemap.database import Database, database_at_view, prepare_database
+from imagemap.example import Example
 from imagemap.io import InputError
 from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import load_mesh
@@ -89,34 +92,37 @@ class ExampleSet:
     def prepared(
         self,
         views: tuple[View, ...] | list[View],
-        size: tuple[int, int],
+        sizes: tuple[int, int] | list[tuple[int, int]],
         *,
         meshes: bool = True,
         pictures: bool = True,
     ) -> ExampleSet:
         """A copy that needs no file; what a batch ships.
 
-        Every view of ``views`` at ``size`` prepared (arrays loaded, mesh examples
-        rendered); with ``meshes``, every mesh example's mesh loaded; with ``pictures``,
+        Every view of ``views`` at each of ``sizes`` (one (W, H) or a list) prepared
+        (arrays loaded, mesh examples rendered; picture examples loaded once whatever
+        the sizes); with ``meshes``, every mesh example's mesh loaded; with ``pictures``,
         the database as a depth-map query sees it too (mesh examples from the front at
         the default size, as ``imagemap synthesize DEPTH`` renders them).
         """
         if self.source is None:
             return self
-        at_size = (int(size[0]), int(size[1]))
-        wanted = [(v, at_size) for v in views]
+        if len(sizes) == 2 and all(isinstance(v, int | np.integer) for v in sizes):
+            sizes = [sizes]  # type: ignore[list-item]
+        wanted = [(v, (int(s[0]), int(s[1]))) for s in sizes for v in views]  # type: ignore[index]
         if pictures:
             wanted.append((FRONT, DEFAULT_SIZE))
-        ready = {}
+        ready: dict[str, Database] = {}
+        loaded: dict[int, Example] = {}  # picture examples: the same at every view and size
         for view, at in wanted:
             key = view_key(view, at)
             if key not in ready:
-                ready[key] = prepare_database(self.at_view(view, at))
-        loaded = {name: self.mesh(name) for name in self.mesh_names} if meshes else {}
+                ready[key] = prepare_database(self.at_view(view, at), loaded)
+        kept = {name: self.mesh(name) for name in self.mesh_names} if meshes else {}
         return ExampleSet(
             source=None,
             views=ready,
-            meshes=loaded,
+            meshes=kept,
             mesh_names=self.mesh_names if meshes else (),
             names=self.names,
         )
