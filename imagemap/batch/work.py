@@ -74,7 +74,9 @@ def prepare_databases(
     kinds = {job.kind for job in jobs} if jobs is not None else {"mesh", "depth"}
     views = options.views if "mesh" in kinds else ()
     # Each mesh's views' size (Job.size, chosen by run_batch when options.size is None).
-    sizes = sorted({job.size or options.size for job in jobs or () if job.kind == "mesh"} - {None})
+    sizes: list[tuple[int, int]] = sorted(
+        {s for job in jobs or () if job.kind == "mesh" if (s := job.size or options.size)}
+    )
     if not sizes:
         sizes = [options.size or DEFAULT_SIZE]
     return ExampleSet.of(database).prepared(

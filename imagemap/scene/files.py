@@ -507,7 +507,7 @@ def _with_tangents(mesh, normals: np.ndarray, uv: np.ndarray):
         split.metadata.update(mesh.metadata)
         mesh = split
         normals = normals[origin]
-        mesh.vertex_normals = normals  # type: ignore[method-assign]
+        mesh.vertex_normals = normals
     tangents = mikk_tangents(mesh.vertices, mesh.faces, normals, uv[origin])
     mesh.vertex_attributes[_TANGENT] = tangents.astype(np.float32)
     return mesh
