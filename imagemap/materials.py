@@ -41,6 +41,7 @@ import numpy as np
 from imagemap.core.blend import copy_through
 from imagemap.errors import InputError
 from imagemap.io import _load_raw
+from imagemap.tangents import corner_tangents, tangent_frames
 
 __all__ = [
     "MAP_KINDS",
@@ -405,8 +406,6 @@ def atlas_normals_to_view(encoded: np.ndarray, mesh, faces: np.ndarray, bary: np
     atlas' frames are the mesh's MikkTSpace tangents (glTF's rule for a file without
     ``TANGENT``, and what :func:`~imagemap.scene.files.export_textured` writes).
     """
-    from imagemap.scene.tangents import corner_tangents, tangent_frames  # deferred: cycle
-
     tangents = corner_tangents(mesh.vertices, mesh.faces, mesh.vertex_normals, mesh.visual.uv)
     t, b, normals = tangent_frames(tangents, mesh.vertex_normals, mesh.faces, faces, bary)
     local = decode_normals(encoded).astype(np.float64)

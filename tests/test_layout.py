@@ -126,8 +126,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
      "imagemap.outputs"),
     # The generic engine: guide and appearance bands, nothing of depth maps or meshes.
     ("imagemap.core",),
-    # Examples as data, and the PBR maps they carry.
-    ("imagemap.example", "imagemap.materials"),
+    # Examples as data, the PBR maps they carry, and the tangent frames of normal maps.
+    ("imagemap.example", "imagemap.materials", "imagemap.tangents"),
     # Meshes, views, ray casting, mesh files: below the database, which reads them.
     ("imagemap.scene",),
     ("imagemap.database",),

@@ -12,7 +12,7 @@ from imagemap.mesh.maps import _to_tangent_space
 from imagemap.scene import project_texture, render_mesh
 from imagemap.scene.files import export_textured, textured_mesh
 from imagemap.scene.surface import frame_mesh, keep_surface
-from imagemap.scene.tangents import corner_tangents, mikk_tangents, tangent_frames, tangent_split
+from imagemap.tangents import corner_tangents, mikk_tangents, tangent_frames, tangent_split
 from tests.test_glb import glb_accessor, glb_json
 
 #: Float32 in the file against float64 in the bake: the frames agree far better than this.

@@ -18,8 +18,8 @@ from imagemap.materials import (
 )
 from imagemap.scene.bake import rasterize_uv
 from imagemap.scene.files import _base_colour_texture, material_of, textured_mesh
-from imagemap.scene.tangents import corner_tangents, tangent_frames
 from imagemap.scene.views import fill_from_nearest
+from imagemap.tangents import corner_tangents, tangent_frames
 
 __all__ = ["SIDE_MAPS", "bake_maps", "mesh_maps", "with_mesh_maps", "with_surface_maps"]
 
@@ -114,7 +114,7 @@ def _to_tangent_space(world: np.ndarray, textured, face: np.ndarray, bary: np.nd
 
 def _baked_normals(mesh, renders, view_maps, bake, textured, projection: bool) -> np.ndarray:
     """The views' normal maps as one tangent-space normal texture of ``textured``'s UVs,
-    in the frames of its MikkTSpace tangents (:func:`imagemap.scene.tangents.mikk_tangents`,
+    in the frames of its MikkTSpace tangents (:func:`imagemap.tangents.mikk_tangents`,
     what :func:`~imagemap.scene.files.export_textured` writes as ``TANGENT``).
 
     Each view's normals go to world directions, through the colour's ``bake``, and

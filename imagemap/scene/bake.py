@@ -294,8 +294,8 @@ def texture_size_for(mesh, pixel_size: float | None = None) -> int:
 #: The most pixels a view gets by :func:`view_size_for` (the default ``--size``): 2.5x
 #: :data:`~imagemap.scene.views.DEFAULT_SIZE`'s, 317x237. The exact rule asks more of a
 #: fine atlas (the 2 m fish of issue #46 at 512^2: 734x550, 13x the pixels, one texel per
-#: pixel); the cap keeps that fish within 1.5x of its time at 200x150 (350x262 took
-#: 1.48x, on a shared machine; docs/meshes.md).
+#: pixel); the cap holds that fish to 1.38x its time at 200x150 in a quiet run, 1.53-1.65x at
+#: load 9 on the shared 2-core machine (docs/meshes.md).
 MAX_VIEW_PIXELS = 5 * DEFAULT_SIZE[0] * DEFAULT_SIZE[1] // 2
 
 

@@ -26,7 +26,8 @@ from imagemap.scene.views import (
 __all__ = ["RENDER_VERSION", "MeshExample", "mesh_examples"]
 
 #: Bumped whenever rendering changes, so cached renders of examples are redone.
-RENDER_VERSION = 2  # 2: the material's PBR maps rendered and cached too
+RENDER_VERSION = 3  # 2: the material's PBR maps rendered and cached too; 3: normal maps read
+# in MikkTSpace frames (issue #46 item 4)
 
 
 def _default_cache() -> Path:

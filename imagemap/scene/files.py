@@ -496,7 +496,7 @@ def _with_tangents(mesh, normals: np.ndarray, uv: np.ndarray):
     vertices split where UV triangles of both orientations meet (two tangents)."""
     import trimesh  # deferred: start-up (trimesh)
 
-    from imagemap.scene.tangents import mikk_tangents, tangent_split  # deferred: start-up
+    from imagemap.tangents import mikk_tangents, tangent_split  # deferred: start-up
 
     faces, origin = tangent_split(mesh.faces, uv)
     if len(origin) > len(mesh.vertices):
@@ -521,7 +521,7 @@ def export_textured(mesh, path: str | os.PathLike, *, scale: float = 1.0) -> lis
     the mesh has none); ``scale`` multiplies the coordinates (glTF is in metres:
     see :func:`unit_scale`) and is recorded in the GLB's ``asset.extras``. A GLB
     whose material has a normal texture gets a vertex ``TANGENT`` in the MikkTSpace
-    convention (:func:`imagemap.scene.tangents.mikk_tangents`), the frame the mesh
+    convention (:func:`imagemap.tangents.mikk_tangents`), the frame the mesh
     route bakes normal maps in; OBJ has no slot for tangents (a viewer computes its own).
     Returns the paths written.
     """
