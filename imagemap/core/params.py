@@ -163,6 +163,27 @@ class EngineParams:
         samples) instead of float32: half the engine's largest arrays. The search
         proposes candidates on them; every accepted match is decided on the exact
         float window distance, so the target still never increases.
+
+    Notes
+    -----
+    The defaults are the paper's method; each front end sets ``levels``, the weights,
+    ``position_weight``, ``pca_fraction``, ``backend``, ``tolerance``, ``vote`` and
+    ``appearance_pyramid`` from its own configuration (the depth front end's are
+    measured beside :class:`imagemap.depth.config.DepthConfig`'s fields). The others
+    were swept on the depth front end (#43; 12 fish/busts at 1x, seed 0, macro part
+    transfer; the default 0.814/0.776, seed to seed 0.004/0.014):
+
+    - ``pca_samples`` 4000 -> 0.813/0.785, 16000 -> 0.817/0.785;
+    - ``patchmatch_passes`` 2 -> 0.812/0.776, 8 -> 0.815/0.787 (busts' parts in one
+      palette 94 % against 99 %);
+    - ``window_sigma`` 0.25 -> 0.817/0.767 (a bust's feature not drawn), 0.5 ->
+      0.813/0.776;
+    - ``init_from_guide`` False -> 0.813/0.787 (parts in one palette 97 % against 99 %);
+    - ``quantize_features`` False: the same matches within +-0.003 SSIM for twice the
+      features' memory (docs/presets.md, docs/performance.md).
+
+    ``guide_padding`` "constant" is the depth's own background (0); ``stride`` 1 and
+    ``pca_max_components`` None are the paper's (the BTF front end sets its own).
     """
 
     levels: tuple[LevelPlan, ...] = (LevelPlan(7), LevelPlan(11), LevelPlan(9))

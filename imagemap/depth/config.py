@@ -250,6 +250,10 @@ class Guides:
     extension_sigma: float = setting(2.0, minimum=0.0)
     #: Weight of the position relative to the object's centroid, per RMS radius of the
     #: object (Table 1's relative position; fish 0.5, humans 3).
+    #: Swept (#43; 12 fish/busts at 1x, seed 0, macro part transfer; the default 0.814/0.776, seed
+    #: to seed 0.004/0.014), at half and twice each preset's: fish 0.25 -> 0.814, 1 -> 0.814 (parts
+    #: in one palette 96 % against 99 %); busts 0.5 -> 0.776, 2 -> 0.772. Registered, it acts only
+    #: where the relief disagrees (relief_disagreement).
     position_weight: float = setting(1.0, minimum=0.0)
     #: Register each example onto the query (a smooth non-rigid warp of the whole object,
     #: :mod:`imagemap.depth.register`) and compare positions where the warp puts the
