@@ -1,6 +1,7 @@
-"""Colorizing a mesh: in its UV atlas when it shares the examples' layout, else by views.
+"""Colorizing a mesh: in its UV atlas, from examples in its layout or registered into it;
+else by views.
 
-Two paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
+Three paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
 
 - **uv-space** (:mod:`imagemap.mesh.uvspace`): when the query mesh and textured mesh
   examples of the database share one UV layout (a registered template, as scanned
@@ -8,7 +9,12 @@ Two paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
   examples' own textures. No view: nothing hidden, nothing mirrored. The layout is
   detected (:func:`imagemap.mesh.uvspace.shares_layout`) or declared (``uv_space=True``,
   ``--uv-space``).
-- **views**: one synthesis per view, all from the same examples (chosen once for the
+- **registered** (:mod:`imagemap.mesh.register`): when the database has textured mesh
+  examples but not in the query's layout, each is registered to the query in 3-D
+  (rigid, mirrored where the class allows it, then smooth non-rigid) and resampled into
+  the query's atlas (an xatlas atlas for a query without UVs); the uv-space synthesis
+  then runs on them as on examples in the layout.
+- **views** (depth-map examples only, or forced): one synthesis per view, all from the same examples (chosen once for the
   object, :func:`shared_examples`), textured by projection (one view) or baked into a
   UV atlas, each texel from the view that sees it best (:func:`imagemap.scene.bake.bake_views`).
 """
@@ -35,7 +41,8 @@ from imagemap.mesh.uvspace import (
     shares_layout,
     surface_maps,
 )
-from imagemap.scene.bake import bake_views, project_texture, view_shares
+from imagemap.mesh.register import registered_examples
+from imagemap.scene.bake import bake_views, project_texture, uv_atlas, view_shares
 from imagemap.scene.files import check_finite, load_mesh, textured_mesh
 from imagemap.scene.views import (
     DEFAULT_SIZE,
@@ -60,8 +67,8 @@ __all__ = [
 
 log = logging.getLogger("imagemap")
 
-#: The mesh route's two ways of making a texture.
-PATHS = ("uv-space", "views")
+#: The mesh route's three ways of making a texture.
+PATHS = ("uv-space", "registered", "views")
 
 
 @dataclass
@@ -77,7 +84,7 @@ class MeshResult:
     results : list of ColorizeResult
         One per view; on the uv-space path one, whose image is the texture.
     path : str
-        ``"uv-space"`` or ``"views"`` (:data:`PATHS`).
+        ``"uv-space"``, ``"registered"`` or ``"views"`` (:data:`PATHS`).
     """
 
     mesh: object  # trimesh.Trimesh with UVs and texture
@@ -218,6 +225,43 @@ def uv_layout_examples(
     return shared
 
 
+def registrable_examples(
+    database: Database | dict[str, Database] | ExampleSet,
+    names: list[str] | None = None,
+) -> dict | None:
+    """The textured mesh examples (name -> mesh) for the registered path, or None.
+
+    None when the database has no mesh example with UVs and a texture (depth-map
+    examples only: the views path), or when an example asked for in ``names`` is not one.
+    """
+    examples = ExampleSet.of(database)
+    wanted = [n for n in examples.mesh_names if not names or n in names]
+    if not wanted or (names and set(names) - set(wanted)):
+        return None
+    found = {}
+    for name in wanted:
+        example_mesh = examples.mesh(name)
+        if getattr(example_mesh.visual, "uv", None) is not None and texture_image(example_mesh) is not None:
+            found[name] = example_mesh
+    if not found or (names and set(names) - set(found)):
+        return None
+    return found
+
+
+def with_atlas(mesh):
+    """``mesh`` itself when it has per-vertex UVs, else a copy with an xatlas atlas
+    (vertices split along the charts' seams; :func:`imagemap.scene.bake.uv_atlas`)."""
+    uv = getattr(mesh.visual, "uv", None)
+    if uv is not None and len(uv) == len(mesh.vertices):
+        return mesh
+    import trimesh
+
+    vertices, faces, uv, _ = uv_atlas(mesh)
+    return trimesh.Trimesh(
+        vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv), process=False
+    )
+
+
 def colorize_mesh(
     mesh,
     database: Database | dict[str, Database] | ExampleSet,
@@ -226,6 +270,7 @@ def colorize_mesh(
     size: tuple[int, int] = DEFAULT_SIZE,
     texture_size: int | None = None,
     uv_space: bool | list | None = None,
+    registered: bool | None = None,
     preset="busts",
     seed: int = 0,
     examples: list[str] | None = None,
@@ -318,6 +363,15 @@ def colorize_mesh(
         vertices, faces, uv = mesh_uv_arrays(mesh)
         textured = textured_mesh(vertices, faces, uv, result.image)
         return MeshResult(mesh=textured, renders=[], results=[result], path="uv-space")
+    to_register = (
+        registrable_examples(examples_set, names)
+        if registered or (registered is None and uv_space is not False)
+        else None
+    )
+    if to_register is not None:
+        return _colorize_registered(
+            mesh, to_register, config, texture_size, names, seed, quiet, step
+        )
 
     renders, databases = [], []
     for view in views:
@@ -351,3 +405,47 @@ def colorize_mesh(
     else:
         textured = bake_views(mesh, renders, [r.image for r in results], texture_size)
     return MeshResult(mesh=textured, renders=renders, results=results, path="views")
+
+
+def _colorize_registered(
+    mesh, meshes: dict, config, texture_size, names, seed, quiet, step
+) -> MeshResult:
+    """The registered path: the mesh examples registered to the query, resampled into its
+    atlas (:func:`imagemap.mesh.register.registered_examples`), then the uv-space
+    synthesis on them."""
+    query = with_atlas(mesh)
+    if texture_size is None:
+        own = texture_image(mesh)
+        sizes = [max(texture_image(m).shape[:2]) for m in meshes.values()]
+        texture_size = int(max(own.shape[:2])) if own is not None else int(max(sizes))
+    if step is not None:
+        step(f"registering {len(meshes)} mesh examples to the query")
+    examples, _ = registered_examples(
+        query,
+        meshes,
+        m=config.selection.m,
+        texture_size=int(texture_size),
+        mirror=bool(config.selection.mirror),
+        names=names,
+        seed=seed,
+    )
+    log.info(
+        "mesh route: registered path (%d mesh examples in other layouts, kept %s), %d^2 texture",
+        len(meshes),
+        ", ".join(e.name for e in examples),
+        texture_size,
+    )
+    if step is not None:
+        step(f"synthesizing in the UV atlas ({texture_size}^2)")
+    result = colorize_uv(
+        query,
+        examples,
+        config,
+        size=int(texture_size),
+        names=[e.name for e in examples],
+        seed=seed,
+        quiet=quiet,
+    )
+    vertices, faces, uv = mesh_uv_arrays(query)
+    textured = textured_mesh(vertices, faces, uv, result.image)
+    return MeshResult(mesh=textured, renders=[], results=[result], path="registered")

@@ -19,7 +19,12 @@ from typing import Any
 
 from imagemap.io import InputError, image_writer
 from imagemap.materials import SIDE_MAPS
-from imagemap.mesh.colorize import MeshResult, colorize_mesh, uv_layout_examples
+from imagemap.mesh.colorize import (
+    MeshResult,
+    colorize_mesh,
+    registrable_examples,
+    uv_layout_examples,
+)
 from imagemap.mesh.library import ExampleSet
 from imagemap.mesh.maps import mesh_maps, with_surface_maps
 from imagemap.outputs import exported
@@ -62,6 +67,9 @@ class MeshRequest:
         The examples asked for (None: chosen).
     uv_space : bool or None
         ``--uv-space`` (True), ``--no-uv-space`` (False), detected (None).
+    registered : bool or None
+        Mesh examples in other UV layouts registered to the query and resampled into its
+        atlas (None: when there are such examples; ``--no-register``: False, the views).
     maps : bool
         Carry the examples' PBR maps (``--no-maps``: False).
     """
@@ -74,6 +82,7 @@ class MeshRequest:
     seed: int = 0
     examples: tuple[str, ...] | None = None
     uv_space: bool | None = None
+    registered: bool | None = None
     maps: bool = True
 
 
@@ -184,10 +193,19 @@ def texture_mesh(
     views = tuple(request.views)
     # Examples in the query's UV layout: synthesized in the atlas, no view is rendered.
     in_layout = uv_layout_examples(mesh, examples, request.uv_space, names)
+    # Else mesh examples in other layouts: registered to the query, no view either.
+    to_register = (
+        registrable_examples(examples, names)
+        if in_layout is None and request.uv_space is not False and request.registered is not False
+        else None
+    )
     if in_layout is not None:
         views = ()
         used = ", ".join(e.name for e in in_layout)
         say(f"uv-space path: examples in the mesh's UV layout: {used}")
+    elif to_register is not None:
+        views = ()
+        say(f"registered path: {len(to_register)} mesh examples registered to the mesh")
     elif request.auto_views:
         views = tuple(choose_views(mesh, views))
         say(f"views chosen by coverage: {'; '.join(str(v) for v in views)}")
@@ -195,7 +213,9 @@ def texture_mesh(
         _render_mesh_examples(examples, views, request.size, quiet)
     # Step lines whatever stderr is (a program running the command reads them): the
     # views (or the atlas), the bake, the PBR maps.
-    total = (len(views) + 1 if views else 1) + (1 if request.maps and views else 0)
+    total = (len(views) + 1 if views else 1 + (to_register is not None)) + (
+        1 if request.maps and views else 0
+    )
     done = 0
 
     def step(text: str) -> None:
@@ -214,6 +234,7 @@ def texture_mesh(
         examples=names,
         quiet=quiet or not sys.stderr.isatty(),
         uv_space=in_layout if in_layout is not None else False,
+        registered=to_register is not None,
         step=step,
         **sizing,
     )

@@ -1,0 +1,631 @@
+"""Mesh examples in ANY UV layout: registered to the query in 3-D, resampled into its atlas.
+
+The uv-space synthesis (:mod:`imagemap.mesh.uvspace`) needs examples in the query's UV
+layout. This module makes them so: each textured mesh example is
+
+1. **registered** to the query (:func:`register_rigid`): both normalised (centroid, RMS
+   radius), candidate starts (the identity and the principal axes with every choice of
+   signs; the mirrored ones only where the class allows it), each refined by ICP
+   (:func:`trimesh.registration.icp`) on a coarse sampling, the one of least symmetric
+   residual refined on a finer one;
+2. **deformed** smoothly onto the query (:func:`deform`): the example's vertices follow
+   the closest-point displacements to and from the query's surface, smoothed by a
+   graph-Laplacian solve, stiff first, then less (a cheap non-rigid step:
+   :func:`trimesh.registration.nricp_amberg` took 19 s per generated fish);
+3. **resampled into the query's atlas** (:func:`resample`): every used texel of the
+   query's atlas is a surface point; its closest point on the deformed example is a face
+   and barycentrics of the example, so an example UV: the example's texture is sampled
+   there (bilinear, at the output texture's size). The same face and barycentrics on the
+   *rigidly* registered example give the example's own surface guides there: its
+   position (where the example's point is, against the query's: the shape's
+   disagreement), its normal and its curvature.
+
+The examples then share the query's layout and the uv-space synthesis runs on them as
+it does on scanned heads: :func:`registered_examples` gives :class:`RegisteredExample`
+objects that :func:`imagemap.mesh.uvspace.colorize_uv` takes as they are.
+
+Examples
+--------
+A box registered to itself turned a quarter and mirrored comes back to its place:
+
+>>> import trimesh
+>>> box = trimesh.creation.box(extents=(3.0, 2.0, 1.0)).subdivide().subdivide()
+>>> turned = box.copy(); turned.apply_transform(np.diag([-1.0, 1, 1, 1]))
+>>> fit = register_rigid(turned, box, mirror=True)
+>>> fit.mirrored, fit.residual < 0.02
+(True, True)
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+from scipy import sparse
+from scipy.sparse.linalg import factorized
+from scipy.spatial import cKDTree
+
+from imagemap.core.blend import fill_background
+from imagemap.errors import InputError
+from imagemap.mesh.uvspace import (
+    SurfaceMaps,
+    UVExample,
+    _vertex_normals,
+    _weld,
+    vertex_curvature,
+)
+from imagemap.scene.bake import rasterize_uv
+from imagemap.scene.views import surface_colours
+
+__all__ = [
+    "COVER_DISTANCE",
+    "Registration",
+    "RegisteredExample",
+    "deform",
+    "register_rigid",
+    "registered_examples",
+    "resample",
+]
+
+log = logging.getLogger("imagemap")
+
+#: Surface samples for the candidates' coarse ICP (each start is refined on these) ...
+COARSE_SAMPLES = 800
+#: ... and for the chosen start's fine ICP, the residual and the deformation's targets.
+FINE_SAMPLES = 6000
+#: ICP iterations per candidate (coarse) and for the chosen one (fine).
+COARSE_ITERATIONS = 12
+FINE_ITERATIONS = 30
+#: A mirrored or turned start replaces the identity (the meshes as posed) only when its
+#: residual is below this share of the identity's: objects of one class are usually posed
+#: alike, and a symmetric body fits its mirror image nearly as well (generated fish:
+#: 1.00-1.03 of the identity's residual), which would swap its flanks for nothing.
+TURN_GAIN = 0.8
+#: Laplacian stiffness of the deformation's passes (in vertex hops squared: ~sqrt of it
+#: hops of smoothing), stiff first: the body moves as a whole before its parts do.
+STIFFNESS = (400.0, 100.0, 25.0, 6.0)
+#: Closest-point displacements longer than this (in RMS radii) are not followed: a part
+#: the other object lacks (a fin) does not pull the surface across the body.
+PULL_DISTANCE = 0.25
+#: A query texel is covered by an example when the deformed example passes within this
+#: (in RMS radii of the query) of it: elsewhere (a fin the example lacks) it is no source.
+COVER_DISTANCE = 0.08
+#: Two connected parts (a fin, an eye) correspond when their centroids (in RMS radii of
+#: the query) plus the log of their sizes' ratio differ by less than this: generated fish
+#: (body, tail, three fins, eye) match part for part at 0.1-0.3; a part of no match
+#: (cost above this) is searched on the whole example.
+PART_MATCH_COST = 0.6
+#: Candidate faces examined per point by the closest-point search (nearest samples' faces).
+CLOSEST_CANDIDATES = 4
+#: Dense samples per face of the closest-point search (so a point's nearest samples lie on
+#: or beside its closest face).
+SAMPLES_PER_FACE = 6
+
+
+@dataclass
+class Registration:
+    """A mesh example registered to the query.
+
+    Attributes
+    ----------
+    matrix : (4, 4) array
+        Example world -> query world (similarity: rotation, uniform scale, translation;
+        a reflection when ``mirrored``).
+    mirrored : bool
+        The matrix reflects (its determinant is negative).
+    residual : float
+        Symmetric mean closest-sample distance after the rigid fit, in RMS radii of the
+        query: the shapes' agreement, by which the examples are chosen.
+    vertices : (V, 3) array
+        The example's vertices rigidly registered (query world).
+    deformed : (V, 3) array
+        The same after the smooth deformation onto the query (query world).
+    faces : (F, 3) int array
+        The example's faces, wound outwards again when the matrix reflects.
+    """
+
+    matrix: np.ndarray
+    mirrored: bool
+    residual: float
+    vertices: np.ndarray
+    deformed: np.ndarray
+    faces: np.ndarray
+
+
+def _frame(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """(centroid, RMS radius) of points (radius 1 for a single point)."""
+    centre = points.mean(axis=0)
+    radius = float(np.sqrt(np.mean(np.sum((points - centre) ** 2, axis=1))))
+    return centre, radius if radius > 0 else 1.0
+
+
+def surface_samples(
+    vertices: np.ndarray, faces: np.ndarray, count: int, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points (N, 3), face (N,), barycentrics (N, 3)): area-uniform random surface samples.
+
+    Examples
+    --------
+    >>> tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> points, face, bary = surface_samples(tri, np.array([[0, 1, 2]]), 5)
+    >>> points.shape, bool(np.allclose(bary.sum(axis=1), 1.0)), bool((points[:, 2] == 0).all())
+    ((5, 3), True, True)
+    """
+    corners = vertices[faces]
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    total = areas.sum()
+    if not total > 0:
+        raise InputError("the mesh has no surface (every face has zero area)")
+    rng = np.random.default_rng(seed)
+    face = rng.choice(len(faces), size=count, p=areas / total)
+    r1, r2 = np.sqrt(rng.random(count)), rng.random(count)
+    bary = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], axis=1)
+    points = np.einsum("nk,nkc->nc", bary, corners[face])
+    return points, face, bary
+
+
+def _residual(a: np.ndarray, b: np.ndarray, tree_b: cKDTree | None = None) -> float:
+    """Symmetric mean nearest-neighbour distance between two point sets."""
+    tree_b = tree_b or cKDTree(b)
+    there = tree_b.query(a)[0]
+    back = cKDTree(a).query(b)[0]
+    return float(0.5 * (there.mean() + back.mean()))
+
+
+def _starts(source: np.ndarray, target: np.ndarray, mirror: bool) -> list[np.ndarray]:
+    """Candidate rotations (3, 3) of normalised source points onto normalised target
+    points: the identity, then the principal axes matched with every choice of signs
+    (the reflections only with ``mirror``)."""
+    starts = [np.eye(3)]
+    _, _, axes_s = np.linalg.svd(source, full_matrices=False)
+    _, _, axes_t = np.linalg.svd(target, full_matrices=False)
+    for signs in itertools.product((1.0, -1.0), repeat=3):
+        rotation = axes_t.T @ np.diag(signs) @ axes_s
+        if np.linalg.det(rotation) < 0 and not mirror:
+            continue
+        starts.append(rotation)
+    if mirror:
+        starts.append(np.diag([1.0, 1.0, -1.0]))  # the identity's mirror (flanks swapped)
+    return starts
+
+
+def _apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def register_rigid(example, query, mirror: bool = False, seed: int = 0) -> Registration:
+    """The rigid (similarity) registration of a mesh example onto the query.
+
+    Parameters
+    ----------
+    example, query : trimesh.Trimesh
+    mirror : bool
+        Reflections are candidates too (a class whose two sides are mirror images).
+    seed : int
+        Of the surface samples (same seed, same registration).
+
+    Returns
+    -------
+    Registration
+        ``deformed`` is the rigid fit itself (see :func:`deform`).
+    """
+    e_vertices = np.asarray(example.vertices, dtype=np.float64)
+    e_faces = np.asarray(example.faces, dtype=np.int64)
+    q_vertices = np.asarray(query.vertices, dtype=np.float64)
+    q_faces = np.asarray(query.faces, dtype=np.int64)
+    e_fine = surface_samples(e_vertices, e_faces, FINE_SAMPLES, seed)[0]
+    q_fine = surface_samples(q_vertices, q_faces, FINE_SAMPLES, seed + 1)[0]
+    e_centre, e_radius = _frame(e_fine)
+    q_centre, q_radius = _frame(q_fine)
+    source = (e_fine - e_centre) / e_radius
+    target = (q_fine - q_centre) / q_radius
+    coarse_s, coarse_t = source[:COARSE_SAMPLES], target[:COARSE_SAMPLES]
+    tree_coarse = cKDTree(coarse_t)
+    fits = []
+    for rotation in _starts(source, target, mirror):
+        initial = np.eye(4)
+        initial[:3, :3] = rotation
+        matrix, moved, _ = trimesh.registration.icp(
+            coarse_s, coarse_t, initial=initial, max_iterations=COARSE_ITERATIONS,
+            reflection=False, scale=False,
+        )  # fmt: skip
+        fits.append((_residual(moved, coarse_t, tree_coarse), matrix))
+    best = int(np.argmin([r for r, _ in fits]))
+    if fits[0][0] * TURN_GAIN <= fits[best][0]:
+        best = 0  # as posed, unless another start fits clearly better
+    matrix, moved, _ = trimesh.registration.icp(
+        source, target, initial=fits[best][1], max_iterations=FINE_ITERATIONS,
+        reflection=False, scale=False,
+    )  # fmt: skip
+    residual = _residual(moved, target)
+    # matrix maps (x - e_centre) / e_radius onto (y - q_centre) / q_radius: in world units,
+    # y = q_radius (L (x - e_centre) / e_radius + b) + q_centre.
+    linear = matrix[:3, :3]
+    full = np.eye(4)
+    full[:3, :3] = linear * (q_radius / e_radius)
+    full[:3, 3] = q_radius * matrix[:3, 3] + q_centre - full[:3, :3] @ e_centre
+    mirrored = bool(np.linalg.det(linear) < 0)
+    vertices = _apply(full, e_vertices)
+    faces = e_faces[:, ::-1].copy() if mirrored else e_faces
+    return Registration(full, mirrored, residual, vertices, vertices.copy(), faces)
+
+
+def _laplacian(faces: np.ndarray, count: int) -> sparse.csr_matrix:
+    """The uniform graph Laplacian (degree minus adjacency) of a mesh's edges."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    i, j = np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]
+    adjacency = sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(count, count))
+    adjacency.data[:] = 1.0  # each edge once, whatever number of faces share it
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    return (sparse.diags(degree) - adjacency).tocsc()
+
+
+@dataclass
+class Parts:
+    """Connected parts of the query and of a registered example, matched part for part.
+
+    Attributes
+    ----------
+    query : (F_q,) int
+        Each query face's part.
+    example : (F_e,) int
+        Each example face's part.
+    pairs : dict
+        Query part -> the example part it corresponds to (parts without one left out).
+    """
+
+    query: np.ndarray
+    example: np.ndarray
+    pairs: dict
+
+
+def _part_labels(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Each face's connected part (faces sharing an edge of the welded mesh)."""
+    _, welded_faces, _ = _weld(vertices, faces)
+    adjacency = trimesh.graph.face_adjacency(welded_faces)
+    return trimesh.graph.connected_component_labels(adjacency, node_count=len(faces))
+
+
+def _part_frames(vertices, faces, labels) -> tuple[np.ndarray, np.ndarray]:
+    """(area-weighted centroid (P, 3), sqrt of the area (P,)) of each part."""
+    corners = vertices[faces]
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    count = int(labels.max()) + 1
+    total = np.bincount(labels, weights=areas, minlength=count)
+    centres = np.stack(
+        [np.bincount(labels, weights=areas * corners.mean(axis=1)[:, k], minlength=count)
+         for k in range(3)], axis=1,
+    ) / np.maximum(total, 1e-30)[:, None]  # fmt: skip
+    return centres, np.sqrt(total)
+
+
+def match_parts(registration: Registration, query) -> Parts:
+    """The example's connected parts matched to the query's (:data:`PART_MATCH_COST`).
+
+    One-to-one (:func:`scipy.optimize.linear_sum_assignment`) on the distance of the parts'
+    centroids after the rigid fit, in RMS radii of the query, plus the absolute log of
+    their sizes' ratio. A mesh of one part matches it to the other's largest.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    q_vertices = np.asarray(query.vertices, dtype=np.float64)
+    q_faces = np.asarray(query.faces, dtype=np.int64)
+    q_labels = _part_labels(q_vertices, q_faces)
+    e_labels = _part_labels(registration.vertices, registration.faces)
+    q_centres, q_sizes = _part_frames(q_vertices, q_faces, q_labels)
+    e_centres, e_sizes = _part_frames(registration.vertices, registration.faces, e_labels)
+    _, radius = _frame(q_vertices)
+    cost = np.linalg.norm(q_centres[:, None] - e_centres[None], axis=2) / radius + np.abs(
+        np.log(np.maximum(q_sizes[:, None], 1e-30) / np.maximum(e_sizes[None], 1e-30))
+    )
+    rows, cols = linear_sum_assignment(cost)
+    pairs = {int(r): int(c) for r, c in zip(rows, cols, strict=True) if cost[r, c] < PART_MATCH_COST}
+    if not pairs:
+        pairs = {int(np.argmax(q_sizes)): int(np.argmax(e_sizes))}
+    return Parts(q_labels, e_labels, pairs)
+
+
+def deform(registration: Registration, query, seed: int = 0, parts: Parts | None = None):
+    """The registered example deformed smoothly onto the query's surface.
+
+    Each matched part of the example (:func:`match_parts`: an eye onto the query's eye, a
+    fin onto its fin) is first moved and scaled onto its query part (centroid and size).
+    Then each pass moves every (welded) vertex by the smooth field that best follows the
+    displacements to the query: each vertex's to its nearest query sample and each query
+    sample's from its nearest vertex (within the matched parts, and within
+    :data:`PULL_DISTANCE`), smoothed by ``(W + s L) x = W d`` (``L`` the graph Laplacian,
+    ``s`` from :data:`STIFFNESS`).
+
+    Returns
+    -------
+    Registration
+        With ``deformed`` set (``vertices``, the rigid fit, kept).
+    """
+    parts = parts or match_parts(registration, query)
+    q_vertices = np.asarray(query.vertices, dtype=np.float64)
+    q_faces = np.asarray(query.faces, dtype=np.int64)
+    targets, target_face, _ = surface_samples(q_vertices, q_faces, FINE_SAMPLES, seed + 2)
+    target_part = parts.query[target_face]
+    _, q_radius = _frame(targets)
+    pull = PULL_DISTANCE * q_radius
+    welded, welded_faces, index = _weld(registration.vertices, registration.faces)
+    count = len(welded)
+    vertex_part = np.full(count, -1, dtype=np.int64)
+    for k in range(3):
+        vertex_part[welded_faces[:, k]] = parts.example
+    q_centres, q_sizes = _part_frames(q_vertices, q_faces, parts.query)
+    e_centres, e_sizes = _part_frames(registration.vertices, registration.faces, parts.example)
+    points = welded.copy()
+    for q_part, e_part in parts.pairs.items():
+        here = vertex_part == e_part
+        scale = q_sizes[q_part] / max(e_sizes[e_part], 1e-30)
+        points[here] = q_centres[q_part] + scale * (points[here] - e_centres[e_part])
+    # (vertices of the example part, targets of the query part) searched together.
+    matched = set(parts.pairs.values())
+    groups = [(vertex_part == e, target_part == q) for q, e in parts.pairs.items()]
+    rest = ~np.isin(vertex_part, list(matched))
+    if rest.any():
+        groups.append((rest, np.ones(len(targets), dtype=bool)))
+    laplacian = _laplacian(welded_faces, count)
+    for stiffness in STIFFNESS:
+        pulls = np.zeros_like(points)
+        weight = np.zeros(count)
+        for vertices_in, targets_in in groups:
+            if not vertices_in.any() or not targets_in.any():
+                continue
+            v_index = np.flatnonzero(vertices_in)
+            t_points = targets[targets_in]
+            distance, nearest = cKDTree(t_points).query(points[v_index])
+            near = distance < pull
+            pulls[v_index[near]] += t_points[nearest[near]] - points[v_index[near]]
+            weight[v_index[near]] += 1.0
+            back_distance, back = cKDTree(points[v_index]).query(t_points)
+            keep = back_distance < pull
+            np.add.at(pulls, v_index[back[keep]], t_points[keep] - points[v_index[back[keep]]])
+            np.add.at(weight, v_index[back[keep]], 1.0)
+        solve = factorized((sparse.diags(weight) + stiffness * laplacian).tocsc())
+        move = np.stack([solve(pulls[:, k]) for k in range(3)], axis=1)
+        points = points + move
+    return Registration(
+        registration.matrix,
+        registration.mirrored,
+        registration.residual,
+        registration.vertices,
+        points[index],
+        registration.faces,
+    )
+
+
+def closest_points(
+    vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(face (N,), barycentrics (N, 3), distance (N,)) of each point's closest surface point.
+
+    The candidate faces of a point are those of its :data:`CLOSEST_CANDIDATES` nearest
+    dense surface samples; the closest point on each candidate triangle is exact
+    (:func:`trimesh.triangles.closest_point`).
+
+    Examples
+    --------
+    >>> tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> face, bary, dist = closest_points(tri, np.array([[0, 1, 2]]), np.array([[0.25, 0.25, 2.0]]))
+    >>> face.tolist(), np.round(bary, 3).tolist(), np.round(dist, 3).tolist()
+    ([0], [[0.5, 0.25, 0.25]], [2.0])
+    """
+    count = max(len(faces) * SAMPLES_PER_FACE, 64)
+    samples, sample_face, _ = surface_samples(vertices, faces, count, seed)
+    # Every face has a sample at its centroid too (a small face may draw none).
+    centroids = vertices[faces].mean(axis=1)
+    samples = np.r_[samples, centroids]
+    sample_face = np.r_[sample_face, np.arange(len(faces))]
+    k = min(CLOSEST_CANDIDATES, len(samples))
+    _, nearest = cKDTree(samples).query(points, k=k)
+    nearest = nearest.reshape(len(points), k)
+    candidates = sample_face[nearest]  # (N, k)
+    triangles = vertices[faces[candidates.ravel()]]
+    repeated = np.repeat(points, k, axis=0)
+    closest = trimesh.triangles.closest_point(triangles, repeated)
+    distance = np.linalg.norm(closest - repeated, axis=1).reshape(len(points), k)
+    pick = np.argmin(distance, axis=1)
+    rows = np.arange(len(points))
+    face = candidates[rows, pick]
+    chosen = closest.reshape(len(points), k, 3)[rows, pick]
+    bary = trimesh.triangles.points_to_barycentric(vertices[faces[face]], chosen)
+    bary = np.clip(bary, 0.0, 1.0)
+    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-12)
+    return face, bary, distance[rows, pick]
+
+
+@dataclass
+class Resampled:
+    """One example in the query's atlas at one size.
+
+    Attributes
+    ----------
+    colour : (T, T, 3) float32
+        The example's texture at each texel's corresponding point; padded.
+    maps : SurfaceMaps
+        The example's guides at each texel (position in the query's normalised frame).
+    covered : (T, T) bool
+        Texels the deformed example passes near (:data:`COVER_DISTANCE`).
+    """
+
+    colour: np.ndarray
+    maps: SurfaceMaps
+    covered: np.ndarray
+
+
+def _query_frame(vertices, faces, uv, size) -> tuple[np.ndarray, float, tuple]:
+    """The query atlas' texel points and their (centroid, RMS radius), as surface_maps has them."""
+    texel, face, bary = rasterize_uv(uv, faces, size)
+    if texel.size == 0:
+        raise InputError("the mesh's UV layout covers no texel")
+    welded, welded_faces, _ = _weld(vertices, faces)
+    points = np.einsum("nk,nkc->nc", bary, welded[welded_faces[face]])
+    centre, radius = _frame(points)
+    return centre, radius, (texel, face, points)
+
+
+def resample(example, registration: Registration, query, size: int, seed: int = 0) -> Resampled:
+    """An example's texture and surface guides in the query's atlas at ``size``.
+
+    Parameters
+    ----------
+    example : trimesh.Trimesh
+        The example, with UVs and a texture.
+    registration : Registration
+        Its registration to the query (:func:`register_rigid`, :func:`deform`).
+    query : trimesh.Trimesh
+        With per-vertex UVs.
+    size : int
+
+    Returns
+    -------
+    Resampled
+    """
+    q_vertices = np.asarray(query.vertices, dtype=np.float64)
+    q_faces = np.asarray(query.faces, dtype=np.int64)
+    q_uv = np.asarray(query.visual.uv, dtype=np.float64)
+    centre, radius, (texel, q_face, points) = _query_frame(q_vertices, q_faces, q_uv, size)
+    faces = registration.faces
+    parts = match_parts(registration, query)
+    texel_part = parts.query[q_face]
+    face = np.zeros(len(points), dtype=np.int64)
+    bary = np.zeros((len(points), 3))
+    distance = np.zeros(len(points))
+    matched = set(parts.pairs.values())
+    rest_faces = np.flatnonzero(~np.isin(parts.example, list(matched)))
+    for q_part in np.unique(texel_part):
+        here = texel_part == q_part
+        if q_part in parts.pairs:
+            subset = np.flatnonzero(parts.example == parts.pairs[q_part])
+        else:
+            subset = rest_faces if rest_faces.size else np.arange(len(faces))
+        f, b, d = closest_points(registration.deformed, faces[subset], points[here], seed)
+        face[here], bary[here], distance[here] = subset[f], b, d
+    # The colour: the example's own faces (its own winding, its own UVs).
+    colour = surface_colours(example, face, bary[:, ::-1] if registration.mirrored else bary)
+    # The guides: the same surface point on the rigidly registered example.
+    welded, welded_faces, index = _weld(registration.vertices, faces)
+    normals = _vertex_normals(welded, welded_faces)
+    curvature = vertex_curvature(welded, welded_faces, normals)
+    corners = index[faces[face]]
+    position = np.einsum("nk,nkc->nc", bary, welded[corners])
+    normal = np.einsum("nk,nkc->nc", bary, normals[corners])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    texel_curvature = np.einsum("nk,nk->n", bary, curvature[corners]) * radius
+    spread = float(np.percentile(np.abs(texel_curvature), 95)) or 1.0
+    texel_curvature = spread * np.tanh(texel_curvature / spread)
+    used = np.zeros((size, size), dtype=bool)
+    used.flat[texel] = True
+    covered = np.zeros((size, size), dtype=bool)
+    covered.flat[texel[distance < COVER_DISTANCE * radius]] = True
+    if not covered.any():
+        covered = used
+    stack = np.zeros((size * size, 10), dtype=np.float32)
+    stack[texel, :3] = (position - centre) / radius
+    stack[texel, 3:6] = normal
+    stack[texel, 6] = texel_curvature
+    stack[texel, 7:10] = colour
+    stack = fill_background(stack.reshape(size, size, 10), covered)
+    maps = SurfaceMaps(
+        mask=covered,
+        position=stack[..., :3].copy(),
+        normal=stack[..., 3:6].copy(),
+        curvature=stack[..., 6].copy(),
+    )
+    return Resampled(np.clip(stack[..., 7:10], 0.0, 1.0), maps, covered)
+
+
+@dataclass
+class RegisteredExample(UVExample):
+    """A mesh example in another layout, resampled into the query's atlas.
+
+    ``texture`` is its colour in the query's layout at the output size (uint8), and
+    :meth:`maps` its guides there at any size (made on first use), so that
+    :func:`imagemap.mesh.uvspace.colorize_uv` takes it as an example in the layout.
+    """
+
+    example_mesh: object = None
+    query: object = None
+    registration: Registration | None = None
+    seed: int = 0
+
+    def maps(self, size: int) -> SurfaceMaps:
+        if size not in self._maps:
+            self._maps[size] = resample(
+                self.example_mesh, self.registration, self.query, size, self.seed
+            ).maps
+        return self._maps[size]
+
+
+def registered_examples(
+    query,
+    examples: dict[str, object],
+    *,
+    m: int,
+    texture_size: int,
+    mirror: bool = False,
+    names: list[str] | None = None,
+    seed: int = 0,
+) -> tuple[list[RegisteredExample], dict[str, float]]:
+    """The ``m`` mesh examples nearest the query in shape, registered and resampled into
+    its atlas.
+
+    Parameters
+    ----------
+    query : trimesh.Trimesh
+        With per-vertex UVs.
+    examples : dict
+        Name -> textured trimesh (UVs and a texture).
+    m : int
+        How many to keep (by registration residual), unless ``names`` are given.
+    texture_size : int
+        The output texture's size: the examples' colours are resampled at it.
+    mirror : bool
+        Mirrored registrations are candidates (:func:`register_rigid`).
+    names : list of str, optional
+        The examples to use (all registered; no choice).
+    seed : int
+
+    Returns
+    -------
+    (list of RegisteredExample, nearest first; dict name -> residual of every example)
+    """
+    start = time.perf_counter()
+    fits = {name: register_rigid(mesh, query, mirror, seed) for name, mesh in examples.items()}
+    residuals = {name: fit.residual for name, fit in fits.items()}
+    if names:
+        chosen = list(names)
+    else:
+        chosen = sorted(residuals, key=lambda n: residuals[n])[: max(1, m)]
+    made = []
+    for name in chosen:
+        fit = deform(fits[name], query, seed)
+        resampled = resample(examples[name], fit, query, texture_size, seed)
+        texture = np.round(resampled.colour * 255.0).astype(np.uint8)
+        made.append(
+            RegisteredExample(
+                name, query, texture, example_mesh=examples[name], query=query,
+                registration=fit, seed=seed,
+            )  # fmt: skip
+        )
+    log.info(
+        "registered %d mesh examples in %.1f s (residual in RMS radii: %s); kept %s%s",
+        len(examples),
+        time.perf_counter() - start,
+        ", ".join(f"{n} {r:.3f}" for n, r in sorted(residuals.items(), key=lambda x: x[1])),
+        ", ".join(chosen),
+        " (mirrored: " + ", ".join(n for n in chosen if fits[n].mirrored) + ")"
+        if any(fits[n].mirrored for n in chosen)
+        else "",
+    )
+    return made, residuals
