@@ -140,6 +140,7 @@ def run_fish(data: Path, out: Path, seed: int = 0) -> dict:
 
 def run_heads(data: Path, out: Path, seed: int = 0) -> dict:
     import trimesh
+    from real_meshes import EVAL_VIEWS, RENDER_SIZE, TexturedArrays, image_errors, look_at, render
 
     from imagemap.database import Database
     from imagemap.mesh import colorize_mesh
@@ -147,7 +148,6 @@ def run_heads(data: Path, out: Path, seed: int = 0) -> dict:
     from imagemap.scene import load_mesh
     from imagemap.scene.bake import uv_atlas
     from imagemap.scene.files import export_textured, textured_mesh
-    from real_meshes import EVAL_VIEWS, RENDER_SIZE, TexturedArrays, image_errors, look_at, render
 
     out.mkdir(parents=True, exist_ok=True)
     files = sorted(data.glob("*.glb"))

@@ -21,10 +21,11 @@ from imagemap.scene import check_textured, export_textured, load_mesh, render_te
 
 SIZE = (60, 45)
 #: In centimetres (issue #46: --units was accepted and ignored by the batch).
-OPTIONS = BatchOptions(preset="fish", size=SIZE, texture_size=64, scale=0.01)
+# The views path (the registered one has its own tests: tests/test_registered.py).
+OPTIONS = BatchOptions(preset="fish", size=SIZE, texture_size=64, scale=0.01, registered=False)
 #: The same options as imagemap synthesize's command line.
 SINGLE = ["--preset", "fish", "--size", "60x45", "--texture-size", "64", "--view", "front"]
-SINGLE += ["--units", "cm", "-q"]
+SINGLE += ["--units", "cm", "--no-register", "-q"]
 
 
 def alpha_masked(mesh):
@@ -266,6 +267,7 @@ def test_batch_cli_summary_and_skip(fish, tmp_path, capsys):
 def test_synthesize_cli_mesh_to_glb_obj_png(fish, tmp_path, capsys):
     query = str(fish / "queries" / "fish_004.glb")
     base = ["synthesize", query, "--db", str(fish / "db"), "--preset", "fish", "--size", "60x45"]
+    base += ["--no-register"]  # the views path
     assert main([*base, "-o", str(tmp_path / "a.glb"), "-q"]) == 0
     assert main([*base, "-o", str(tmp_path / "b.glb"), "-q"]) == 0
     assert (tmp_path / "a.glb").read_bytes() == (tmp_path / "b.glb").read_bytes()  # same seed
@@ -291,7 +293,7 @@ def test_mesh_command_writes_step_lines_the_addon_reads(fish, tmp_path, capsys):
     query = str(fish / "queries" / "fish_004.glb")
     args = ["synthesize", query, "--db", str(fish / "db"), "--preset", "fish", "--size", "60x45"]
     args += ["--views", "front,back", "--texture-size", "64", "-o", str(tmp_path / "a.glb")]
-    assert main(args) == 0
+    assert main([*args, "--no-register"]) == 0
     steps = [parse_progress(line) for line in capsys.readouterr().err.splitlines()]
     found = [(s.step, s.total, s.text) for s in steps if s is not None]
     assert found == [

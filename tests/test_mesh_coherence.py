@@ -78,11 +78,11 @@ def test_views_of_one_object_use_the_same_examples(bump_database):
                 for w, r, db in zip(shares, renders, at_view, strict=True))  # fmt: skip
     nearest = database.names[int(np.argmin(total))]
     made = colorize_mesh(query, database, "front,back", size=size, preset="humans",
-                         texture_size=32)  # fmt: skip
+                         texture_size=32, registered=False)  # fmt: skip
     assert [r.example_names for r in made.results] == [[nearest], [nearest]]
     assert made.path == "views"
     two = colorize_mesh(query, database, "front,back", size=size, preset="humans", m=2,
-                        texture_size=32)  # fmt: skip
+                        texture_size=32, registered=False)  # fmt: skip
     assert sorted(two.results[0].example_names) == sorted(two.results[1].example_names)
     assert shared_examples(renders, at_view, 2, shares) == two.results[0].example_names
     # A view that gives the texture nothing does not choose: the front's own choice.

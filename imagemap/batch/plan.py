@@ -50,8 +50,9 @@ class BatchOptions:
     (:func:`imagemap.scene.bake.view_size_for`, the default of ``imagemap synthesize
     MESH``; :attr:`Job.size`); ``scale`` multiplies the written coordinates
     (``--units``/``--scale``); ``uv_space`` as ``--uv-space``/``--no-uv-space`` (None:
-    detected); ``maps`` False writes the colour only (``--no-maps``); ``background``
-    None writes RGBA maps with a transparent background, else RGB on that colour.
+    detected); ``registered`` False as ``--no-register``; ``maps`` False writes the
+    colour only (``--no-maps``); ``background`` None writes RGBA maps with a transparent
+    background, else RGB on that colour.
     Every object is made as ``imagemap synthesize`` makes it with the same options
     (:meth:`mesh_request`). Checked when built: an unknown preset or option, or a
     value the configuration refuses, is an
@@ -69,6 +70,7 @@ class BatchOptions:
     auto_views: bool = False
     scale: float = 1.0
     uv_space: bool | None = None
+    registered: bool | None = None
     maps: bool = True
 
     def __post_init__(self) -> None:
@@ -106,6 +108,8 @@ class BatchOptions:
         object.__setattr__(self, "scale", float(scale))
         if self.uv_space not in (None, True, False):
             raise InputError(f"uv_space: expected True, False or None, got {self.uv_space!r}")
+        if self.registered not in (None, True, False):
+            raise InputError(f"registered: expected True, False or None, got {self.registered!r}")
         for flag in ("auto_views", "maps"):
             if not isinstance(getattr(self, flag), bool):
                 raise InputError(f"{flag}: expected True or False, got {getattr(self, flag)!r}")
@@ -163,6 +167,7 @@ class BatchOptions:
             config=self.config(),
             seed=self.seed,
             uv_space=self.uv_space,
+            registered=self.registered,
             maps=self.maps,
         )
 

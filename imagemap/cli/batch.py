@@ -119,6 +119,7 @@ def run_batch_cli(args: argparse.Namespace) -> int:
         auto_views=getattr(args, "views", None) == "auto",
         scale=unit_scale(args.units, args.scale),
         uv_space=args.uv_space,
+        registered=args.registered,
         maps=not args.no_maps,
     )
     if args.scheduler and not args.scheduler.startswith(("tcp://", "tls://", "inproc://")):

@@ -60,7 +60,9 @@ def _mesh_preview(textured, database, first_name: str, size):
 
 
 def how_made(made, views) -> str:
-    """The closing line's "3 view(s)", or "its UV atlas" on the uv-space path."""
+    """The closing line's "3 view(s)", or "its UV atlas" on the uv-space and registered paths."""
+    if made.path == "registered":
+        return "its UV atlas (mesh examples registered)"
     return "its UV atlas" if made.path == "uv-space" else f"{len(views)} view(s)"
 
 
@@ -164,6 +166,7 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         seed=args.seed,
         examples=tuple(examples) if examples else None,
         uv_space=getattr(args, "uv_space", None),
+        registered=getattr(args, "registered", None),
         maps=not getattr(args, "no_maps", False),
     )
     start = time.perf_counter()

@@ -105,8 +105,8 @@ def add_mesh_options(
     parser: argparse.ArgumentParser, uv_space: bool = False, fine_views: bool = False
 ) -> None:
     """--view, --views, --size, --texture-size, --units, --scale: how meshes are seen,
-    textured and written; with ``uv_space``, --uv-space and --no-uv-space too; with
-    ``fine_views``, --size's default (None) is each mesh's own
+    textured and written; with ``uv_space``, --uv-space, --no-uv-space and --no-register
+    too; with ``fine_views``, --size's default (None) is each mesh's own
     (:func:`imagemap.scene.bake.view_size_for`), else 200x150."""
     group = parser.add_argument_group("meshes (input .glb .obj .ply ...; output .glb or .obj)")
     if uv_space:
@@ -127,6 +127,16 @@ def add_mesh_options(
             action="store_const",
             const=False,
             help="synthesize by views even when the examples share the query's UV layout",
+        )
+        group.add_argument(
+            "--no-register",
+            dest="registered",
+            action="store_const",
+            const=False,
+            default=None,
+            help="synthesize by views when the database's textured meshes are in other UV "
+            "layouts than the query's (default: they are registered to the query in 3-D and "
+            "resampled into its atlas: the registered path)",
         )
     group.add_argument(
         "--view",

@@ -14,9 +14,10 @@ Three paths (:attr:`MeshResult.path` says which ran, and the log at INFO):
   (rigid, mirrored where the class allows it, then smooth non-rigid) and resampled into
   the query's atlas (an xatlas atlas for a query without UVs); the uv-space synthesis
   then runs on them as on examples in the layout.
-- **views** (depth-map examples only, or forced): one synthesis per view, all from the same examples (chosen once for the
-  object, :func:`shared_examples`), textured by projection (one view) or baked into a
-  UV atlas, each texel from the view that sees it best (:func:`imagemap.scene.bake.bake_views`).
+- **views** (depth-map examples only, or forced): one synthesis per view, all from the
+  same examples (chosen once for the object, :func:`shared_examples`), textured by
+  projection (one view) or baked into a UV atlas, each texel from the view that sees it
+  best (:func:`imagemap.scene.bake.bake_views`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from imagemap.depth.pipeline import colorize
 from imagemap.depth.selection import selection_distances
 from imagemap.io import InputError
 from imagemap.mesh.library import ExampleSet
+from imagemap.mesh.register import registered_examples
 from imagemap.mesh.uvspace import (
     LAYOUT_TEST_SIZE,
     UVExample,
@@ -41,7 +43,6 @@ from imagemap.mesh.uvspace import (
     shares_layout,
     surface_maps,
 )
-from imagemap.mesh.register import registered_examples
 from imagemap.scene.bake import bake_views, project_texture, uv_atlas, view_shares
 from imagemap.scene.files import check_finite, load_mesh, textured_mesh
 from imagemap.scene.views import (
@@ -241,7 +242,10 @@ def registrable_examples(
     found = {}
     for name in wanted:
         example_mesh = examples.mesh(name)
-        if getattr(example_mesh.visual, "uv", None) is not None and texture_image(example_mesh) is not None:
+        if (
+            getattr(example_mesh.visual, "uv", None) is not None
+            and texture_image(example_mesh) is not None
+        ):
             found[name] = example_mesh
     if not found or (names and set(names) - set(found)):
         return None
@@ -416,7 +420,8 @@ def _colorize_registered(
     query = with_atlas(mesh)
     if texture_size is None:
         own = texture_image(mesh)
-        sizes = [max(texture_image(m).shape[:2]) for m in meshes.values()]
+        textures = [texture_image(m) for m in meshes.values()]
+        sizes = [max(t.shape[:2]) for t in textures if t is not None]
         texture_size = int(max(own.shape[:2])) if own is not None else int(max(sizes))
     if step is not None:
         step(f"registering {len(meshes)} mesh examples to the query")
@@ -439,7 +444,7 @@ def _colorize_registered(
         step(f"synthesizing in the UV atlas ({texture_size}^2)")
     result = colorize_uv(
         query,
-        examples,
+        list[UVExample](examples),
         config,
         size=int(texture_size),
         names=[e.name for e in examples],
