@@ -43,7 +43,13 @@ from imagemap.mesh.uvspace import (
     shares_layout,
     surface_maps,
 )
-from imagemap.scene.bake import bake_views, project_texture, uv_atlas, view_shares
+from imagemap.scene.bake import (
+    MIN_TEXTURE_SIZE,
+    bake_views,
+    project_texture,
+    uv_atlas,
+    view_shares,
+)
 from imagemap.scene.files import check_finite, load_mesh, textured_mesh
 from imagemap.scene.views import (
     DEFAULT_SIZE,
@@ -419,10 +425,15 @@ def _colorize_registered(
     synthesis on them."""
     query = with_atlas(mesh)
     if texture_size is None:
+        # The query's own texture's size (one under MIN_TEXTURE_SIZE, a placeholder, does
+        # not count), else the examples' largest.
         own = texture_image(mesh)
         textures = [texture_image(m) for m in meshes.values()]
         sizes = [max(t.shape[:2]) for t in textures if t is not None]
-        texture_size = int(max(own.shape[:2])) if own is not None else int(max(sizes))
+        if own is not None and max(own.shape[:2]) >= MIN_TEXTURE_SIZE:
+            texture_size = int(max(own.shape[:2]))
+        else:
+            texture_size = int(max(sizes))
     if step is not None:
         step(f"registering {len(meshes)} mesh examples to the query")
     examples, _ = registered_examples(
