@@ -404,6 +404,7 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
         groups.append((-1, -1))
     everything = np.arange(len(q_faces))
     laplacian = _laplacian(welded_faces, count)
+    indices: dict[int, SurfaceIndex] = {}  # the query's parts: made once
     for stiffness in STIFFNESS:
         pulls = np.zeros_like(points)
         weight = np.zeros(count)
@@ -421,7 +422,9 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
                 continue
             # Each vertex towards its closest point of the query part (exact: none on
             # the same surface) ...
-            f, b, d = closest_points(q_vertices, q_faces[q_subset], points[v_index], seed)
+            if q_part not in indices:
+                indices[q_part] = SurfaceIndex(q_vertices, q_faces[q_subset], seed)
+            f, b, d = indices[q_part].closest(points[v_index])
             near = d < pull
             there = np.einsum("nk,nkc->nc", b, q_vertices[q_faces[q_subset[f]]])
             pulls[v_index[near]] += there[near] - points[v_index[near]]
@@ -450,14 +453,56 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
     )
 
 
+class SurfaceIndex:
+    """A mesh's faces ready for closest-point queries (:meth:`closest`).
+
+    The candidate faces of a point are those of its :data:`CLOSEST_CANDIDATES` nearest
+    dense surface samples (each face has samples at its centroid and near its corners
+    too, so that a small or thin face is never without one); the closest point on each
+    distinct candidate triangle is exact (:func:`trimesh.triangles.closest_point`).
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0):
+        self.vertices, self.faces = vertices, faces
+        count = max(len(faces) * SAMPLES_PER_FACE, 64)
+        samples, sample_face, _ = surface_samples(vertices, faces, count, seed)
+        every = np.arange(len(faces))
+        # Corners drawn a tenth towards the centroid: distinct samples, each of its face.
+        corners, centroids = vertices[faces], vertices[faces].mean(axis=1)
+        inset = 0.9 * corners + 0.1 * centroids[:, None, :]
+        self.sample_face = np.r_[sample_face, every, np.repeat(every, 3)]
+        self.tree = cKDTree(np.r_[samples, centroids, inset.reshape(-1, 3)])
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(face (N,), barycentrics (N, 3), distance (N,)) of each point's closest point."""
+        k = min(CLOSEST_CANDIDATES, len(self.sample_face))
+        _, nearest = self.tree.query(points, k=k)
+        candidates = np.sort(self.sample_face[nearest.reshape(len(points), k)], axis=1)
+        # Each distinct candidate face of a point once (several samples share a face).
+        fresh = np.ones(candidates.shape, dtype=bool)
+        fresh[:, 1:] = candidates[:, 1:] != candidates[:, :-1]
+        rows, cols = np.nonzero(fresh)
+        triangles = self.vertices[self.faces[candidates[rows, cols]]]
+        closest = trimesh.triangles.closest_point(triangles, points[rows])
+        distance = np.full(candidates.shape, np.inf)
+        distance[rows, cols] = np.linalg.norm(closest - points[rows], axis=1)
+        found = np.full(candidates.shape + (3,), np.nan)
+        found[rows, cols] = closest
+        pick = np.argmin(distance, axis=1)
+        every = np.arange(len(points))
+        face = candidates[every, pick]
+        chosen = found[every, pick]
+        bary = trimesh.triangles.points_to_barycentric(self.vertices[self.faces[face]], chosen)
+        bary = np.clip(bary, 0.0, 1.0)
+        bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-12)
+        return face, bary, distance[every, pick]
+
+
 def closest_points(
     vertices: np.ndarray, faces: np.ndarray, points: np.ndarray, seed: int = 0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(face (N,), barycentrics (N, 3), distance (N,)) of each point's closest surface point.
-
-    The candidate faces of a point are those of its :data:`CLOSEST_CANDIDATES` nearest
-    dense surface samples; the closest point on each candidate triangle is exact
-    (:func:`trimesh.triangles.closest_point`).
+    """(face (N,), barycentrics (N, 3), distance (N,)) of each point's closest surface point
+    (:class:`SurfaceIndex`).
 
     Examples
     --------
@@ -466,32 +511,7 @@ def closest_points(
     >>> face.tolist(), np.round(bary, 3).tolist(), np.round(dist, 3).tolist()
     ([0], [[0.5, 0.25, 0.25]], [2.0])
     """
-    count = max(len(faces) * SAMPLES_PER_FACE, 64)
-    samples, sample_face, _ = surface_samples(vertices, faces, count, seed)
-    # Every face has samples at its centroid and its corners too (a small or thin face
-    # may draw none; a point at a vertex then finds every face around it).
-    every = np.arange(len(faces))
-    # (corners drawn a tenth towards the centroid: distinct samples, each of its face).
-    corners, centroids = vertices[faces], vertices[faces].mean(axis=1)
-    inset = 0.9 * corners + 0.1 * centroids[:, None, :]
-    samples = np.r_[samples, centroids, inset.reshape(-1, 3)]
-    sample_face = np.r_[sample_face, every, np.repeat(every, 3)]
-    k = min(CLOSEST_CANDIDATES, len(samples))
-    _, nearest = cKDTree(samples).query(points, k=k)
-    nearest = nearest.reshape(len(points), k)
-    candidates = sample_face[nearest]  # (N, k)
-    triangles = vertices[faces[candidates.ravel()]]
-    repeated = np.repeat(points, k, axis=0)
-    closest = trimesh.triangles.closest_point(triangles, repeated)
-    distance = np.linalg.norm(closest - repeated, axis=1).reshape(len(points), k)
-    pick = np.argmin(distance, axis=1)
-    rows = np.arange(len(points))
-    face = candidates[rows, pick]
-    chosen = closest.reshape(len(points), k, 3)[rows, pick]
-    bary = trimesh.triangles.points_to_barycentric(vertices[faces[face]], chosen)
-    bary = np.clip(bary, 0.0, 1.0)
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-12)
-    return face, bary, distance[rows, pick]
+    return SurfaceIndex(vertices, faces, seed).closest(points)
 
 
 @dataclass
