@@ -677,7 +677,13 @@ def registered_examples(
     (list of RegisteredExample, nearest first; dict name -> residual of every example)
     """
     start = time.perf_counter()
-    fits = {name: register_rigid(mesh, query, mirror, seed) for name, mesh in examples.items()}
+    surface_frame(np.asarray(query.vertices, dtype=np.float64), np.asarray(query.faces))
+    fits = {}
+    for name, mesh in examples.items():
+        try:
+            fits[name] = register_rigid(mesh, query, mirror, seed)
+        except InputError as error:  # a degenerate example: named
+            raise InputError(f"mesh example {name}: {error}") from error
     residuals = {name: fit.residual for name, fit in fits.items()}
     if names:
         chosen = list(names)
