@@ -20,8 +20,7 @@ import math
 import numbers
 import os
 import sys
-from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 # Nothing heavy at import: the command line builds its parser with these types
 # before NumPy is loaded (imagemap --help stays fast).
@@ -206,14 +205,16 @@ def parse_size(text: str) -> tuple[int, int]:
     return width, height
 
 
-@dataclass(frozen=True)
-class Check:
+class Check(NamedTuple):
     """What a setting's value must be (:func:`setting`): its kind and bounds.
 
     ``kind`` is ``"float"`` (finite, in [minimum, maximum], below ``below``),
     ``"floats"`` (a tuple of such), ``"int"``, ``"bool"``, ``"choice"`` (one of
     ``choices``), ``"odd_width"`` (an odd positive integer: a window's width) or
     ``"odd_widths"`` (a non-empty tuple of them). ``optional``: None passes too.
+
+    A named tuple, not a dataclass: the command line's parser imports this module, and
+    making a dataclass (and importing :mod:`dataclasses`) costs a few ms of every start.
     """
 
     kind: str = "float"
@@ -230,7 +231,7 @@ class Check:
             if not isinstance(value, tuple):
                 raise InputError(f"{name}: expected a tuple of numbers, got {value!r}")
             for item in value:
-                replace(self, kind="float")(name, item)
+                self._replace(kind="float")(name, item)
         elif self.kind == "float":
             value = check_float(name, value, minimum=self.minimum, maximum=self.maximum)
             if self.below is not None and value >= self.below:
@@ -263,6 +264,7 @@ def setting(default: Any, **check: Any) -> Any:
 
     Examples
     --------
+    >>> from dataclasses import dataclass
     >>> @dataclass(frozen=True)
     ... class Example:
     ...     m: int = setting(2, kind="int", minimum=1)
@@ -275,11 +277,15 @@ def setting(default: Any, **check: Any) -> Any:
     """
     if isinstance(default, (list, dict, set)):
         raise TypeError("setting: use an immutable default (a tuple)")
+    from dataclasses import field  # deferred: start-up (the parser imports this module)
+
     return field(default=default, metadata={"check": Check(**check)})
 
 
 def check_settings(instance: Any) -> None:
     """Run the :class:`Check` of every field of a dataclass made with :func:`setting`."""
+    from dataclasses import fields  # deferred: start-up (the parser imports this module)
+
     for f in fields(instance):
         check = f.metadata.get("check")
         if check is not None:

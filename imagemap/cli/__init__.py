@@ -12,36 +12,46 @@ does not know itself as ``args.forwarded`` and parses them when it runs.
 Building the parser imports nothing heavy: ``register`` functions must not import
 NumPy, SciPy, scikit-image or numba (``imagemap --help`` and every ``COMMAND
 --help`` answer at once); the ``func`` functions import what their command needs.
-The colorization options and presets come from :mod:`imagemap.depth.config`, which
-imports nothing heavy; the choices that live in heavy modules are restated here
-(:data:`PIXELWISE_BACKEND_NAMES`; a test checks it against the library).
+``imagemap COMMAND ...`` registers only that command's module (:data:`COMMANDS`): the
+process that runs or explains one command does not build the others' parsers.
+The colorization options come from :mod:`imagemap.depth.options`, which imports
+nothing heavy; the choices that live in other modules (presets, backends, methods) are
+restated here (a test checks them against the library).
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import ctypes
 import gc
 import importlib
-import logging
 import sys
 
 import imagemap
-from imagemap.core.params import APPEARANCE_PYRAMIDS, BACKENDS
-from imagemap.depth.config import METHODS, PRESETS
 from imagemap.errors import InputError
 
-#: The ``--preset`` choices.
-PRESET_NAMES = tuple(sorted(PRESETS))
-#: The ``--backend`` choices.
-BACKEND_NAMES = BACKENDS
+# The names below are restated, not imported: their modules make dataclasses (about
+# 15 ms of every start, `imagemap synthesize --help` included). A test checks each
+# against the library (tests/test_startup.py).
+
+#: The ``--preset`` choices: ``sorted(imagemap.depth.config.PRESETS)``.
+PRESET_NAMES = ("busts", "fish", "humans", "shells")
+#: The ``--backend`` choices: ``imagemap.core.params.BACKENDS``.
+BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
 #: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
-#: The ``imagemap evaluate --methods`` names, in report order.
-METHOD_NAMES = tuple(METHODS)
-#: The ``--appearance-pyramid`` choices.
-APPEARANCE_PYRAMID_NAMES = APPEARANCE_PYRAMIDS
+#: The ``imagemap evaluate --methods`` names, in report order: ``imagemap.depth.config.METHODS``.
+METHOD_NAMES = (
+    "full",
+    "copy_nearest",
+    "warp_nearest",
+    "one_pass",
+    "mean_vote",
+    "no_position",
+    "laplacian",
+    "paper",
+)
+#: The ``--appearance-pyramid`` choices: ``imagemap.core.params.APPEARANCE_PYRAMIDS``.
+APPEARANCE_PYRAMID_NAMES = ("gaussian", "laplacian")
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",
@@ -54,6 +64,18 @@ SUBCOMMAND_MODULES = [
 #: Modules adding subcommands to a group made by a module above: group -> modules.
 GROUP_MODULES = {"btf": ["imagemap.cli.btf_ma"]}
 
+#: Each top-level command -> the module of ``SUBCOMMAND_MODULES`` that registers it:
+#: ``imagemap COMMAND ...`` builds only that module's parsers (a test checks the table
+#: against the whole parser).
+COMMANDS = {
+    "synthesize": "imagemap.cli.synthesize",
+    "db": "imagemap.cli.synthesize",
+    "btf": "imagemap.cli.btf",
+    "evaluate": "imagemap.cli.evaluate",
+    "bench": "imagemap.cli.bench",
+    "batch": "imagemap.cli.batch",
+}
+
 EPILOG = """\
 examples:
   imagemap synthesize query_depth.png --db fish_db/ -o map.png --preset fish
@@ -65,7 +87,10 @@ Run 'imagemap COMMAND --help' for the options of each command.
 """
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``imagemap`` parser: every command's, or only ``command``'s (a name of
+    :data:`COMMANDS`; another name or None: every command's)."""
+    modules = [COMMANDS[command]] if command in COMMANDS else SUBCOMMAND_MODULES
     parser = argparse.ArgumentParser(
         prog="imagemap",
         description=(
@@ -80,12 +105,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action=_VersionAction)
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     groups: dict[str, argparse._SubParsersAction] = {}
-    for name in SUBCOMMAND_MODULES:
+    for name in modules:
         groups.update(importlib.import_module(name).register(subparsers) or {})
     for group, names in GROUP_MODULES.items():
-        for name in names:
+        for name in names if group in groups else ():
             importlib.import_module(name).register(groups[group])
     return parser
+
+
+def _command(argv: list[str] | None) -> str | None:
+    """The command ``argv`` names: its first word that is not an option (the top-level
+    options, ``--help`` and ``--version``, take no value), or None."""
+    words = sys.argv[1:] if argv is None else argv
+    return next((word for word in words if not word.startswith("-")), None)
 
 
 class _VersionAction(argparse.Action):
@@ -157,6 +189,9 @@ def _map_large_blocks() -> None:
     process), not on import."""
     if not sys.platform.startswith("linux"):
         return
+    import contextlib  # deferred: start-up (the parser alone needs neither)
+    import ctypes  # deferred: start-up (the parser alone needs neither)
+
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL("libc.so.6").mallopt(-3, _MMAP_THRESHOLD)  # -3: M_MMAP_THRESHOLD
 
@@ -185,7 +220,7 @@ def _given_options(argv: list[str] | None) -> frozenset[str]:
     """The destinations of the options the command line gives itself (not their defaults):
     a command refuses an option that does not apply to its input, and two that conflict,
     whatever their order (``--views A --view B``)."""
-    parser = build_parser()
+    parser = build_parser(_command(argv))
     _record_given(parser)
     try:
         namespace, _ = parser.parse_known_args(argv)
@@ -195,7 +230,7 @@ def _given_options(argv: list[str] | None) -> frozenset[str]:
 
 
 def _main(argv: list[str] | None, own_process: bool = False) -> int:
-    parser = build_parser()
+    parser = build_parser(_command(argv))
     try:
         args, unknown = parser.parse_known_args(argv)
         if getattr(args, "forward_unknown", False):
@@ -209,6 +244,8 @@ def _main(argv: list[str] | None, own_process: bool = False) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    import logging  # deferred: start-up (not needed by --help)
+
     level = logging.WARNING
     if getattr(args, "verbose", False):
         level = logging.INFO

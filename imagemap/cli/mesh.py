@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -196,6 +195,8 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "scale_to_metres": scale,
         }
+        import json
+
         text = json.dumps(report, indent=2)
         writers[Path(args.report)] = lambda tmp: Path(tmp).write_text(text)
     cleanup = None

@@ -1,6 +1,6 @@
 """Options shared by the commands that synthesize: made from one declaration.
 
-The colorization options are :data:`imagemap.depth.config.OPTIONS`: every command
+The colorization options are :data:`imagemap.depth.options.OPTIONS`: every command
 (``synthesize``, ``batch``, ``evaluate``) adds them with :func:`add_config_options`
 and reads them back with :func:`config_options`, so a new option reaches every route
 by being declared once. Also here: the mesh options and the background colour,
@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from imagemap.depth.config import OPTIONS
+from imagemap.depth.options import OPTIONS
 from imagemap.errors import InputError
 from imagemap.validate import (
     fraction,
@@ -40,7 +40,7 @@ _TYPES = {
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
-    """Add every option of :data:`~imagemap.depth.config.OPTIONS`, and ``--seed``.
+    """Add every option of :data:`~imagemap.depth.options.OPTIONS`, and ``--seed``.
 
     An option not given is None: the preset's value stands.
     """
@@ -68,7 +68,7 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 
 
 def config_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The options of :data:`~imagemap.depth.config.OPTIONS` given on the command line.
+    """The options of :data:`~imagemap.depth.options.OPTIONS` given on the command line.
 
     Examples
     --------

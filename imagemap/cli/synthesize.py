@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import logging
 import sys
 import time
 from pathlib import Path
@@ -17,11 +15,8 @@ from imagemap.cli.options import (
     config_options,
     parse_colour,
 )
-from imagemap.depth.config import resolve_config
 from imagemap.errors import InputError
 from imagemap.progress import progress
-
-log = logging.getLogger("imagemap")
 
 #: Why the command functions import inside themselves (tests/test_imports_marked.py):
 #: the parser is built without NumPy, SciPy or numba, so ``imagemap --help`` answers at
@@ -322,6 +317,7 @@ def _check_outputs(args: argparse.Namespace, jobs: list[dict], database) -> None
 def run_synthesize(args: argparse.Namespace) -> int:
     from imagemap.database import Database
     from imagemap.depth.budget import guard_colorize
+    from imagemap.depth.config import resolve_config
     from imagemap.io import read_depth
 
     mesh = is_mesh_request(args)  # a mesh in, or a textured mesh out
@@ -484,6 +480,8 @@ def _peak_rss_mb() -> float | None:
 
 
 def _json_writer(content):
+    import json
+
     text = json.dumps(content, indent=2)
 
     def write(tmp) -> None:
@@ -517,6 +515,8 @@ def _preview(depth, result, database):
 
 
 def run_db_check(args: argparse.Namespace) -> int:
+    import json
+
     from imagemap.database import check_database
 
     rows, problems = check_database(args.directory)

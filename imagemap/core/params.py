@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from imagemap.core.choices import APPEARANCE_PYRAMIDS, BACKENDS, VOTES
 from imagemap.validate import check_settings, setting
 
 __all__ = [
@@ -25,15 +26,6 @@ __all__ = [
     "LevelPlan",
     "uniform_levels",
 ]
-
-#: Nearest-neighbour searches of the E-step (:mod:`imagemap.core.search`).
-BACKENDS = ("patchmatch", "exact", "pynndescent")
-#: How matched windows make the map (:attr:`EngineParams.vote`), the values users type
-#: (``--vote``): the mean M-step and a copy source made from the final matches; the mean
-#: alone; the mode (a copy) inside the iterations too.
-VOTES = ("copy", "mean", "mode")
-#: What the appearance bands of a level are: its Gaussian level or its Laplacian band.
-APPEARANCE_PYRAMIDS = ("gaussian", "laplacian")
 
 
 @dataclass(frozen=True)
