@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 
@@ -16,7 +15,13 @@ from imagemap.errors import InputError
 #: because imagemap.cli imports this module.
 DEFERRED_IMPORTS = "command functions import their modules when run; the parser loads none"
 
-log = logging.getLogger("imagemap")
+
+def _log():
+    """The ``imagemap`` logger (logging is imported when a command logs, not for its parser)."""
+    import logging
+
+    return logging.getLogger("imagemap")
+
 
 METHODS = ("pixelwise", "texture_optimization")
 BTF_INPUT = "sample BTF (.npz written by imagemap, or UBO2014 .btf)"
@@ -182,7 +187,7 @@ def _extrapolate(args: argparse.Namespace) -> int:
                 )
     backend = args.backend
     if args.search is not None:
-        log.warning("--search is deprecated; use --backend (approximate = pca_kdtree)")
+        _log().warning("--search is deprecated; use --backend (approximate = pca_kdtree)")
         if backend is None:
             backend = {"approximate": "pca_kdtree", "exact": "kdtree"}.get(args.search, args.search)
     kind = PixelwiseParams if args.method == "pixelwise" else TextureOptimizationParams
@@ -239,7 +244,7 @@ def _extrapolate(args: argparse.Namespace) -> int:
             prepared = prepare_scans(scans, sample_images, response=response)
             _, hypothesis, _ = orient_to_sample(prepared, sample_images, seed=args.seed)
             scans = apply_orientation(scans, hypothesis)
-        log.info(
+        _log().info(
             "registered: azimuths %s, quarter turns %s, angles %s, shifts %s",
             registration.azimuths,
             registration.turns,
@@ -282,7 +287,7 @@ def _response(chart: str | None):
     except InputError as exc:
         raise InputError(f"--chart {chart}: {exc}") from exc
     r = fit.response
-    log.info(
+    _log().info(
         "scanner response from %s: offsets %s, multipliers %s, gammas %s (RMS %s)",
         chart,
         [round(v, 4) for v in r.offsets],

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 
@@ -15,7 +14,12 @@ from imagemap.errors import InputError
 #: because imagemap.cli imports this module.
 DEFERRED_IMPORTS = "command functions import their modules when run; the parser loads none"
 
-log = logging.getLogger("imagemap")
+
+def _log():
+    """The ``imagemap`` logger (logging is imported when a command logs, not for its parser)."""
+    import logging
+
+    return logging.getLogger("imagemap")
 
 
 def register(btf_subparsers: argparse._SubParsersAction) -> None:
@@ -178,7 +182,7 @@ def _synthesize(args: argparse.Namespace) -> int:
                 "would turn the synthesized textures into nonsense)"
             )
         if not model.sample_digest:
-            log.warning("%s: an older model without its sample's fingerprint", args.model)
+            _log().warning("%s: an older model without its sample's fingerprint", args.model)
     check_memory(
         synthesis_bytes(
             model, (height, width), n_components=None if sample is None else sample.n_components

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 
@@ -13,6 +12,14 @@ from imagemap.errors import InputError
 #: imports what it needs when it runs, and register() imports imagemap.cli's helpers late
 #: because imagemap.cli imports this module.
 DEFERRED_IMPORTS = "command functions import their modules when run; the parser loads none"
+
+
+def _log():
+    """The ``imagemap`` logger (logging is imported when a command logs, not for its parser)."""
+    import logging
+
+    return logging.getLogger("imagemap")
+
 
 #: --integration choices, as the API names them.
 INTEGRATION_NAMES = {"poisson": "poisson", "frankot-chellappa": "frankot_chellappa"}
@@ -104,7 +111,7 @@ def _warn_name_order(paths: list[str]) -> None:
             return
         numbers.append(int(found[-1]))
     if len(set(numbers)) == len(numbers) and numbers != sorted(numbers):
-        logging.getLogger("imagemap").warning(
+        _log().warning(
             "images are not in the order of their numbers (%s, %s, ..); each is paired with "
             "the lights file's line of its position",
             paths[0],

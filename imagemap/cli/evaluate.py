@@ -8,7 +8,6 @@ import sys
 
 from imagemap.cli import METHOD_NAMES, PRESET_NAMES, add_common_options
 from imagemap.cli.options import add_config_options, config_options
-from imagemap.depth.config import resolve_config
 from imagemap.errors import InputError
 from imagemap.validate import positive_int
 
@@ -81,6 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_evaluate(args: argparse.Namespace) -> int:
     from imagemap.database import Database
+    from imagemap.depth.config import resolve_config
     from imagemap.evaluation import METHODS, leave_one_out
     from imagemap.outputs import check_output_directory, resolve
     from imagemap.report import check_report, summarize, write_report
