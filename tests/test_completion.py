@@ -385,3 +385,24 @@ def test_nearest_host_distance_equals_the_nine_gathers():
         nearest_host_distance(colours, host, cell_y.astype(np.int64), cell_x.astype(np.int64))[0, 0]
         == 0
     )
+
+
+def test_neighbour_counts_from_the_pair_table_are_the_k_d_trees(monkeypatch):
+    # The table of all pairs (used up to PAIR_TABLE_POINTS, no scipy.spatial import) must
+    # count exactly what cKDTree.query_ball_point counts, points at the radius included.
+    from scipy.spatial import cKDTree
+
+    from imagemap.depth import completion
+
+    rng = np.random.default_rng(0)
+    points = rng.random((400, 3)) * 0.3
+    points[1] = points[0] + [0.07, 0.0, 0.0]  # at the radius: the boundary case
+    points[2] = points[0] + [0.0, 0.07 * (1 - 1e-6), 0.0]
+    radius = 0.07
+    expected = cKDTree(points).query_ball_point(points, r=radius, return_length=True)
+    counts = completion._neighbour_counts(points, radius)
+    assert len(points) <= completion.PAIR_TABLE_POINTS
+    assert counts.min() >= 1 and counts.max() > 3  # the sample has neighbours to count
+    np.testing.assert_array_equal(counts, expected)
+    monkeypatch.setattr(completion, "PAIR_TABLE_POINTS", 100)  # the k-d tree's route
+    np.testing.assert_array_equal(completion._neighbour_counts(points, radius), expected)

@@ -62,8 +62,7 @@ import logging
 from typing import NamedTuple
 
 import numpy as np
-from scipy import ndimage, sparse, spatial
-from scipy.sparse import csgraph
+from scipy import ndimage
 
 from imagemap.core.blend import copy_through, fill_background, smooth_inside
 from imagemap.depth.config import Completion
@@ -194,12 +193,7 @@ def small_features(
     means = np.stack(sums, -1) / counts[:, None]
     compact = np.flatnonzero(keep)
     if len(compact):
-        # Neighbours in colour through a k-d tree: a noisy photograph can have tens of
-        # thousands of compact components, too many for a table of all pairs.
-        tree = spatial.cKDTree(means[compact])
-        repeats = tree.query_ball_point(
-            means[compact], r=completion.feature_contrast * (1 - 1e-6), return_length=True
-        )
+        repeats = _neighbour_counts(means[compact], completion.feature_contrast * (1 - 1e-6))
         keep[compact] = repeats <= completion.max_repeats
     for i in map(int, np.flatnonzero(keep)):
         box = boxes[i - 1]
@@ -212,6 +206,35 @@ def small_features(
     lookup = np.zeros(n + 1, np.int32)
     lookup[keep] = np.arange(1, int(keep.sum()) + 1)
     return lookup[labels], int(keep.sum())
+
+
+#: Up to this many points :func:`_neighbour_counts` counts from a table of all pairs (8 MB
+#: at most) and needs no k-d tree: importing scipy.spatial costs about 0.07 s of CPU, a
+#: tenth of a 200x150 synthesis's imports, for the few tens of features of a map.
+PAIR_TABLE_POINTS = 1024
+
+
+def _neighbour_counts(points: np.ndarray, radius: float) -> np.ndarray:
+    """For each of ``points`` (N, C), how many of them (itself included) lie within
+    ``radius`` (Euclidean): a table of all pairs for up to :data:`PAIR_TABLE_POINTS`, a
+    k-d tree above (a noisy photograph can have tens of thousands of compact components).
+
+    Both compare the squared distance, summed channel by channel, with ``radius ** 2``,
+    as scipy's ``cKDTree.query_ball_point`` does: the same counts either way.
+
+    Examples
+    --------
+    >>> _neighbour_counts(np.array([[0.0, 0.0], [0.05, 0.0], [0.2, 0.0]]), 0.07)
+    array([2, 2, 1])
+    """
+    if len(points) > PAIR_TABLE_POINTS:
+        from scipy.spatial import cKDTree  # deferred: start-up (0.07 s; many points only)
+
+        return cKDTree(points).query_ball_point(points, r=radius, return_length=True)
+    squared = np.zeros((len(points), len(points)))
+    for channel in points.T:
+        squared += (channel[:, None] - channel[None, :]) ** 2
+    return (squared <= radius * radius).sum(1)
 
 
 def _span(box) -> int:
@@ -238,7 +261,9 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
         seconds.append(index[b][joined])
     del index
     first, second = np.concatenate(firsts), np.concatenate(seconds)
-    graph = sparse.coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
+    from scipy.sparse import coo_matrix, csgraph  # deferred: start-up (wide components only)
+
+    graph = coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
     del first, second
     m, which = csgraph.connected_components(graph, directed=False)
     del graph
