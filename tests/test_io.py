@@ -65,3 +65,50 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
     finally:
         os.umask(umask)
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
+
+
+def _png_kinds(folder):
+    """PNGs of every kind Pillow writes, made by Pillow itself (not by imagemap)."""
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, (9, 11, 3), np.uint8)
+    made = {
+        "grey": Image.fromarray(rgb[..., 0]),
+        "grey_alpha": Image.fromarray(rgb[..., :2].copy(), mode="LA"),
+        "rgb": Image.fromarray(rgb),
+        "rgba": Image.fromarray(np.dstack([rgb, rgb[..., :1]])),
+        "palette": Image.fromarray(rgb).quantize(colors=7),
+        "bilevel": Image.fromarray(rgb[..., 0] > 127),
+        "grey16": Image.fromarray(rng.integers(0, 65536, (9, 11)).astype(np.uint16)),
+    }
+    transparent = made["palette"].copy()
+    transparent.info["transparency"] = 2
+    made["palette_transparent"] = transparent
+    paths = {}
+    for name, image in made.items():
+        paths[name] = folder / f"{name}.png"
+        image.save(paths[name])
+    return paths
+
+
+def test_pngs_read_without_imageio_are_imageios_arrays(tmp_path):
+    # Pillow alone reads a PNG (no imageio import at start-up): the same values, dtype
+    # and layout as imageio's Pillow plugin, for every kind of PNG; writes the same bytes.
+    import imageio.v3 as iio
+
+    from imagemap import io
+
+    for name, path in _png_kinds(tmp_path).items():
+        expected = iio.imread(path)
+        got = io._read_png(path)
+        assert got is not None and got.dtype == expected.dtype, name
+        assert got.flags.writeable, name
+        np.testing.assert_array_equal(got, expected, err_msg=name)
+        if got.ndim == 2 or got.shape[-1] in (3, 4):
+            iio.imwrite(tmp_path / "by_imageio.png", got, extension=".png")
+            io._write_png(tmp_path / "by_pillow.png", got)
+            by_imageio, by_pillow = (tmp_path / f"by_{w}.png" for w in ("imageio", "pillow"))
+            assert by_pillow.read_bytes() == by_imageio.read_bytes(), name
+    (tmp_path / "noise.png").write_bytes(b"\x89PNG not really")
+    assert io._read_png(tmp_path / "noise.png") is None  # left to imageio, as before
