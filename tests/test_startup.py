@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -42,8 +43,56 @@ def test_import_imagemap_loads_nothing_heavy():
 
 def test_building_the_parser_loads_no_scientific_module():
     loaded = _modules_after("from imagemap.cli import build_parser; build_parser()")
-    # numpy: still loaded by imagemap/cli/btf*.py at registration (not this module's files).
-    assert not loaded.intersection(set(HEAVY) - {"numpy"})
+    assert not loaded.intersection(HEAVY)
+
+
+#: Runs ``imagemap ARGS`` as the program does (``python -m imagemap``), then the probe.
+_PROGRAM = (
+    "import runpy, sys\n"
+    "sys.argv = ['imagemap', {args}]\n"
+    "try:\n"
+    "    runpy.run_module('imagemap', run_name='__main__')\n"
+    "except SystemExit:\n"
+    "    pass\n"
+)
+
+
+def test_synthesize_help_imports_no_scientific_module_and_no_other_command():
+    # #44 item 1: `imagemap synthesize --help` within a few ms of bare Python. It prints
+    # its help having imported no scientific module, not the configuration's dataclasses
+    # (imagemap.depth.config: 15 ms) and no other command's module.
+    loaded = _modules_after(_PROGRAM.format(args="'synthesize', '--help'"), top_level=False)
+    assert not {name.split(".")[0] for name in loaded}.intersection(HEAVY)
+    assert "imagemap.cli.synthesize" in loaded  # the probe ran the command's parser
+    assert not loaded.intersection({"imagemap.depth.config", "imagemap.core.params"})
+    others = {"imagemap.cli.btf", "imagemap.cli.evaluate", "imagemap.cli.batch"}
+    assert not loaded.intersection(others)
+
+
+def test_each_command_is_registered_by_the_module_commands_names():
+    # COMMANDS says which module registers each command: `imagemap COMMAND` builds that
+    # module's parsers alone. Every command of the whole parser is in the table, and
+    # each module's parser has exactly the commands the table gives it.
+    from imagemap.cli import COMMANDS, SUBCOMMAND_MODULES
+
+    def commands(parser):
+        (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        return set(action.choices)
+
+    assert commands(build_parser()) == set(COMMANDS)
+    assert set(COMMANDS.values()) == set(SUBCOMMAND_MODULES)
+    for command, module in COMMANDS.items():
+        assert commands(build_parser(command)) == {c for c, m in COMMANDS.items() if m == module}
+
+
+def test_one_commands_parser_reads_a_command_line_as_the_whole_parser_does(capsys):
+    argv = ["synthesize", "q_depth.png", "--db", "db", "-o", "out.png", "--m", "3", "--vote",
+            "mean", "--no-mirror", "--seed", "7"]  # fmt: skip
+    whole, alone = (vars(build_parser(c).parse_args(argv)) for c in (None, "synthesize"))
+    assert alone == whole and alone["m"] == 3 and alone["mirror"] is False
+    assert main(["synthesise", "q_depth.png"]) == 2  # an unknown command lists them all
+    error = capsys.readouterr().err
+    assert "invalid choice: 'synthesise'" in error and "'btf'" in error and "'batch'" in error
 
 
 def test_a_synthesis_does_not_import_scipy_signal_or_stats():
