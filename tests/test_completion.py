@@ -406,3 +406,43 @@ def test_neighbour_counts_from_the_pair_table_are_the_k_d_trees(monkeypatch):
     np.testing.assert_array_equal(counts, expected)
     monkeypatch.setattr(completion, "PAIR_TABLE_POINTS", 100)  # the k-d tree's route
     np.testing.assert_array_equal(completion._neighbour_counts(points, radius), expected)
+
+
+def test_joined_components_are_csgraphs_components_in_its_numbering():
+    # The doubled-grid labelling (no scipy.sparse import) must give the components of
+    # csgraph.connected_components on the pixels in raster order, numbered alike: the
+    # wide components' pieces, and so the features, keep their order and their labels.
+    from scipy.sparse import coo_matrix, csgraph
+
+    from imagemap.depth.completion import _joined_components
+
+    rng = np.random.default_rng(1)
+    for trial in range(6):
+        shape = (int(rng.integers(5, 40)), int(rng.integers(5, 40)))
+        region = rng.random(shape) < (0.5 if trial % 2 else 0.95)
+        region[:2] = False  # a box smaller than the picture
+        across = rng.random((shape[0], shape[1] - 1)) < 0.6
+        down = rng.random((shape[0] - 1, shape[1])) < 0.6
+        index = np.full(shape, -1)
+        index[region] = np.arange(int(region.sum()))
+        edges = [
+            (index[a][join], index[b][join])
+            for a, b, links in (
+                (np.s_[:, :-1], np.s_[:, 1:], across),
+                (np.s_[:-1, :], np.s_[1:, :], down),
+            )
+            for join in [links & region[a] & region[b]]
+        ]
+        first = np.concatenate([f for f, _ in edges])
+        second = np.concatenate([s for _, s in edges])
+        size = int(region.sum())
+        graph = coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
+        m, which = csgraph.connected_components(graph, directed=False)
+        expected = np.zeros(shape, np.int32)
+        expected[region] = which + 1
+        labels, count = _joined_components(region, across, down)
+        assert count == m and m > 3
+        np.testing.assert_array_equal(labels, expected)
+    empty = np.zeros((3, 4), bool)
+    labels, none = _joined_components(empty, np.ones((3, 3), bool), np.ones((2, 4), bool))
+    assert none == 0 and not labels.any()

@@ -242,6 +242,47 @@ def _span(box) -> int:
     return max(box[0].stop - box[0].start, box[1].stop - box[1].start)
 
 
+def _joined_components(
+    region: np.ndarray, across: np.ndarray, down: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """The connected components of the graph of ``region``'s pixels (H, W) in which a
+    pixel is joined to its right neighbour where ``across`` (H, W - 1) and to the one
+    below where ``down`` (H - 1, W): (labels (H, W) int32, 0 outside ``region``, 1..m
+    numbered in the order of each component's first pixel in raster order; m).
+
+    ``ndimage.label`` of a grid of twice the resolution (pixels at even rows and
+    columns, each join between the two pixels it joins): the components and the
+    numbering of ``scipy.sparse.csgraph.connected_components`` on the pixels in raster
+    order, without importing scipy.sparse (about 0.07 s of CPU at start-up).
+
+    Examples
+    --------
+    >>> region = np.array([[1, 1, 1], [1, 0, 1]], bool)
+    >>> across = np.array([[True, False], [False, False]])
+    >>> down = np.array([[True, False, True]])
+    >>> _joined_components(region, across, down)
+    (array([[1, 1, 2],
+           [1, 0, 2]], dtype=int32), 2)
+    """
+    components = np.zeros(region.shape, np.int32)
+    rows, columns = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
+    if not len(rows):
+        return components, 0
+    # Within the region's box: 20 bytes a pixel of the box at most (a 4096^2 box, 320 MB).
+    y0, y1, x0, x1 = rows[0], rows[-1] + 1, columns[0], columns[-1] + 1
+    inside = region[y0:y1, x0:x1]
+    height, width = inside.shape
+    grid = np.zeros((2 * height - 1, 2 * width - 1), bool)
+    grid[::2, ::2] = inside
+    grid[::2, 1::2] = across[y0:y1, x0 : x1 - 1] & inside[:, :-1] & inside[:, 1:]
+    grid[1::2, ::2] = down[y0 : y1 - 1, x0:x1] & inside[:-1, :] & inside[1:, :]
+    labelled = np.zeros(grid.shape, np.int32)
+    count = ndimage.label(grid, output=labelled)  # 4-connected: pixels through joins
+    del grid
+    components[y0:y1, x0:x1] = labelled[::2, ::2]
+    return components, int(count)
+
+
 def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
     """Cut the wide components at colour steps (half the feature ``contrast`` between
     neighbouring pixels); their compact pieces become new
@@ -249,27 +290,14 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
     its enclosure) and the rest of them is dropped. Vectorized but for pieces
     with holes: a noisy picture cut at its colour steps has millions of pieces,
     too many to visit one by one."""
-    index = np.full(region.shape, -1, np.int32)
-    size = int(region.sum())
-    index[region] = np.arange(size, dtype=np.int32)
     step = contrast / 2
-    firsts, seconds = [], []
+    joined = []
     for a, b in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1, :], np.s_[1:, :])):
-        joined = region[a] & region[b]
-        joined &= np.sqrt(((colours[a] - colours[b]) ** 2).sum(-1)) < step
-        firsts.append(index[a][joined])
-        seconds.append(index[b][joined])
-    del index
-    first, second = np.concatenate(firsts), np.concatenate(seconds)
-    from scipy.sparse import coo_matrix, csgraph  # deferred: start-up (wide components only)
-
-    graph = coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
-    del first, second
-    m, which = csgraph.connected_components(graph, directed=False)
-    del graph
-    pieces = np.zeros(labels.shape, np.int32)
-    pieces[region] = which + 1
-    del which
+        join = region[a] & region[b]
+        join &= np.sqrt(((colours[a] - colours[b]) ** 2).sum(-1)) < step
+        joined.append(join)
+    pieces, m = _joined_components(region, *joined)
+    del joined
     labels = np.where(region, 0, labels)
     # Each piece's size and box.
     inside = np.flatnonzero(pieces)
