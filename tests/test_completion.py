@@ -408,12 +408,13 @@ def test_neighbour_counts_from_the_pair_table_are_the_k_d_trees(monkeypatch):
     np.testing.assert_array_equal(completion._neighbour_counts(points, radius), expected)
 
 
-def test_joined_components_are_csgraphs_components_in_its_numbering():
+def test_joined_components_are_csgraphs_components_in_its_numbering(monkeypatch):
     # The doubled-grid labelling (no scipy.sparse import) must give the components of
     # csgraph.connected_components on the pixels in raster order, numbered alike: the
     # wide components' pieces, and so the features, keep their order and their labels.
     from scipy.sparse import coo_matrix, csgraph
 
+    from imagemap.depth import completion
     from imagemap.depth.completion import _joined_components
 
     rng = np.random.default_rng(1)
@@ -442,6 +443,11 @@ def test_joined_components_are_csgraphs_components_in_its_numbering():
         expected[region] = which + 1
         labels, count = _joined_components(region, across, down)
         assert count == m and m > 3
+        np.testing.assert_array_equal(labels, expected)
+        with monkeypatch.context() as patch:  # the large regions' route: csgraph itself
+            patch.setattr(completion, "GRID_LABEL_PIXELS", 0)
+            labels, count = _joined_components(region, across, down)
+        assert count == m
         np.testing.assert_array_equal(labels, expected)
     empty = np.zeros((3, 4), bool)
     labels, none = _joined_components(empty, np.ones((3, 3), bool), np.ones((2, 4), bool))

@@ -242,6 +242,39 @@ def _span(box) -> int:
     return max(box[0].stop - box[0].start, box[1].stop - box[1].start)
 
 
+#: Up to this many pixels in the box of the region :func:`_joined_components` labels,
+#: the doubled grid (20 bytes a pixel of the box: 20 MB); above, csgraph, whose memory
+#: follows the region's pixels, not its box, and whose import is nothing beside a large
+#: map's synthesis.
+GRID_LABEL_PIXELS = 2**20
+
+
+def _csgraph_components(
+    region: np.ndarray, across: np.ndarray, down: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """:func:`_joined_components` by ``scipy.sparse.csgraph`` on the pixels in raster order."""
+    from scipy.sparse import coo_matrix, csgraph  # deferred: start-up (large regions only)
+
+    index = np.full(region.shape, -1, np.int32)
+    size = int(region.sum())
+    index[region] = np.arange(size, dtype=np.int32)
+    firsts, seconds = [], []
+    for a, b, links in ((np.s_[:, :-1], np.s_[:, 1:], across), (np.s_[:-1, :], np.s_[1:, :], down)):
+        join = links & region[a] & region[b]
+        firsts.append(index[a][join])
+        seconds.append(index[b][join])
+    del index
+    first, second = np.concatenate(firsts), np.concatenate(seconds)
+    del firsts, seconds
+    graph = coo_matrix((np.ones(len(first), np.int8), (first, second)), (size, size))
+    del first, second
+    count, which = csgraph.connected_components(graph, directed=False)
+    del graph
+    components = np.zeros(region.shape, np.int32)
+    components[region] = which + 1
+    return components, int(count)
+
+
 def _joined_components(
     region: np.ndarray, across: np.ndarray, down: np.ndarray
 ) -> tuple[np.ndarray, int]:
@@ -250,10 +283,11 @@ def _joined_components(
     below where ``down`` (H - 1, W): (labels (H, W) int32, 0 outside ``region``, 1..m
     numbered in the order of each component's first pixel in raster order; m).
 
-    ``ndimage.label`` of a grid of twice the resolution (pixels at even rows and
-    columns, each join between the two pixels it joins): the components and the
-    numbering of ``scipy.sparse.csgraph.connected_components`` on the pixels in raster
-    order, without importing scipy.sparse (about 0.07 s of CPU at start-up).
+    Up to :data:`GRID_LABEL_PIXELS` in the region's box, ``ndimage.label`` of a grid of
+    twice the resolution (pixels at even rows and columns, each join between the two
+    pixels it joins), which needs no scipy.sparse import (about 0.07 s of CPU at
+    start-up); above, ``scipy.sparse.csgraph.connected_components`` on the pixels in
+    raster order. Both give the same components, numbered alike.
 
     Examples
     --------
@@ -268,8 +302,9 @@ def _joined_components(
     rows, columns = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
     if not len(rows):
         return components, 0
-    # Within the region's box: 20 bytes a pixel of the box at most (a 4096^2 box, 320 MB).
     y0, y1, x0, x1 = rows[0], rows[-1] + 1, columns[0], columns[-1] + 1
+    if (y1 - y0) * (x1 - x0) > GRID_LABEL_PIXELS:
+        return _csgraph_components(region, across, down)
     inside = region[y0:y1, x0:x1]
     height, width = inside.shape
     grid = np.zeros((2 * height - 1, 2 * width - 1), bool)
