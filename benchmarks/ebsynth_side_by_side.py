@@ -21,12 +21,12 @@ flips every repetition), one after the other, never two at once:
     EbSynth's other settings at their defaults (OpenMP uses every core). Its input PNGs
     are written by the driver before the clock starts; the time is EbSynth's process
     alone, reading its inputs and writing its output included;
-(c) the floor: a fresh process that imports what ``synthesize`` imports and loads one
-    cached numba kernel, no work (``run.py``'s ``run_floor``, the cli group's floor).
-    Its wall time includes the interpreter's start and its closing garbage collections,
-    which ``synthesize`` skips (``gc.freeze()`` before exit; about 0.7 s of the floor's
-    wall here), so the table gives beside it, in brackets, the imports and the kernel
-    load as timed inside the process.
+(c) the floor: a fresh process that imports every module a 200x150 ``synthesize``
+    imports and loads every numba kernel it loads from numba's cache, no work
+    (``run.py``'s ``run_floor``, the cli group's floor, made by ``startup.py``). Its
+    wall time includes the interpreter's start; like ``synthesize`` it skips the
+    closing garbage collections (``gc.freeze()`` before exit). The table gives beside
+    it, in brackets, the imports and the kernel load as timed inside the process.
 
 Wall time and peak RSS of (a) and (b) are GNU ``/usr/bin/time``'s (``%e``, ``%M``: the
 measured process alone, not this driver); the floor's are ``run_floor``'s. Before the

@@ -140,7 +140,10 @@ for kernel in plan["kernels"]:
         function = getattr(function, part)
     function.compile(pickle.loads(base64.b64decode(kernel["signature"])))
 loaded = time.perf_counter()
-print(json.dumps({"imports": imported - begin, "kernel_load": loaded - imported}))
+status = open("/proc/self/status").read() if sys.platform.startswith("linux") else ""
+hwm = [line.split()[1] for line in status.splitlines() if line.startswith("VmHWM:")]
+print(json.dumps({"imports": imported - begin, "kernel_load": loaded - imported,
+                  "rss_peak_mb": int(hwm[0]) / 1024 if hwm else float("nan")}))
 gc.freeze()  # as imagemap.cli.main: no closing collections
 """
 
@@ -165,7 +168,8 @@ def timed(command: list[str], checkout: Path) -> dict:
         stdout, stderr = out.read().decode(), err.read().decode()
     if child.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} (in {checkout}) failed: {stderr.strip()}")
-    return {"wall": wall, "cpu": usage.ru_utime + usage.ru_stime, "stdout": stdout, "stderr": stderr}
+    cpu = usage.ru_utime + usage.ru_stime
+    return {"wall": wall, "cpu": cpu, "stdout": stdout, "stderr": stderr}
 
 
 def bytecode_state(checkout: Path) -> tuple[int, int]:
@@ -227,6 +231,15 @@ def record(checkout: Path, class_dir: Path, work: Path) -> dict:
         "kernels": [(k["name"], k["seconds"]) for k in plan["kernels"]],
         "modules": len(plan["modules"]),
     }
+
+
+def floor(checkout: Path, plan: Path) -> dict:
+    """One fresh floor process (:data:`FLOOR_CHILD`) of ``checkout`` with the ``plan`` that
+    :func:`record` wrote: its wall and CPU seconds, the imports' and the kernel load's
+    seconds timed inside it, and its peak RSS (MB, ``VmHWM``; NaN off Linux)."""
+    done = timed([sys.executable, "-c", FLOOR_CHILD, str(plan)], checkout)
+    inside = json.loads(done["stdout"])
+    return {"seconds": done["wall"], "cpu_seconds": done["cpu"], **inside}
 
 
 def _tag(checkout: Path) -> str:
