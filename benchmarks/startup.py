@@ -13,7 +13,8 @@ reversed each repetition), one process at a time; the table gives the median of 
 - ``imagemap synthesize`` of the held-out fish of a generated class at ``--size``
   (default 200x150, two examples, ``--preset fish --m 2 -q``), the whole process.
 
-The floor follows the code it measures: before the timed runs one untimed synthesis per
+The floor follows the code it measures: before the timed runs (after one untimed
+synthesis per checkout that fills numba's cache) one more untimed synthesis per
 checkout (:data:`RECORD_CHILD`, the same command run by ``imagemap.cli.main`` with
 ``-X importtime``) records the modules loaded at its end and each numba kernel it loaded
 (module, name and signature); the floor imports those modules (in sorted order) and
@@ -34,8 +35,10 @@ slower than the timed ones.
 
 ``--before DIR`` runs every case on a second checkout too (its own directory first on
 ``PYTHONPATH``, as ``cd DIR && PYTHONPATH=DIR python -m imagemap``), interleaved with
-this one, and gives the ratios after / before and whether the two syntheses wrote
-byte-identical PNGs (SHA-256 of every file written).
+this one, and gives the ratios after / before (of wall and of CPU time: the median of
+the repetitions' own ratios, each repetition's two processes run back to back, and
+their range) and whether the two syntheses wrote byte-identical PNGs (SHA-256 of every
+file written).
 
 Python compiles a module without cached bytecode (``__pycache__/*.pyc``) from its source
 in every process that imports it: an installed imagemap has it (``pip`` writes it), a
@@ -285,6 +288,9 @@ def run(args: argparse.Namespace) -> dict:
     report: dict = {"size": args.size, "reps": args.reps, "load_start": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as scratch:
         work = Path(scratch)
+        for path in checkouts.values():  # numba's cache, before anything is timed
+            timed([sys.executable, "-m", "imagemap", *synthesis_args(class_dir, work / "warm.png")]
+                  + ["-q"], path)  # fmt: skip
         recorded = {name: record(path, class_dir, work) for name, path in checkouts.items()}
         table = {
             name: cases(path, recorded[name]["plan"], class_dir, work)
@@ -318,6 +324,7 @@ def run(args: argparse.Namespace) -> dict:
                     "wall": statistics.median(w for w, _ in values),
                     "cpu": statistics.median(c for _, c in values),
                     "walls": [w for w, _ in values],
+                    "cpus": [c for _, c in values],
                 }
                 for case, values in times[name].items()
             },
@@ -342,7 +349,7 @@ def format_report(report: dict) -> str:
     ]
     header = "| case | " + " | ".join(f"{n} s" for n in names) + " | above `python -c pass` |"
     if len(names) == 2:
-        header += " ratio after / before (wall) |"
+        header += " after / before: wall, CPU (median of the repetitions' ratios; range) |"
     lines += [header, "|---" + "|---:" * (len(names) + 1 + (len(names) == 2)) + "|"]
     bare = {n: report[n]["cases"]["python -c pass"]["wall"] for n in names}
     for case in report["after"]["cases"]:
@@ -353,8 +360,14 @@ def format_report(report: dict) -> str:
         above = " / ".join(f"{report[n]['cases'][case]['wall'] - bare[n]:+.3f}" for n in names)
         row = f"| {case} | " + " | ".join(cells) + f" | {above} |"
         if len(names) == 2:
-            ratio = report["after"]["cases"][case]["wall"] / report["before"]["cases"][case]["wall"]
-            row += f" ×{ratio:.2f} |"
+            after, before = report["after"]["cases"][case], report["before"]["cases"][case]
+            cells = []
+            for key in ("walls", "cpus"):
+                ratios = [a / b for a, b in zip(after[key], before[key], strict=True)]
+                cells.append(
+                    f"×{statistics.median(ratios):.2f} ({min(ratios):.2f}–{max(ratios):.2f})"
+                )
+            row += f" {', '.join(cells)} |"
         lines.append(row)
     lines.append("")
     for n in names:
