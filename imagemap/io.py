@@ -185,17 +185,20 @@ def _read_png(path: Path) -> np.ndarray | None:
     from PIL import Image, UnidentifiedImageError  # deferred: start-up (Pillow, 0.01 s)
 
     try:
-        image = Image.open(path)
+        opened = Image.open(path)
     except UnidentifiedImageError:
         return None
-    with image:
-        if image.format != "PNG" or getattr(image, "custom_mimetype", None) == "image/apng":
+    with opened:
+        if opened.format != "PNG" or getattr(opened, "custom_mimetype", None) == "image/apng":
             return None
-        if image.mode == "P":
-            image = image.convert(image.palette.mode)
-        elif image.mode == "I":  # as imageio: 16-bit grey as uint16 (Pillow >= 10.1)
-            image = image.convert("I;16" if sys.byteorder == "little" else "I;16B")
-        return np.array(image)
+        pixels: Image.Image = opened
+        if opened.mode == "P":
+            if opened.palette is None:
+                return None
+            pixels = opened.convert(opened.palette.mode)
+        elif opened.mode == "I":  # as imageio: 16-bit grey as uint16 (Pillow >= 10.1)
+            pixels = opened.convert("I;16" if sys.byteorder == "little" else "I;16B")
+        return np.array(pixels)
 
 
 def _write_png(tmp: Path, array: np.ndarray) -> None:
