@@ -505,23 +505,24 @@ def _startup_script():
     return module
 
 
-#: The floor's plan, recorded once per driver process: (data folder, plan file).
+#: The floor's plans, recorded once per driver process: data folder and size -> plan file.
 _FLOOR_PLAN: dict[str, Path] = {}
 
 
-def run_floor(data_dir: Path | None = None) -> dict:
-    """The floor of a fresh synthesis process: one process that imports every module a
-    200x150 ``imagemap synthesize`` imports and loads every numba kernel it loads from
-    numba's cache, and does no work (``benchmarks/startup.py``'s floor; its plan comes
-    from one untimed synthesis, recorded once per driver process). Like ``imagemap``, it
-    freezes the heap before exit: no closing collections in its wall time."""
+def run_floor(data_dir: Path | None = None, size: tuple[int, int] = (200, 150)) -> dict:
+    """The floor of a fresh synthesis process: one process that imports every module an
+    ``imagemap synthesize`` of the generated fish at ``size`` imports and loads every numba
+    kernel it loads from numba's cache, and does no work (``benchmarks/startup.py``'s
+    floor; its plan comes from one untimed synthesis, recorded once per driver process).
+    Like ``imagemap``, it freezes the heap before exit: no closing collections in its
+    wall time."""
     startup = _startup_script()
     data_dir = Path(data_dir or BENCHMARKS / ".data")
-    key = str(data_dir)
+    key = f"{data_dir}:{size}"
     if key not in _FLOOR_PLAN:
         folder = data_dir / "floor"
         folder.mkdir(parents=True, exist_ok=True)
-        class_dir = fish_class(data_dir, (200, 150))
+        class_dir = fish_class(data_dir, size)
         _FLOOR_PLAN[key] = startup.record(BENCHMARKS.parent, class_dir, folder)["plan"]
     found = startup.floor(BENCHMARKS.parent, _FLOOR_PLAN[key])
     figures = {
@@ -563,7 +564,7 @@ def run_cli(data_dir: Path, settings: Settings, out_dir: Path) -> list[dict]:
                  size=size)
         )  # fmt: skip
         _progress(rows[-1])
-    rows.append(run_floor(data_dir))
+    rows.append(run_floor(data_dir, settings.cli_size))
     _progress(rows[-1])
     return rows
 

@@ -177,3 +177,26 @@ def test_without_the_benchmark_script_only_bench_fails(tmp_path, monkeypatch, ca
     assert main(["bench", "--quick"]) == 2
     err = capsys.readouterr().err
     assert "run.py: not found" in err and "source checkout" in err
+
+
+def test_the_startup_benchmark_counts_top_level_imports_only():
+    # benchmarks/startup.py's breakdown: the top-level imports' cumulative times (a nested
+    # import is inside its parent's), those numba made while loading a kernel left out.
+    import importlib.util
+
+    path = ROOT / "benchmarks" / "startup.py"
+    if not path.is_file():
+        pytest.skip("no benchmarks/startup.py checkout")
+    spec = importlib.util.spec_from_file_location("imagemap_benchmarks_startup", path)
+    startup = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(startup)
+    text = (
+        "import time: self [us] | cumulative | imported package\n"
+        "import time:       100 |        100 |   numpy.core\n"
+        "import time:       200 |        300 | numpy\n"
+        "imagemap: a log line between the imports\n"
+        "import time:        50 |         50 | numba.np.arraymath\n"
+        "import time:        25 |       1000 | scipy\n"
+    )
+    assert startup._import_seconds(text, set()) == pytest.approx(1350e-6)
+    assert startup._import_seconds(text, {"numba.np.arraymath", "scipy"}) == pytest.approx(300e-6)
