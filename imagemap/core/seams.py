@@ -5,6 +5,9 @@ alpha-expansion (Boykov, Veksler & Zabih 2001) on Kwatra et al.'s seam cost (200
 "Graphcut textures"), each move one minimum cut (PyMaxflow); the terms of a move are
 a numba kernel (:func:`imagemap.core.kernels.expansion_terms`). The seams left are
 blended by :func:`imagemap.core.poisson.seamless_copy`.
+
+One module for one job: one solve (the full one and its coarse-to-fine form share the
+move loop, the terms and the cost bookkeeping, so they stay together).
 """
 
 from __future__ import annotations

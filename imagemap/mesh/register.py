@@ -1,5 +1,8 @@
 """Mesh examples in ANY UV layout: registered to the query in 3-D, resampled into its atlas.
 
+One module for one job: the registered path's preparation of the examples (rigid fit,
+parts, deformation, resampling share the closest-point index they are built on).
+
 The uv-space synthesis (:mod:`imagemap.mesh.uvspace`) needs examples in the query's UV
 layout. This module makes them so: each textured mesh example is
 
