@@ -290,22 +290,27 @@ def test_handed_over_pyramids_are_freed_level_by_level_with_the_same_result():
     assert kept_peak - released_peak > 0.8 * finest, (kept_peak, released_peak, finest)
 
 
-def test_exact_index_makes_its_distance_block_in_place():
-    """One block-sized float32 array (not the product, its double and their difference)."""
-    from imagemap.core.search import ExactIndex
+def test_exact_index_makes_its_distance_matrix_in_pieces_with_the_same_bytes(monkeypatch):
+    """One piece-sized float32 array at a time (not the product, its double and their
+    difference, nor the whole block of queries), and the same indices and distances as
+    the whole block: a last piece of one row (BLAS's gemv) is joined to the one before."""
+    from imagemap.core import search
 
     rng = np.random.default_rng(0)
     data = rng.standard_normal((2000, 8)).astype(np.float32)
-    queries = rng.standard_normal((3000, 8)).astype(np.float32)
-    index = ExactIndex(data)
+    queries = rng.standard_normal((3001, 8)).astype(np.float32)  # 3001 = 30 x 100 + 1
+    index = search.ExactIndex(data)
+    whole = index.query(queries)  # the default pieces hold the whole block here
+    monkeypatch.setattr(search, "_DISTANCE_FLOATS", 100 * len(data))
     tracemalloc.start()
     try:
         found, distances = index.query(queries)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    block = 4 * len(queries) * len(data)
-    assert peak < 1.3 * block, (peak, block)
+    piece = 4 * 101 * len(data)  # the largest piece: 100 rows and the joined last one
+    assert peak < 1.3 * piece, (peak, piece)
+    assert np.array_equal(found, whole[0]) and np.array_equal(distances, whole[1])
     expected = index.data_norms[None] - 2.0 * (queries @ data.T)
     assert np.array_equal(found, np.argmin(expected, axis=1))
 
@@ -377,3 +382,71 @@ def test_rgb_in_row_blocks_equals_the_whole_conversion():
     ycbcr = np.random.default_rng(0).random((600, 70, 3)).astype(np.float32)
     whole = np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0, 1).astype(np.float32)
     assert to_rgb(ycbcr).tobytes() == whole.tobytes()
+
+
+def _off_centre_database():
+    """Blobs in the corner of frames three times their size (crops that reach one side)."""
+    from imagemap.database import Database, Example
+    from tests.conftest import PALETTE, blob, painted
+
+    examples = []
+    for i, (cy, cx) in enumerate([(30, 40), (34, 150), (120, 44)]):
+        depth = blob((160, 200), centre=(cy, cx), radii=(20, 32), bumps=0.02, seed=i)
+        examples.append(Example.from_arrays(f"corner_{i}", depth, painted(depth, PALETTE)))
+    return Database(examples)
+
+
+@pytest.mark.slow  # two colorizations per preset: 6-12 s
+@pytest.mark.parametrize("preset", ["fish", "busts"])
+def test_examples_cut_to_their_objects_give_the_same_bytes(monkeypatch, preset):
+    """The bands stage crops every example's pyramid to its object and margin
+    (guides.crop_levels): the engine, working in frame coordinates, gives the same map
+    and sources as with the whole frames."""
+    from imagemap.depth import guides
+    from imagemap.depth.pipeline import colorize
+    from tests.conftest import blob
+
+    database = _off_centre_database()
+    query = blob((150, 180), centre=(70, 90), radii=(21, 30), bumps=0.02, seed=7)
+    crops = []
+    real_crop = guides.crop_levels
+
+    def spy(mappings, radius):
+        cropped = real_crop(mappings, radius)
+        crops.append([(m.origin, m.shape, m.frame) for m in cropped])
+        return cropped
+
+    monkeypatch.setattr(guides, "crop_levels", spy)
+    cut = colorize(query, database, preset, seed=1)
+    assert crops and all(shape != frame for levels in crops for _, shape, frame in levels)
+    monkeypatch.setattr(guides, "crop_levels", lambda mappings, radius: mappings)
+    whole = colorize(query, database, preset, seed=1)
+    assert np.array_equal(cut.image, whole.image)
+    assert np.array_equal(cut.source, whole.source)
+
+
+def test_a_crop_too_tight_for_the_windows_is_refused():
+    """Windows that would read past a crop's side inside the frame: a ValueError, not
+    padding where the frame has pixels."""
+    rng = np.random.default_rng(0)
+    mask = np.zeros((40, 40), bool)
+    mask[10:30, 10:30] = True
+    guide = rng.random((40, 40, 1)).astype(np.float32)
+    exemplar = Mapping(guide=guide, appearance=guide, mask=mask)
+    tight = Mapping(
+        guide=guide[8:32, 8:32],
+        appearance=guide[8:32, 8:32],
+        mask=mask[8:32, 8:32],
+        origin=(8, 8),
+        frame_shape=(40, 40),
+    )
+    query = Mapping(guide=guide, mask=mask)
+    params = EngineParams(
+        levels=uniform_levels((5,)),
+        backend="exact",
+        guide_weights=(1.0,),
+        appearance_weights=(1.0,),
+    )
+    synthesize([query], [[exemplar]], params)  # the whole frame: fine
+    with pytest.raises(ValueError, match="past its crop"):
+        synthesize([query], [[tight]], params)

@@ -143,6 +143,15 @@ def _validate(query_levels, exemplar_levels, params) -> None:
                 )
             if ex.appearance.shape[2] != exemplar_levels[0][level].appearance.shape[2]:
                 raise ValueError(f"exemplar {i} differs from exemplar 0 in appearance bands")
+            # Crops of the frame (Mapping.origin) aligned from level to level: a coarser
+            # level's colours are expanded onto the finer crop as onto the frame.
+            if level > 0 and tuple(levels[level - 1].origin) != (
+                2 * ex.origin[0],
+                2 * ex.origin[1],
+            ):
+                raise ValueError(
+                    f"exemplar {i}: the crop of level {level - 1} is not twice level {level}'s"
+                )
     n_appearance = exemplar_levels[0][0].appearance.shape[2]
     if len(params.appearance_weights) != n_appearance:
         raise ValueError(f"{n_appearance} appearance bands need as many appearance weights")
@@ -230,7 +239,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                     exemplars, exemplar_colours or [None] * len(exemplars), strict=True
                 )
             ]
-        smallest = min(min(e.shape) for e in exemplars)
+        smallest = min(min(e.frame) for e in exemplars)  # of the frames, not of crops
         k = min(plan.patch_size, smallest - (1 - smallest % 2))
         solver = None  # the coarser level's solver is done: free it before building this one
         level_params = params

@@ -32,6 +32,15 @@ class Mapping:
         The query's own factor (>= 0) per pixel on the position term's weight: less
         where the front end trusts the position less (None: 1 everywhere). Exemplars
         have none.
+    origin : (int, int)
+        Where the arrays' first row and column lie in the exemplar's whole frame: an
+        exemplar's mapping may be a crop of its frame (the object and the margin its
+        windows read), so that the frame is not held whole. The engine works and
+        answers (sources, positions) in frame coordinates: the same as with the whole
+        frame as long as no window it reads crosses a side of the crop that is not a
+        side of the frame (it checks). Needs a mask.
+    frame_shape : (int, int), optional
+        The whole frame's (H, W); None: the arrays' own (no crop).
     """
 
     guide: np.ndarray
@@ -39,6 +48,8 @@ class Mapping:
     mask: np.ndarray | None = None
     position: np.ndarray | None = None
     position_scale: np.ndarray | None = None
+    origin: tuple[int, int] = (0, 0)
+    frame_shape: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         guide = np.asarray(self.guide, dtype=np.float32)
@@ -81,10 +92,30 @@ class Mapping:
             if not np.all(np.isfinite(scale)) or np.any(scale < 0):
                 raise ValueError("position_scale must be finite and not negative")
             object.__setattr__(self, "position_scale", scale)
+        origin = (int(self.origin[0]), int(self.origin[1]))
+        frame = guide.shape[:2] if self.frame_shape is None else tuple(self.frame_shape)
+        if (
+            len(frame) != 2
+            or min(origin) < 0
+            or origin[0] + guide.shape[0] > frame[0]
+            or origin[1] + guide.shape[1] > frame[1]
+        ):
+            raise ValueError(f"a crop at {origin} of {guide.shape[:2]} is not inside {frame}")
+        if frame != guide.shape[:2] and self.mask is None:
+            raise ValueError("a cropped mapping needs a mask")
+        object.__setattr__(self, "origin", origin)
+        object.__setattr__(self, "frame_shape", (int(frame[0]), int(frame[1])))
 
     @property
     def shape(self) -> tuple[int, int]:
+        """The arrays' (H, W) (a crop's own, see ``origin``)."""
         return self.guide.shape[:2]
+
+    @property
+    def frame(self) -> tuple[int, int]:
+        """The whole frame's (H, W): the engine's coordinates."""
+        assert self.frame_shape is not None  # set by __post_init__
+        return self.frame_shape
 
 
 class ReleasableLevels(list):

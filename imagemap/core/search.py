@@ -40,8 +40,13 @@ __all__ = [
 
 log = logging.getLogger("imagemap")
 
-#: Floats per block of the brute-force distance matrix (~128 MB in float32).
+#: Floats per block of queries times data (~128 MB in float32): the query blocks whose
+#: norms are taken together, and the data block (the data are split only beyond it).
 _BLOCK_FLOATS = 32_000_000
+#: Floats per distance matrix actually made (~16 MB in float32): a block of queries is
+#: matched in pieces of this size. It was the whole 128 MB block, the engine's peak
+#: (the coarsest level's exact start) at 1024^2; the pieces give the same bytes.
+_DISTANCE_FLOATS = 4_000_000
 
 #: Beyond this many dimensions a k-d tree is no faster than brute force.
 KDTREE_MAX_DIMS = 16
@@ -84,6 +89,7 @@ class ExactIndex:
         distances = np.empty(queries.shape[0], dtype=np.float32)
         query_block = max(1, _BLOCK_FLOATS // max(n_data, 1))
         data_block = max(1, _BLOCK_FLOATS // query_block)
+        piece = max(1, _DISTANCE_FLOATS // max(min(n_data, data_block), 1))
         for q0 in range(0, queries.shape[0], query_block):
             q = queries[q0 : q0 + query_block]
             q_norms = np.einsum("ij,ij->i", q, q)
@@ -91,19 +97,38 @@ class ExactIndex:
             best_index = np.zeros(q.shape[0], dtype=np.int64)
             for d0 in range(0, n_data, data_block):
                 block = self.data[d0 : d0 + data_block]
-                # |d|^2 - 2 q.d, in place: one block-sized array, not three (the same
-                # float32 operations as ``norms - 2.0 * (q @ block.T)``).
-                dist = q @ block.T
-                np.multiply(dist, np.float32(2.0), out=dist)
-                np.subtract(self.data_norms[None, d0 : d0 + data_block], dist, out=dist)
-                local = np.argmin(dist, axis=1)
-                local_best = dist[np.arange(q.shape[0]), local] + q_norms
-                better = local_best < best
-                best[better] = local_best[better]
-                best_index[better] = local[better] + d0
+                for p0, p1 in _pieces(q.shape[0], piece):
+                    # |d|^2 - 2 q.d, in place: one piece-sized array, not three (the same
+                    # float32 operations as ``norms - 2.0 * (q @ block.T)``).
+                    dist = q[p0:p1] @ block.T
+                    np.multiply(dist, np.float32(2.0), out=dist)
+                    np.subtract(self.data_norms[None, d0 : d0 + data_block], dist, out=dist)
+                    local = np.argmin(dist, axis=1)
+                    local_best = dist[np.arange(p1 - p0), local] + q_norms[p0:p1]
+                    del dist
+                    better = local_best < best[p0:p1]
+                    best[p0:p1][better] = local_best[better]
+                    best_index[p0:p1][better] = local[better] + d0
             indices[q0 : q0 + q.shape[0]] = best_index
             distances[q0 : q0 + q.shape[0]] = np.maximum(best, 0.0)
         return indices, distances
+
+
+def _pieces(n: int, size: int) -> list[tuple[int, int]]:
+    """Rows 0:n in pieces of ``size`` rows, a last piece of one row joined to the one
+    before: BLAS computes a single row by another routine (gemv), whose sums may differ
+    in the last bit from the matrix product's (gemm); a block of n > 1 rows then gives
+    the same products in pieces as whole.
+
+    Examples
+    --------
+    >>> _pieces(7, 3), _pieces(6, 3), _pieces(1, 3)
+    ([(0, 3), (3, 7)], [(0, 3), (3, 6)], [(0, 1)])
+    """
+    starts = list(range(0, n, size))
+    if len(starts) > 1 and n - starts[-1] == 1:
+        starts.pop()
+    return list(zip(starts, starts[1:] + [n], strict=True))
 
 
 class PynndescentIndex:

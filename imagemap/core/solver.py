@@ -85,11 +85,16 @@ def _gaussian_window(k: int, sigma_fraction: float) -> np.ndarray:
     return (g / g.sum()).astype(np.float32)
 
 
-def _centroid_frame(mask: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
-    """(yc, xc, s, s): centroid and RMS radius of the mask (or of the whole frame)."""
+def _centroid_frame(
+    mask: np.ndarray | None, shape: tuple[int, int], origin: tuple[int, int] = (0, 0)
+) -> np.ndarray:
+    """(yc, xc, s, s): centroid and RMS radius of the mask (or of the whole frame), in
+    the frame's coordinates (``origin``: where the mask's first pixel lies in it)."""
     if mask is None:
         mask = np.ones(shape, dtype=bool)
     ys, xs = np.nonzero(mask)
+    if origin != (0, 0):  # the same integers, in the same order, as of the whole frame
+        ys, xs = ys + origin[0], xs + origin[1]
     # One isotropic scale, the object's RMS radius: limbs that move (an arm raised)
     # change the spread along one axis, and must not rescale that axis alone.
     radius = max(float(np.sqrt(ys.var() + xs.var())), 1.0)
@@ -386,15 +391,15 @@ class LevelSolver:
 
         # Exemplars: padded and packed into one array each (zero beyond each one's size).
         # Index arrays are int32 (half the memory of int64; sizes stay far below 2^31).
-        heights = [e.shape[0] for e in exemplars]
-        widths = [e.shape[1] for e in exemplars]
+        heights = [e.frame[0] for e in exemplars]  # the frames' (a mapping may be a crop)
+        widths = [e.frame[1] for e in exemplars]
         n_ex = len(exemplars)
         self.exemplar_shape = np.array([heights, widths], dtype=np.int64).T.copy()
         # Candidates: window centres in the (dilated) mask. Only their windows are ever
         # read, so the bands are packed for the box around them (an object often fills
         # a third of its frame): band_origin is the box's top-left in frame coordinates,
         # band_y, band_x a candidate's window's top-left in the packed bands.
-        self.exemplar_valid = [self._region(ex.mask, ex.shape, r) for ex in exemplars]
+        self.exemplar_valid = [self._frame_region(ex, r) for ex in exemplars]
         boxes = [_box(valid) for valid in self.exemplar_valid]
         self.band_origin = np.array([box[::2] for box in boxes], dtype=np.int32).reshape(-1, 2)
         hp = max(y1 - y0 for y0, y1, _, _ in boxes) + 2 * r
@@ -408,10 +413,13 @@ class LevelSolver:
         n_cand = 0
         for e in range(n_ex):
             ex = exemplars[e]
-            h, w = ex.shape
+            h, w = ex.frame
             y0, y1, x0, x1 = boxes[e]
-            # The box's rows and columns of the padded frame (padded coordinates).
-            rows, cols = slice(y0, y1 + 2 * r), slice(x0, x1 + 2 * r)
+            # The box's rows and columns of the padded frame (padded coordinates), in
+            # the mapping's own arrays (a crop: shifted by its origin).
+            oy, ox = ex.origin
+            _check_crop(ex, (y0 - r, y1 + r, x0 - r, x1 + r), e)
+            rows, cols = slice(y0 - oy, y1 + 2 * r - oy), slice(x0 - ox, x1 + 2 * r - ox)
             crop = (slice(0, y1 - y0 + 2 * r), slice(0, x1 - x0 + 2 * r))
             self._pad_guide(
                 self.exemplar_guide[e][crop],
@@ -432,9 +440,10 @@ class LevelSolver:
             cand_y.append(ys.astype(np.int32))
             cand_x.append(xs.astype(np.int32))
             if ex.position is not None:
-                positions.append(ex.position[ys, xs])
+                positions.append(ex.position[ys - oy, xs - ox])
             else:
-                positions.append(_positions(ys, xs, _centroid_frame(ex.mask, (h, w))))
+                frame = _centroid_frame(ex.mask, (h, w), ex.origin)
+                positions.append(_positions(ys, xs, frame))
             del ex
             if release is not None:  # packed: the caller's mapping may go now
                 exemplars[e] = None  # type: ignore[index]  # a list handed over with release
@@ -627,6 +636,19 @@ class LevelSolver:
         if mask is None:
             return np.ones(shape, dtype=bool)
         return ndimage.binary_dilation(mask, iterations=max(r, 1))
+
+    @classmethod
+    def _frame_region(cls, ex: Mapping, r: int) -> np.ndarray:
+        """An exemplar's window centres (its dilated mask), on its whole frame."""
+        region = cls._region(ex.mask, ex.shape, r)
+        if ex.frame == ex.shape:
+            return region
+        # A crop: dilated there (the same as on the frame while the mask stays r from a
+        # side of the crop inside the frame: checked by _check_crop), put in the frame.
+        whole = np.zeros(ex.frame, dtype=bool)
+        oy, ox = ex.origin
+        whole[oy : oy + ex.shape[0], ox : ox + ex.shape[1]] = region
+        return whole
 
     def _features(self, windows, index, position, bias) -> np.ndarray:
         """(N, D) features [guide PCA | weighted position | sqrt of the exemplar cost
@@ -921,6 +943,26 @@ class LevelSolver:
             out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
             out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
         return out
+
+
+def _check_crop(ex: Mapping, reach: tuple[int, int, int, int], e: int) -> None:
+    """ValueError unless the rows y0:y1 and columns x0:x1 (frame coordinates) that the
+    exemplar's windows read (``reach``) lie inside its crop, or past it only where the
+    crop's side is the frame's (padded as the frame would be)."""
+    if ex.frame == ex.shape:
+        return
+    y0, y1, x0, x1 = reach
+    (oy, ox), (h, w), (fh, fw) = ex.origin, ex.shape, ex.frame
+    if (
+        (y0 < oy and oy > 0)
+        or (y1 > oy + h and oy + h < fh)
+        or (x0 < ox and ox > 0)
+        or (x1 > ox + w and ox + w < fw)
+    ):
+        raise ValueError(
+            f"exemplar {e}: its windows read rows {y0}:{y1}, columns {x0}:{x1} of the "
+            f"frame, past its crop at {ex.origin} of {ex.shape}: crop with a larger margin"
+        )
 
 
 def _guide_parts(guide, context, active, n_own=None):

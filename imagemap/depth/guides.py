@@ -35,7 +35,9 @@ from imagemap.example import Example
 from imagemap.io import validate_depth
 
 __all__ = [
+    "CROP_SLACK",
     "context_level_weights",
+    "crop_levels",
     "context_levels",
     "depth_mappings",
     "example_mappings",
@@ -453,15 +455,85 @@ def example_ycbcr(example: Example) -> np.ndarray:
     return to_ycbcr(fill_background(image, example.mask))
 
 
+#: Pixels of a level kept around its object past the engine's reach (its dilated mask
+#: and windows: twice the largest window radius) when an example's mappings are cropped:
+#: room for the coarser level's colours expanded onto the crop (one coarse pixel) and
+#: to spare. The engine checks that its windows stay inside.
+CROP_SLACK = 8
+
+
+def crop_levels(mappings: list[Mapping], radius: int) -> list[Mapping]:
+    """An exemplar's pyramid cut to its object: each level the box of its mask and
+    ``2 * radius + CROP_SLACK`` pixels around it (``radius``: the largest window radius
+    the engine uses), aligned from level to level (a level's origin twice the coarser
+    one's), in copies (the whole frames are not held). The engine gives the same bytes
+    (:class:`~imagemap.core.mapping.Mapping`'s ``origin``). Levels without a mask, or
+    a crop that would be the whole frame, are left as they are.
+
+    Examples
+    --------
+    >>> mask = np.zeros((64, 80), bool); mask[20:30, 40:50] = True
+    >>> depth = np.where(mask, 0.5, 0.0).astype(np.float32)
+    >>> cropped = crop_levels(depth_mappings(depth, levels=2), radius=2)
+    >>> [(level.origin, level.shape, level.frame) for level in cropped]
+    [((0, 16), (54, 58), (64, 80)), ((0, 8), (27, 29), (32, 40))]
+    """
+    if any(level.mask is None for level in mappings):
+        return mappings
+    n = len(mappings)
+    align = 2 ** (n - 1)
+    top, left, bottom, right = np.inf, np.inf, -np.inf, -np.inf
+    for level, mapping in enumerate(mappings):
+        assert mapping.mask is not None
+        inside_rows = np.flatnonzero(mapping.mask.any(axis=1))
+        inside_cols = np.flatnonzero(mapping.mask.any(axis=0))
+        margin = 2 * radius + CROP_SLACK
+        scale = 2**level  # the box and its margin in the finest level's pixels
+        top = min(top, (inside_rows[0] - margin) * scale)
+        left = min(left, (inside_cols[0] - margin) * scale)
+        bottom = max(bottom, (inside_rows[-1] + 1 + margin) * scale)
+        right = max(right, (inside_cols[-1] + 1 + margin) * scale)
+    height, width = mappings[0].shape
+    y0, x0 = int(max(top, 0)) // align * align, int(max(left, 0)) // align * align
+    y1, x1 = int(min(bottom, height)), int(min(right, width))
+    if (y0, x0, y1, x1) == (0, 0, height, width):
+        return mappings
+    cropped = []
+    for level, mapping in enumerate(mappings):
+        scale = 2**level
+        oy, ox = y0 // scale, x0 // scale
+        rows = slice(oy, min(-(-y1 // scale), mapping.shape[0]))
+        cols = slice(ox, min(-(-x1 // scale), mapping.shape[1]))
+
+        def cut(array, rows=rows, cols=cols):
+            return None if array is None else array[rows, cols].copy()
+
+        cropped.append(
+            Mapping(
+                guide=cut(mapping.guide),
+                appearance=cut(mapping.appearance),
+                mask=cut(mapping.mask),
+                position=cut(mapping.position),
+                position_scale=cut(mapping.position_scale),
+                origin=(oy, ox),
+                frame_shape=mapping.frame,
+            )
+        )
+    return cropped
+
+
 def example_mappings(
     example: Example,
     levels: int = 3,
     appearance_pyramid: str = "gaussian",
     guides: Guides = _GUIDES,
     positions: list[np.ndarray] | None = None,
+    crop_radius: int | None = None,
 ) -> list[Mapping]:
     """An example's pyramid of mappings: depth bands, YCbCr (Gaussian or Laplacian) levels,
-    mask, and (``positions``, per level) where its pixels lie on the query."""
+    mask, and (``positions``, per level) where its pixels lie on the query; with
+    ``crop_radius`` (the engine's largest window radius) cut to the object
+    (:func:`crop_levels`)."""
     if appearance_pyramid not in APPEARANCE_PYRAMIDS:
         raise ValueError(f"appearance_pyramid must be one of {APPEARANCE_PYRAMIDS}")
     mask = example.mask
@@ -472,7 +544,7 @@ def example_mappings(
         appearance = gaussian_pyramid(ycbcr, levels)
     masks = mask_pyramid(mask, levels)
     level_positions: list[np.ndarray | None] = list(positions) if positions else [None] * levels
-    return [
+    mappings = [
         Mapping(
             guide=guide,
             appearance=bands,
@@ -487,3 +559,5 @@ def example_mappings(
             strict=True,
         )
     ]
+    del appearance, masks, level_positions
+    return mappings if crop_radius is None else crop_levels(mappings, crop_radius)

@@ -236,19 +236,32 @@ def _bands(state: State, config: DepthConfig) -> State:
             grid_points=int(config.registration.detail_size),
         )
         example_positions = list(registered)
+        del registered  # each example's positions freed once its mappings are cut
     scales = _position_factors(state, config, levels)
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions, scales)
     )
-    state.exemplar_levels = [
-        ReleasableLevels(
-            example_mappings(
-                e, levels, config.matching.appearance_pyramid, config.guides, positions
+    # The examples cut to their objects and the margin the engine's windows read (an
+    # object is often a third of its frame): the same synthesis, the frames not held.
+    params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
+    radius = max(plan.patch_size for plan in params.level_plans(levels)) // 2
+    state.exemplar_levels = []
+    for index, e in enumerate(state.chosen):
+        positions, example_positions[index] = example_positions[index], None
+        state.exemplar_levels.append(
+            ReleasableLevels(
+                example_mappings(
+                    e,
+                    levels,
+                    config.matching.appearance_pyramid,
+                    config.guides,
+                    positions,
+                    crop_radius=radius,
+                )
             )
         )
-        for e, positions in zip(state.chosen, example_positions, strict=True)
-    ]
+        del positions
     state.changed = f"{len(state.chosen)} examples"
     return state
 
