@@ -32,7 +32,7 @@ import numpy as np
 
 from imagemap import memory
 from imagemap.depth.config import resolve_config
-from imagemap.depth.guides import sized_pyramid
+from imagemap.depth.guides import CROP_SLACK, sized_pyramid
 
 __all__ = [
     "Estimate",
@@ -62,6 +62,9 @@ log = logging.getLogger("imagemap")
 # Checked (#44 item 3) in fresh processes (benchmarks/memory.py, VmHWM minus VmRSS before
 # the call, fish, m = 2) once the seams stage's peak came down: 1024^2 241 MB measured /
 # 254 estimated, 2048^2 726 / 766, 4096^2 2702 / 2805 (+4 % to +5 %; no refit needed).
+# Examples cut to their objects (#44 item 3, guides.crop_levels): the exemplar terms take
+# the crop's box (about, _crop_shape) for the frame: 1024^2 230 MB measured / 248
+# estimated, 2048^2 685 / 745 (+8 %, +9 %; with the frames 254 and 766, +10 %, +12 %).
 _QUERY_CENTRE_BYTES = 55  # coordinates (frame and packed), positions, matches, costs
 _CANDIDATE_BYTES = 40  # exemplar index, coordinates, position, bias
 _QUERY_PIXEL_BYTES = 60  # lookup, vote buffers, dense maps, the copy finish
@@ -267,7 +270,9 @@ def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Est
         sizes = [e.depth.size for e in database]
         order = np.argsort(sizes, kind="stable")[::-1][: max(1, min(n, len(database)))]
         chosen = [database[int(i)] for i in order]
-    exemplars = [(e.depth.shape, int(e.mask.sum()), _boundary(e.mask)) for e in chosen]
+    # The engine gets each example cut to its object and margin (guides.crop_levels).
+    crop = (2 * (max(pyramid.patch_sizes) // 2) + CROP_SLACK) * 2 ** (len(pyramid.patch_sizes) - 1)
+    exemplars = [(_crop_shape(e.mask, crop), int(e.mask.sum()), _boundary(e.mask)) for e in chosen]
     return estimate_colorize(
         mask.shape,
         int(mask.sum()),
@@ -276,6 +281,19 @@ def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Est
         pyramid.patch_sizes,
         config.matching.pca_fraction,
         guide_bands,
+    )
+
+
+def _crop_shape(mask: np.ndarray, margin: int) -> tuple[int, int]:
+    """(H, W) of the box of ``mask`` and ``margin`` pixels around it, inside the frame: about
+    an example's crop (:func:`imagemap.depth.guides.crop_levels`)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if len(rows) == 0:
+        return mask.shape
+    height, width = mask.shape
+    return (
+        min(int(rows[-1]) + 1 + margin, height) - max(int(rows[0]) - margin, 0),
+        min(int(cols[-1]) + 1 + margin, width) - max(int(cols[0]) - margin, 0),
     )
 
 
