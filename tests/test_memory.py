@@ -450,3 +450,27 @@ def test_a_crop_too_tight_for_the_windows_is_refused():
     synthesize([query], [[exemplar]], params)  # the whole frame: fine
     with pytest.raises(ValueError, match="past its crop"):
         synthesize([query], [[tight]], params)
+
+
+def test_exemplar_lookup_covers_the_box_of_the_candidates_not_the_frame():
+    """The PatchMatch lookup of candidate numbers is held for each exemplar's box of
+    window centres (from band_origin); every candidate is found at its frame pixel."""
+    rng = np.random.default_rng(0)
+    mask = np.zeros((120, 160), bool)
+    mask[70:100, 20:60] = True  # a small object in a corner of a large frame
+    guide = rng.random((120, 160, 1)).astype(np.float32)
+    exemplar = Mapping(guide=guide, appearance=guide, mask=mask)
+    query = Mapping(guide=guide[60:110, 10:70], mask=mask[60:110, 10:70])
+    params = EngineParams(
+        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=(1.0,)
+    )
+    solver = _LevelSolver(query, [exemplar], 5, params, np.random.default_rng(0), _Timer())
+    r = 2  # the valid region: the mask dilated by the window radius
+    assert solver.exemplar_lookup.shape == (1, 30 + 2 * r, 40 + 2 * r)
+    assert tuple(solver.band_origin[0]) == (70 - r, 20 - r)
+    found = solver.exemplar_lookup[
+        solver.cand_e,
+        solver.cand_y - solver.band_origin[solver.cand_e, 0],
+        solver.cand_x - solver.band_origin[solver.cand_e, 1],
+    ]
+    assert np.array_equal(found, np.arange(len(solver.cand_e)))

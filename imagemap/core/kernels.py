@@ -19,8 +19,9 @@ result. The thread count is numba's (``NUMBA_NUM_THREADS``, or
 
 Coordinates: a *candidate* is an exemplar window centre, numbered 0..N-1, with
 ``cand_e, cand_y, cand_x`` its exemplar index and centre (unpadded coordinates);
-``exemplar_lookup[e, y, x]`` maps a centre back to its number (-1 when it is
-not a candidate). A *query centre* m has ``query_y[m], query_x[m]`` and
+``exemplar_lookup[e, y - lookup_origin[e, 0], x - lookup_origin[e, 1]]`` maps a
+centre back to its number (-1 when it is not a candidate): the lookup covers the box
+of each exemplar's candidates, not its frame. A *query centre* m has ``query_y[m], query_x[m]`` and
 ``query_lookup[y, x] == m``. Band arrays are padded by the window radius r, so
 the window of centre (y, x) is ``bands[y:y + k, x:x + k]``.
 """
@@ -186,6 +187,7 @@ def _patchmatch_band(
     cand_y,
     cand_x,
     exemplar_lookup,
+    lookup_origin,
     exemplar_shape,
     band_starts,
     matches,
@@ -232,7 +234,7 @@ def _patchmatch_band(
                 cx = cand_x[c] + (step if axis == 1 else 0)
                 if cy < 0 or cx < 0 or cy >= exemplar_shape[e, 0] or cx >= exemplar_shape[e, 1]:
                     continue
-                cc = exemplar_lookup[e, cy, cx]
+                cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cx)
                 if cc < 0 or cc == best:
                     continue
                 d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
@@ -249,7 +251,7 @@ def _patchmatch_band(
                 cx -= radius
                 cy = min(max(cy, 0), exemplar_shape[e, 0] - 1)
                 cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
-                cc = exemplar_lookup[e, cy, cx]
+                cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cx)
                 if cc >= 0 and cc != best:
                     d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
                     if d < best_d:
@@ -267,6 +269,17 @@ def _patchmatch_band(
             distances[m] = best_d
 
 
+@njit(cache=True, nogil=True)
+def _looked_up(exemplar_lookup, lookup_origin, e, y, x):
+    """The candidate at frame pixel (y, x) of exemplar e: the lookup covers the box of
+    its candidates from ``lookup_origin[e]`` (-1 outside it, as anywhere not a centre)."""
+    ly = y - lookup_origin[e, 0]
+    lx = x - lookup_origin[e, 1]
+    if ly < 0 or lx < 0 or ly >= exemplar_lookup.shape[1] or lx >= exemplar_lookup.shape[2]:
+        return -1
+    return exemplar_lookup[e, ly, lx]
+
+
 def patchmatch(
     query_features,
     candidate_features,
@@ -278,6 +291,7 @@ def patchmatch(
     cand_y,
     cand_x,
     exemplar_lookup,
+    lookup_origin,
     exemplar_shape,
     band_starts,
     matches,
@@ -314,6 +328,7 @@ def patchmatch(
             cand_y,
             cand_x,
             exemplar_lookup,
+            lookup_origin,
             exemplar_shape,
             band_starts,
             matches,

@@ -409,7 +409,13 @@ class LevelSolver:
         self.exemplar_guide = np.zeros((n_ex, hp, wp, n_ga), dtype=np.float32)
         self.exemplar_appearance = np.zeros((n_ex, hp, wp, n_appearance), dtype=np.float32)
         cand_e, cand_y, cand_x, positions = [], [], [], []
-        self.exemplar_lookup = np.full((n_ex, max(heights), max(widths)), -1, dtype=np.int32)
+        # Candidate numbers over each exemplar's box of candidates (from band_origin): the
+        # frame outside it has none (-1), and is not held (a third of it is the box).
+        self.exemplar_lookup = np.full(
+            (n_ex, max(y1 - y0 for y0, y1, _, _ in boxes), max(x1 - x0 for _, _, x0, x1 in boxes)),
+            -1,
+            dtype=np.int32,
+        )
         n_cand = 0
         for e in range(n_ex):
             ex = exemplars[e]
@@ -434,7 +440,7 @@ class LevelSolver:
                 self.exemplar_appearance[e][crop], ex.appearance, r, "reflect", rows, cols
             )
             ys, xs = np.nonzero(self.exemplar_valid[e])
-            self.exemplar_lookup[e, ys, xs] = np.arange(n_cand, n_cand + len(ys))
+            self.exemplar_lookup[e, ys - y0, xs - x0] = np.arange(n_cand, n_cand + len(ys))
             n_cand += len(ys)
             cand_e.append(np.full(len(ys), e, dtype=np.int32))
             cand_y.append(ys.astype(np.int32))
@@ -797,6 +803,7 @@ class LevelSolver:
                 self.cand_y,
                 self.cand_x,
                 self.exemplar_lookup,
+                self.band_origin,
                 self.exemplar_shape,
                 self.band_starts,
                 new,
@@ -906,7 +913,8 @@ class LevelSolver:
             )
             sel = e == ex
             at = (sy[sel], sx[sel])  # the nearest candidate read where it is needed only
-            matches[sel] = self.exemplar_lookup[ex, ny[at], nx[at]]
+            oy, ox = self.band_origin[ex]  # the lookup covers the box of the candidates
+            matches[sel] = self.exemplar_lookup[ex, ny[at] - oy, nx[at] - ox]
             del ny, nx
         return matches
 
