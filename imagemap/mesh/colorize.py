@@ -264,7 +264,7 @@ def with_atlas(mesh):
     uv = getattr(mesh.visual, "uv", None)
     if uv is not None and len(uv) == len(mesh.vertices):
         return mesh
-    import trimesh
+    import trimesh  # deferred: start-up (only a mesh without UVs needs a new one)
 
     vertices, faces, uv, _ = uv_atlas(mesh)
     return trimesh.Trimesh(

@@ -347,7 +347,7 @@ def match_parts(registration: Registration, query) -> Parts:
     centroids after the rigid fit, in RMS radii of the query, plus the absolute log of
     their sizes' ratio. A mesh of one part matches it to the other's largest.
     """
-    from scipy.optimize import linear_sum_assignment
+    from scipy.optimize import linear_sum_assignment  # deferred: start-up (scipy.optimize)
 
     q_vertices = np.asarray(query.vertices, dtype=np.float64)
     q_faces = np.asarray(query.faces, dtype=np.int64)
