@@ -14,9 +14,10 @@ NumPy, SciPy, scikit-image or numba (``imagemap --help`` and every ``COMMAND
 --help`` answer at once); the ``func`` functions import what their command needs.
 ``imagemap COMMAND ...`` registers only that command's module (:data:`COMMANDS`): the
 process that runs or explains one command does not build the others' parsers.
-The colorization options come from :mod:`imagemap.depth.options`, which imports
-nothing heavy; the choices that live in other modules (presets, backends, methods) are
-restated here (a test checks them against the library).
+The colorization options come from :mod:`imagemap.depth.options` and the engine's
+choices from :mod:`imagemap.core.choices`, which import nothing heavy; the preset and
+method names, whose modules make dataclasses, are restated here (a test checks them
+against the library).
 """
 
 from __future__ import annotations
@@ -27,16 +28,18 @@ import importlib
 import sys
 
 import imagemap
+from imagemap.core.choices import APPEARANCE_PYRAMIDS, BACKENDS
 from imagemap.errors import InputError
 
-# The names below are restated, not imported: their modules make dataclasses (about
-# 15 ms of every start, `imagemap synthesize --help` included). A test checks each
-# against the library (tests/test_startup.py).
+# The preset and method names below are restated, not imported: their modules make
+# dataclasses (about 15 ms of every start, `imagemap synthesize --help` included). A test
+# checks each against the library (tests/test_startup.py). The engine's choices come from
+# :mod:`imagemap.core.choices`, which makes none.
 
 #: The ``--preset`` choices: ``sorted(imagemap.depth.config.PRESETS)``.
 PRESET_NAMES = ("busts", "fish", "humans", "shells")
-#: The ``--backend`` choices: ``imagemap.core.params.BACKENDS``.
-BACKEND_NAMES = ("patchmatch", "exact", "pynndescent")
+#: The ``--backend`` choices.
+BACKEND_NAMES = BACKENDS
 #: ``imagemap.btf.extrapolate.PIXELWISE_BACKENDS``: ``btf extrapolate --backend`` choices.
 PIXELWISE_BACKEND_NAMES = ("pca_kdtree", "kdtree", "exact", "pynndescent")
 #: The ``imagemap evaluate --methods`` names, in report order: ``imagemap.depth.config.METHODS``.
@@ -50,8 +53,8 @@ METHOD_NAMES = (
     "laplacian",
     "paper",
 )
-#: The ``--appearance-pyramid`` choices: ``imagemap.core.params.APPEARANCE_PYRAMIDS``.
-APPEARANCE_PYRAMID_NAMES = ("gaussian", "laplacian")
+#: The ``--appearance-pyramid`` choices.
+APPEARANCE_PYRAMID_NAMES = APPEARANCE_PYRAMIDS
 
 SUBCOMMAND_MODULES = [
     "imagemap.cli.synthesize",
