@@ -142,6 +142,20 @@ class Registration:
     faces: np.ndarray
 
 
+def _corners_and_areas(
+    vertices: np.ndarray, faces: np.ndarray, surface: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each face's corners (F, 3, 3) and area (F,); with ``surface``, an InputError when
+    every face has zero area."""
+    corners = vertices[faces]
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    if surface and not areas.sum() > 0:
+        raise InputError("the mesh has no surface (every face has zero area)")
+    return corners, areas
+
+
 def surface_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
     """(centroid, RMS radius) of a mesh's surface, exact (area-weighted moments).
 
@@ -153,13 +167,8 @@ def surface_frame(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     >>> np.round(centre, 6).tolist(), round(radius, 2)
     ([1.0, 1.0, 1.0], 2.0)
     """
-    corners = vertices[faces]
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
+    corners, areas = _corners_and_areas(vertices, faces)
     total = areas.sum()
-    if not total > 0:
-        raise InputError("the mesh has no surface (every face has zero area)")
     centre = (areas[:, None] * corners.mean(axis=1)).sum(axis=0) / total
     local = corners - centre
     # E|x|^2 over a triangle = (sum |v_i|^2 + |sum v_i|^2) / 12.
@@ -187,13 +196,8 @@ def surface_samples(
     >>> points.shape, bool(np.allclose(bary.sum(axis=1), 1.0)), bool((points[:, 2] == 0).all())
     ((5, 3), True, True)
     """
-    corners = vertices[faces]
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
+    corners, areas = _corners_and_areas(vertices, faces)
     total = areas.sum()
-    if not total > 0:
-        raise InputError("the mesh has no surface (every face has zero area)")
     rng = np.random.default_rng(seed)
     face = rng.choice(len(faces), size=count, p=areas / total)
     r1, r2 = np.sqrt(rng.random(count)), rng.random(count)
@@ -327,10 +331,7 @@ def _part_labels(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def _part_frames(vertices, faces, labels) -> tuple[np.ndarray, np.ndarray]:
     """(area-weighted centroid (P, 3), sqrt of the area (P,)) of each part."""
-    corners = vertices[faces]
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
+    corners, areas = _corners_and_areas(vertices, faces, surface=False)
     count = int(labels.max()) + 1
     total = np.bincount(labels, weights=areas, minlength=count)
     centres = np.stack(
