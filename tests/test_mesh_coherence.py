@@ -212,3 +212,15 @@ def test_cli_says_which_path_ran_and_refuses_uv_space_without_uvs(shared_heads, 
     assert code == 2
     assert "--uv-space: the query mesh has no UV coordinates" in capsys.readouterr().err
     assert not (tmp_path / "plain.glb").exists()
+
+
+def test_a_placeholder_texture_does_not_size_the_uv_paths_output(shared_heads):
+    from imagemap.mesh.colorize import _atlas_size
+
+    head = load_mesh(shared_heads / "head_00.glb")
+    examples = [texture_image(load_mesh(shared_heads / "head_01.glb"))]  # 128^2
+    vertices, faces, uv = mesh_uv_arrays(head)
+    grey = textured_mesh(vertices, faces, uv, np.full((2, 2, 3), 0.5, np.float32))
+    assert _atlas_size(grey, examples) == 128  # not 2: the examples' size
+    own = textured_mesh(vertices, faces, uv, np.full((256, 256, 3), 0.5, np.float32))
+    assert _atlas_size(own, examples) == 256  # a real texture of its own keeps its size

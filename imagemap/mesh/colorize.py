@@ -356,9 +356,7 @@ def colorize_mesh(
         uv_examples = uv_layout_examples(mesh, examples_set, uv_space, names)
     if uv_examples is not None:
         if texture_size is None:
-            own = texture_image(mesh)
-            sizes = [max(e.texture.shape[:2]) for e in uv_examples]
-            texture_size = int(max(own.shape[:2])) if own is not None else int(max(sizes))
+            texture_size = _atlas_size(mesh, [e.texture for e in uv_examples])
         log.info(
             "mesh route: uv-space path (%d examples in the query's UV layout: %s), %d^2 texture",
             len(uv_examples),
@@ -417,6 +415,16 @@ def colorize_mesh(
     return MeshResult(mesh=textured, renders=renders, results=results, path="views")
 
 
+def _atlas_size(mesh, example_textures: list) -> int:
+    """The texture size of a UV path's output: the query's own texture's, else the
+    examples' largest. A texture under MIN_TEXTURE_SIZE is a placeholder (a grey 2x2 that
+    exporters give an untextured material) and does not count: it would make a 2x2 map."""
+    own = texture_image(mesh)
+    if own is not None and max(own.shape[:2]) >= MIN_TEXTURE_SIZE:
+        return int(max(own.shape[:2]))
+    return int(max(max(t.shape[:2]) for t in example_textures if t is not None))
+
+
 def _colorize_registered(
     mesh, meshes: dict, config, texture_size, names, seed, quiet, step
 ) -> MeshResult:
@@ -425,15 +433,7 @@ def _colorize_registered(
     synthesis on them."""
     query = with_atlas(mesh)
     if texture_size is None:
-        # The query's own texture's size (one under MIN_TEXTURE_SIZE, a placeholder, does
-        # not count), else the examples' largest.
-        own = texture_image(mesh)
-        textures = [texture_image(m) for m in meshes.values()]
-        sizes = [max(t.shape[:2]) for t in textures if t is not None]
-        if own is not None and max(own.shape[:2]) >= MIN_TEXTURE_SIZE:
-            texture_size = int(max(own.shape[:2]))
-        else:
-            texture_size = int(max(sizes))
+        texture_size = _atlas_size(mesh, [texture_image(m) for m in meshes.values()])
     if step is not None:
         step(f"registering {len(meshes)} mesh examples to the query")
     examples, _ = registered_examples(
