@@ -16,10 +16,27 @@ palette on both sides: small, as the truth's).
 given its own xatlas layout, textured from the others (in the HiFi3D++ layout) by the
 registered path and by the closest-point transfer; rendered by
 :mod:`benchmarks.real_meshes`' own perspective rasterizer from its four angles (none is a
-synthesis view: this path has none).
+synthesis view: this path has none), and from :data:`NEW_HEAD_ANGLES` (``NAME_new_angles.png``:
+truth | registered | transfer).
 
-    python benchmarks/registered_meshes.py fish [--data DIR] [--out OUT]
+    python benchmarks/registered_meshes.py fish [--data DIR] [--out OUT] [--baseline GLB]
     python benchmarks/registered_meshes.py heads [--data DIR] [--out OUT]
+    python benchmarks/registered_meshes.py time [--data DIR] [--pairs 3]
+
+``--baseline GLB`` adds a column for a release's own output for fish_008, e.g. 0.2.0's
+(no tag; the release commit is cc4a2ac, whose default was ``--views auto``)::
+
+    git archive cc4a2ac imagemap | tar -x -C v020
+    cd v020 && PYTHONPATH=. python -m imagemap synthesize \
+        ../scratch/registered/fish/holdout/meshes/fish_008.glb \
+        --db ../scratch/registered/fish/meshes -o fish_008_v020.glb --preset fish
+
+``time`` (#46, item 6): the views path (``--views auto``) against the registered path on
+fish_008 (10 560 faces, 512² texture) with :data:`TIME_EXAMPLES` mesh examples, each run
+in a fresh process (``time-one``), the two alternating; per run the CPU and wall seconds
+of :func:`imagemap.mesh.route.texture_mesh` (the route as the command runs it, without
+the PBR maps, which the registered path does not carry), the 1-minute load before it,
+and the texture's SHA-256 (same seed, same map).
 """
 
 from __future__ import annotations
@@ -42,6 +59,15 @@ FISH_ANGLES = ("0,0", "180,0", "0,90", "0,-90", "90,0", "-90,0", "40,25", "-140,
 FISH_RENDER = (240, 180)
 DEFAULT_FISH = ROOT / "scratch" / "registered" / "fish"
 DEFAULT_OUT = ROOT / "scratch" / "registered" / "out"
+#: Three angles of the heads that neither the examples' views (front, left, right) nor the
+#: four evaluation angles of ``benchmarks/real_meshes.py`` use: from the left and below,
+#: from the right and above, and from behind on the right (azimuth, elevation; degrees).
+NEW_HEAD_ANGLES = ((-65.0, -20.0), (25.0, 35.0), (150.0, 10.0))
+#: Mesh examples of the time measurement: the first 6 of the 8 (the issue's figure was
+#: asked for 6 examples).
+TIME_EXAMPLES = 6
+#: The texture's side in the time measurement (the issue's 512² atlas).
+TIME_TEXTURE = 512
 
 
 def flank_difference(front: np.ndarray, back: np.ndarray, mask_f, mask_b) -> float:
@@ -69,7 +95,7 @@ def _render(mesh, angle: str):
     return render_textured(mesh, angle, FISH_RENDER), render.mask
 
 
-def run_fish(data: Path, out: Path, seed: int = 0) -> dict:
+def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None) -> dict:
     from imagemap.database import Database
     from imagemap.mesh import colorize_mesh
     from imagemap.mesh.register import registered_examples
@@ -101,6 +127,13 @@ def run_fish(data: Path, out: Path, seed: int = 0) -> dict:
     first = min(residuals, key=lambda n: residuals[n])
     colour, _ = transfer(truth, meshes[first], size, mirror=True, seed=seed)
     made["transfer"] = textured_mesh(truth.vertices, truth.faces, truth.visual.uv, colour)
+    if baseline is not None:  # a release's output for the same fish (its own run)
+        made["0.2.0"] = load_mesh(baseline)
+    from imagemap.scene.files import export_textured
+
+    for name, mesh in made.items():
+        if name != "0.2.0":  # the textured meshes, for other renderers (Blender)
+            export_textured(mesh, out / f"fish_008_{name}.glb")
     report: dict = {"seconds": seconds, "first_choice": first,
                     "examples": result.example_names, "angles": {}}  # fmt: skip
     renders = {"truth": {a: _render(truth, a) for a in FISH_ANGLES}}
@@ -124,7 +157,7 @@ def run_fish(data: Path, out: Path, seed: int = 0) -> dict:
                for k in ("de00", "crisp")}
         for name in made
     }  # fmt: skip
-    columns = ["truth", "views", "registered", "transfer"]
+    columns = ["truth", *(["0.2.0"] if baseline else []), "views", "registered", "transfer"]
     rows = [
         np.concatenate(
             [render_textured(truth if c == "truth" else made[c], a, FISH_RENDER, shaded=True)
@@ -138,7 +171,7 @@ def run_fish(data: Path, out: Path, seed: int = 0) -> dict:
     return report
 
 
-def run_heads(data: Path, out: Path, seed: int = 0) -> dict:
+def run_heads(data: Path, out: Path, seed: int = 0, only: list[str] | None = None) -> dict:
     import trimesh
     from real_meshes import EVAL_VIEWS, RENDER_SIZE, TexturedArrays, image_errors, look_at, render
 
@@ -154,7 +187,7 @@ def run_heads(data: Path, out: Path, seed: int = 0) -> dict:
     names = [p.stem for p in files]
     report: dict = {"objects": {}}
     pictures = []
-    for name in names:
+    for name in only or names:
         truth_path = data / f"{name}.glb"
         truth = TexturedArrays.load(truth_path)
         mesh = load_mesh(truth_path)
@@ -178,21 +211,26 @@ def run_heads(data: Path, out: Path, seed: int = 0) -> dict:
             export_textured(textured_mesh(vertices, faces, uv, texture), paths[label])
         arrays = {label: TexturedArrays.load(p) for label, p in paths.items()}
         centre, radius = truth.bounding_sphere()
-        rows = []
-        for azimuth, elevation in EVAL_VIEWS:
-            camera = look_at(azimuth, elevation, centre, radius, RENDER_SIZE)
-            truth_image, mask = render(truth, camera)
-            row = {"view": f"{azimuth:g},{elevation:g}"}
-            cells = [truth_image]
-            for label, arr in arrays.items():
-                image, own = render(arr, camera)
-                row[label] = image_errors(image, truth_image, mask & own)
-                cells.append(image)
-            rows.append(row)
-            pictures.append(np.concatenate(cells, axis=1))
+        rows, new_rows, new_pictures = [], [], []
+        for angles, into, picture in ((EVAL_VIEWS, rows, pictures),
+                                      (NEW_HEAD_ANGLES, new_rows, new_pictures)):  # fmt: skip
+            for azimuth, elevation in angles:
+                camera = look_at(azimuth, elevation, centre, radius, RENDER_SIZE)
+                truth_image, mask = render(truth, camera)
+                row = {"view": f"{azimuth:g},{elevation:g}"}
+                cells = [truth_image]
+                for label, arr in arrays.items():
+                    image, own = render(arr, camera)
+                    row[label] = image_errors(image, truth_image, mask & own)
+                    cells.append(image)
+                into.append(row)
+                picture.append(np.concatenate(cells, axis=1))
+        import imagemap
+
+        imagemap.write_image(out / f"{name}_new_angles.png", np.concatenate(new_pictures))
         report["objects"][name] = {"seconds": seconds, "examples": made.example_names,
                                    "first_choice": first, "residuals": residuals,
-                                   "views": rows}  # fmt: skip
+                                   "views": rows, "new_views": new_rows}  # fmt: skip
         print(name, json.dumps(report["objects"][name], default=float), flush=True)
     import imagemap
 
@@ -201,16 +239,93 @@ def run_heads(data: Path, out: Path, seed: int = 0) -> dict:
     return report
 
 
+def time_one(route: str, data: Path, seed: int = 0) -> dict:
+    """One route on fish_008 in this process: CPU and wall seconds, the texture's hash."""
+    import hashlib
+    import os
+
+    from imagemap.database import Database
+    from imagemap.mesh.library import ExampleSet
+    from imagemap.mesh.route import MeshRequest, texture_mesh
+    from imagemap.scene import load_mesh
+    from imagemap.scene.coverage import CANDIDATES
+
+    if not (data / "holdout" / "meshes").is_dir():
+        from data_gen.dataset import write_class
+
+        write_class("fish", data, count=9, seed=0, holdout=1, meshes=True, quiet=True)
+    truth = load_mesh(data / "holdout" / "meshes" / "fish_008.glb")
+    database = Database.from_directory(data / "meshes")
+    database = database.without(*database.names[TIME_EXAMPLES:])
+    request = MeshRequest(
+        views=CANDIDATES if route == "views" else (),
+        auto_views=route == "views",
+        texture_size=TIME_TEXTURE,
+        config="fish",
+        seed=seed,
+        registered=route == "registered",
+        maps=False,
+    )
+    load = os.getloadavg()[0]
+    cpu, wall = time.process_time(), time.perf_counter()
+    done = texture_mesh(truth, ExampleSet.of(database), request)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    image = np.ascontiguousarray(done.made.image)
+    return {"route": done.made.path, "cpu": cpu, "wall": wall, "load": load,
+            "sha256": hashlib.sha256(image.tobytes()).hexdigest()[:16]}  # fmt: skip
+
+
+def run_time(data: Path, pairs: int) -> dict:
+    """``pairs`` x (views, registered), alternating, each in a fresh process."""
+    import os
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    runs = []
+    for _ in range(pairs):
+        for route in ("views", "registered"):
+            line = subprocess.run(
+                [sys.executable, __file__, "time-one", route, "--data", str(data)],
+                env=env, cwd=ROOT, check=True, capture_output=True, text=True,
+            ).stdout.strip().splitlines()[-1]  # fmt: skip
+            runs.append(json.loads(line))
+            print(line, flush=True)
+    report: dict = {"runs": runs}
+    for key in ("cpu", "wall"):
+        views = [r[key] for r in runs if r["route"] == "views"]
+        registered = [r[key] for r in runs if r["route"] == "registered"]
+        report[key] = {
+            "views": views,
+            "registered": registered,
+            "ratios": [r / v for v, r in zip(views, registered, strict=True)],
+            "ratio_of_medians": float(np.median(registered) / np.median(views)),
+        }
+    return report
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("fish", "heads"))
+    parser.add_argument("what", choices=("fish", "heads", "time", "time-one"))
+    parser.add_argument("route", nargs="?", choices=("views", "registered"))
     parser.add_argument("--data", type=Path)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    parser.add_argument("--pairs", type=int, default=3)
+    parser.add_argument("--only", nargs="+", help="heads: only these held out")
+    parser.add_argument(
+        "--baseline", type=Path, help="fish: a release's fish_008 GLB, a column of its own"
+    )
     args = parser.parse_args(argv)
-    if args.what == "fish":
-        report = run_fish(args.data or DEFAULT_FISH, args.out)
+    if args.what == "time-one":
+        print(json.dumps(time_one(args.route, args.data or DEFAULT_FISH)))
+        return 0
+    if args.what == "time":
+        report = run_time(args.data or DEFAULT_FISH, args.pairs)
+    elif args.what == "fish":
+        report = run_fish(args.data or DEFAULT_FISH, args.out, baseline=args.baseline)
     else:
-        report = run_heads(args.data or ROOT / "scratch" / "realdata" / "faces", args.out)
+        report = run_heads(
+            args.data or ROOT / "scratch" / "realdata" / "faces", args.out, only=args.only
+        )
     print(json.dumps({k: v for k, v in report.items() if k != "objects"}, indent=1,
                      default=float))  # fmt: skip
     return 0

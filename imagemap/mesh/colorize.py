@@ -76,6 +76,13 @@ log = logging.getLogger("imagemap")
 
 #: The mesh route's three ways of making a texture.
 PATHS = ("uv-space", "registered", "views")
+#: The engine's atlas size on the registered path (the uv-space path's is
+#: :data:`imagemap.mesh.uvspace.WORKING_SIZE`): every example is already resampled into the
+#: query's atlas, so the engine only chooses which example each part comes from, and the
+#: texture is copied at the output size. fish_008 (512², 2 of 8 examples): the same
+#: figures at 128 as at 256 (mean ΔE00 30.97 / 30.99, crispness 0.83 / 0.84, flank
+#: difference 3.68 / 3.79) at 0.3 of the synthesis' CPU.
+REGISTERED_WORKING_SIZE = 128
 
 
 @dataclass
@@ -461,6 +468,7 @@ def _colorize_registered(
         names=[e.name for e in examples],
         seed=seed,
         quiet=quiet,
+        working_size=REGISTERED_WORKING_SIZE,
     )
     vertices, faces, uv = mesh_uv_arrays(query)
     textured = textured_mesh(vertices, faces, uv, result.image)
