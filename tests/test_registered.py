@@ -151,6 +151,28 @@ def test_the_far_side_comes_from_the_examples_far_side(tmp_path):
     assert np.abs(_side(views.mesh, "180,0") - BLUE).mean() > SIDE_COLOUR
 
 
+def test_the_engine_runs_coarser_than_the_texture(tmp_path, monkeypatch, caplog):
+    """The registered path's engine works at ``REGISTERED_WORKING_SIZE`` (here 16, under
+    the 32² texture), and the texture, copied at its own size through the engine's source
+    map, still has each side's colour from the example's same side (0.3 s at load 5)."""
+    import logging
+
+    import imagemap.mesh.colorize as colorize_module
+
+    monkeypatch.setattr(colorize_module, "REGISTERED_WORKING_SIZE", 16)
+    body = lumpy(subdivisions=2)
+    folder = tmp_path / "db"
+    folder.mkdir()
+    two_tone(body, flip=True).export(folder / "tones.glb")
+    database = Database.from_directory(folder, size=(40, 30))
+    with caplog.at_level(logging.INFO, logger="imagemap"):
+        made = colorize_mesh(body, database, preset=resolve_config("humans", m=1), texture_size=32)
+    assert made.path == "registered" and made.image.shape[:2] == (32, 32)
+    assert "32^2 atlas (engine at 16^2)" in caplog.text
+    near, far = _side(made.mesh, "0,0"), _side(made.mesh, "180,0")
+    assert np.abs(near - RED).mean() < SIDE_COLOUR and np.abs(far - BLUE).mean() < SIDE_COLOUR
+
+
 def test_a_degenerate_example_is_named_before_any_work():
     query = two_tone(lumpy(subdivisions=1), flip=False)
     flat = trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]], process=False)
