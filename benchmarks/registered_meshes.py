@@ -20,8 +20,12 @@ synthesis view: this path has none), and from :data:`NEW_HEAD_ANGLES` (``NAME_ne
 truth | registered | transfer).
 
     python benchmarks/registered_meshes.py fish [--data DIR] [--out OUT] [--baseline GLB]
-    python benchmarks/registered_meshes.py heads [--data DIR] [--out OUT]
+    python benchmarks/registered_meshes.py heads [--data DIR] [--out OUT] [--only NAME ...]
+        [--size N]
     python benchmarks/registered_meshes.py time [--data DIR] [--pairs 3]
+
+``--only`` holds out only these heads; ``--size`` sets the heads' texture size (default: their
+own, 1024): smaller to explore, the default to report.
 
 ``--baseline GLB`` adds a column for a release's own output for fish_008, e.g. 0.2.0's
 (no tag; the release commit is cc4a2ac, whose default was ``--views auto``)::
@@ -171,7 +175,9 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
     return report
 
 
-def run_heads(data: Path, out: Path, seed: int = 0, only: list[str] | None = None) -> dict:
+def run_heads(
+    data: Path, out: Path, seed: int = 0, only: list[str] | None = None, size: int | None = None
+) -> dict:
     import trimesh
     from real_meshes import EVAL_VIEWS, RENDER_SIZE, TexturedArrays, image_errors, look_at, render
 
@@ -185,6 +191,8 @@ def run_heads(data: Path, out: Path, seed: int = 0, only: list[str] | None = Non
     out.mkdir(parents=True, exist_ok=True)
     files = sorted(data.glob("*.glb"))
     names = [p.stem for p in files]
+    if only is not None and only not in names:
+        raise SystemExit(f"--only {only}: no {only}.glb in {data}")
     report: dict = {"objects": {}}
     pictures = []
     for name in only or names:
@@ -198,7 +206,7 @@ def run_heads(data: Path, out: Path, seed: int = 0, only: list[str] | None = Non
                                 process=False)  # fmt: skip
         database = Database.from_directory(data).without(name)
         start = time.perf_counter()
-        made = colorize_mesh(query, database, preset="busts", seed=seed)
+        made = colorize_mesh(query, database, preset="busts", seed=seed, texture_size=size)
         seconds = time.perf_counter() - start
         size = made.image.shape[0]
         meshes = {n: load_mesh(data / f"{n}.glb") for n in names if n != name}
@@ -234,8 +242,9 @@ def run_heads(data: Path, out: Path, seed: int = 0, only: list[str] | None = Non
         print(name, json.dumps(report["objects"][name], default=float), flush=True)
     import imagemap
 
-    imagemap.write_image(out / "heads.png", np.concatenate(pictures, axis=0))
-    (out / "heads.json").write_text(json.dumps(report, indent=1, default=float))
+    stem = "heads" if only is None else f"heads_{only}"
+    imagemap.write_image(out / f"{stem}.png", np.concatenate(pictures, axis=0))
+    (out / f"{stem}.json").write_text(json.dumps(report, indent=1, default=float))
     return report
 
 
@@ -311,6 +320,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     parser.add_argument("--pairs", type=int, default=3)
     parser.add_argument("--only", nargs="+", help="heads: only these held out")
+    parser.add_argument("--size", type=int, help="heads: texture size (default: their own)")
     parser.add_argument(
         "--baseline", type=Path, help="fish: a release's fish_008 GLB, a column of its own"
     )
@@ -324,7 +334,10 @@ def main(argv=None) -> int:
         report = run_fish(args.data or DEFAULT_FISH, args.out, baseline=args.baseline)
     else:
         report = run_heads(
-            args.data or ROOT / "scratch" / "realdata" / "faces", args.out, only=args.only
+            args.data or ROOT / "scratch" / "realdata" / "faces",
+            args.out,
+            only=args.only,
+            size=args.size,
         )
     print(json.dumps({k: v for k, v in report.items() if k != "objects"}, indent=1,
                      default=float))  # fmt: skip

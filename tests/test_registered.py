@@ -12,7 +12,13 @@ from imagemap.depth.config import resolve_config
 from imagemap.errors import InputError
 from imagemap.example import Example
 from imagemap.mesh.colorize import colorize_mesh, registrable_examples, uv_layout_examples
-from imagemap.mesh.register import deform, register_rigid, registered_examples, resample
+from imagemap.mesh.register import (
+    Registration,
+    deform,
+    register_rigid,
+    registered_examples,
+    resample,
+)
 from imagemap.scene import textured_mesh
 from imagemap.scene.views import render_mesh, render_textured, texture_image
 
@@ -27,6 +33,8 @@ SELF_DEFORMATION = 0.01
 #: Mean |RGB| (0-1) of a side's colour from the truth's: the examples' two tones are
 #: 0.8 apart per channel; a side copied from the wrong tone is off by ~1.6 summed.
 SIDE_COLOUR = 0.15
+#: Half the thickness of the folded sheet below (its layers are 2x this apart).
+FOLD = 0.05
 
 
 def lumpy(radius: float = 1.0, subdivisions: int = 3) -> trimesh.Trimesh:
@@ -103,6 +111,62 @@ def test_an_example_resampled_into_its_own_layout_is_its_texture():
     out = resample(mesh, fit, mesh, 32)
     assert out.covered.all()  # the sheet's top covers the whole atlas
     assert np.abs(out.colour - texture).max() < SAME_TEXEL
+
+
+def _sheet(shape, columns: int, rows: int) -> trimesh.Trimesh:
+    """A (columns x rows) grid of ``shape(s, t)`` (s, t in [0, 1]), its first face facing +z."""
+    s, t = np.meshgrid(np.linspace(0, 1, columns), np.linspace(0, 1, rows), indexing="ij")
+    vertices = shape(s.ravel(), t.ravel())
+    grid = np.arange(columns * rows).reshape(columns, rows)
+    a, b = grid[:-1, :-1].ravel(), grid[1:, :-1].ravel()
+    c, d = grid[1:, 1:].ravel(), grid[:-1, 1:].ravel()
+    faces = np.r_[np.c_[a, b, c], np.c_[a, c, d]]
+    corners = vertices[faces[0]]
+    if np.cross(corners[1] - corners[0], corners[2] - corners[0])[2] < 0:
+        faces = faces[:, ::-1]
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def test_the_deformation_does_not_pull_a_back_surface_onto_the_front():
+    # A sheet folded in two (a U in x-z, 2 FOLD thick), its upper layer facing +z and its
+    # lower one -z (a shell's front and back, or a head's face and mouth bag), onto a flat
+    # query facing +z: both layers are FOLD from it, but only the upper one faces alike.
+    length, arc = 2.0, np.pi * FOLD
+
+    def fold(s, t):
+        along = s * (2 * length + arc)
+        turn = (along - length) / FOLD
+        x = np.where(along < length, along, length + FOLD * np.sin(np.clip(turn, 0, np.pi)))
+        x = np.where(along > length + arc, 2 * length + arc - along, x)
+        z = np.where(along < length, FOLD, FOLD * np.cos(np.clip(turn, 0, np.pi)))
+        return np.c_[x, t, z]
+
+    example = _sheet(fold, 90, 20)
+    query = _sheet(lambda s, t: np.c_[length * s, t, 0 * s], 40, 20)
+    v = example.vertices
+    fit = Registration(np.eye(4), False, 0.0, v.copy(), v.copy(), example.faces)
+    moved = deform(fit, query).deformed
+    inner = v[:, 0] < 0.75 * length  # away from the bend
+    upper, lower = inner & (v[:, 2] > 0.99 * FOLD), inner & (v[:, 2] < -0.99 * FOLD)
+    # The front lands on the query; the back keeps its distance behind it (pulled onto
+    # the query too when the normals are not compared: both layers at z = 0).
+    assert np.abs(moved[upper, 2]).max() < 0.1 * FOLD
+    assert np.median(moved[upper, 2]) - np.median(moved[lower, 2]) > 1.5 * FOLD
+
+
+def test_an_example_larger_than_the_query_is_not_shrunk_onto_it():
+    # The example's sheet is twice the query's length (a head with a longer neck), just
+    # above it, rigidly in place: its points over the query stay over the same points.
+    # (Moved onto the query's centroid and scaled to its area, as the parts are, a point
+    # at x = 1 would go to x = 0.29, and pulls along the normal never bring it back.)
+    query = _sheet(lambda s, t: np.c_[2.0 * s, t, 0 * s], 40, 20)
+    example = _sheet(lambda s, t: np.c_[4.0 * s, t, 0 * s + FOLD], 80, 20)
+    v = example.vertices
+    fit = Registration(np.eye(4), False, 0.0, v.copy(), v.copy(), example.faces)
+    moved = deform(fit, query).deformed
+    over = v[:, 0] < 1.5  # away from the query's end (pulled towards it from beyond)
+    assert np.abs(moved[over, :2] - v[over, :2]).max() < 0.1 * FOLD
+    assert np.abs(moved[over, 2]).max() < 0.1 * FOLD  # and onto it
 
 
 def test_the_path_taken(tmp_path):
