@@ -415,9 +415,9 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
     points = welded.copy()
     # The example's largest part (a body, a head) stays where the rigid fit put it: that fit
     # is its registration, and centroids and areas compare badly where the surfaces cover
-    # different extents (the FLAME head has a shorter neck than the HiFi3D++ heads: moved
-    # by them, its median UV error against the truth's correspondence doubled, 23 -> 49
-    # texels of 1024).
+    # different extents (FFHQ-UV's teaser3 onto the FLAME head, whose neck is shorter:
+    # moved 0.14 RMS radii by them; median UV error against the heads' shared layout 49
+    # texels of 1024, 23 kept in place).
     main = int(np.argmax(e_sizes))
     for q_part, e_part in parts.pairs.items():
         if e_part == main:
