@@ -191,8 +191,9 @@ def run_heads(
     out.mkdir(parents=True, exist_ok=True)
     files = sorted(data.glob("*.glb"))
     names = [p.stem for p in files]
-    if only is not None and only not in names:
-        raise SystemExit(f"--only {only}: no {only}.glb in {data}")
+    missing = [n for n in only or () if n not in names]
+    if missing:
+        raise SystemExit(f"--only: no {', '.join(missing)} in {data} (*.glb)")
     report: dict = {"objects": {}}
     pictures = []
     for name in only or names:
