@@ -138,6 +138,44 @@ def _sq_dist_scaled(a, b, ndims, position_dim, position_scale):
     return s + (position_scale - np.float32(1.0)) * (d0 * d0 + d1 * d1)
 
 
+#: Feature columns summed between two checks of :func:`_sq_dist_below` against its bound.
+#: A check costs a compare; most PatchMatch trials lose, many within the first blocks
+#: (the guide's leading PCA components come first).
+_BOUND_CHECK_COLUMNS = 8
+
+
+@njit(cache=True, nogil=True)
+def _sq_dist_below(a, b, ndims, position_dim, position_scale, bound):
+    """:func:`_sq_dist_scaled` where it is below ``bound``; elsewhere some value at least
+    ``bound`` (the sum stops as soon as it cannot end below it).
+
+    The same float32 operations in the same order as :func:`_sq_dist_scaled`, so a
+    result below ``bound`` has the same bits, and a trial is never won or lost
+    differently: every term is a square (not negative), so each partial sum is at most
+    the full one (rounding is monotonic), and the position columns' correction (negative
+    where ``position_scale`` < 1) is computed first and added to the partial sum before
+    each comparison."""
+    scaled = not (position_scale == 1.0 or position_dim < 0 or position_dim + 2 > ndims)
+    correction = np.float32(0.0)
+    if scaled:
+        d0 = np.float32(a[position_dim]) - np.float32(b[position_dim])
+        d1 = np.float32(a[position_dim + 1]) - np.float32(b[position_dim + 1])
+        correction = (position_scale - np.float32(1.0)) * (d0 * d0 + d1 * d1)
+    s = np.float32(0.0)
+    i = 0
+    while i < ndims:
+        stop = min(i + _BOUND_CHECK_COLUMNS, ndims)
+        for j in range(i, stop):
+            d = np.float32(a[j]) - np.float32(b[j])
+            s += d * d
+        if stop < ndims and s + correction >= bound:
+            return s + correction
+        i = stop
+    if not scaled:
+        return s
+    return s + correction
+
+
 @njit(cache=True, nogil=True)
 def _feature_distances(
     query_features, candidate_features, matches, ndims, out, start, stop, position_dim, scales
@@ -237,7 +275,7 @@ def _patchmatch_band(
                 cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cx)
                 if cc < 0 or cc == best:
                     continue
-                d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
+                d = _sq_dist_below(qf, candidate_features[cc], ndims, position_dim, scale, best_d)
                 if d < best_d:
                     best = cc
                     best_d = d
@@ -253,7 +291,9 @@ def _patchmatch_band(
                 cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
                 cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cx)
                 if cc >= 0 and cc != best:
-                    d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
+                    d = _sq_dist_below(
+                        qf, candidate_features[cc], ndims, position_dim, scale, best_d
+                    )
                     if d < best_d:
                         best = cc
                         best_d = d
@@ -261,7 +301,7 @@ def _patchmatch_band(
                 trial += 1
             # One jump anywhere: lets a pixel leave a poor exemplar.
             cc = _random_below(seed, m, p, 1000003, n_candidates)
-            d = _sq_dist_scaled(qf, candidate_features[cc], ndims, position_dim, scale)
+            d = _sq_dist_below(qf, candidate_features[cc], ndims, position_dim, scale, best_d)
             if d < best_d:
                 best = cc
                 best_d = d
