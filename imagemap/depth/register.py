@@ -117,14 +117,20 @@ def _bspline_weights(t: np.ndarray) -> np.ndarray:
     )
 
 
-def _basis(coords: np.ndarray, low: float, high: float, n: int) -> np.ndarray:
-    """(len(coords), n) cubic B-spline basis of ``n`` control points over [low, high]."""
+def _span(coords: np.ndarray, low: float, high: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first of the four control points (of ``n`` over [low, high]) whose cubic
+    B-splines cover each coordinate, (N,) int64, and their weights, (N, 4)."""
     spacing = max(high - low, 1e-6) / (n - 3)
     u = (np.asarray(coords, dtype=np.float64) - low) / spacing
     first = np.clip(np.floor(u).astype(np.int64), 0, n - 4)
-    weights = _bspline_weights(np.clip(u - first, 0.0, 1.0))
-    out = np.zeros((len(u), n))
-    rows = np.arange(len(u))
+    return first, _bspline_weights(np.clip(u - first, 0.0, 1.0))
+
+
+def _basis(coords: np.ndarray, low: float, high: float, n: int) -> np.ndarray:
+    """(len(coords), n) cubic B-spline basis of ``n`` control points over [low, high]."""
+    first, weights = _span(coords, low, high, n)
+    out = np.zeros((len(first), n))
+    rows = np.arange(len(first))
     for k in range(4):
         out[rows, first + k] = weights[:, k]
     return out
@@ -173,12 +179,24 @@ class Warp:
     relief_step: float = 1.0
 
     def displacement(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The B-spline displacement (query pixels) at query coordinates."""
-        basis = _tensor_basis(np.ravel(ys), np.ravel(xs), self.box, self.n)
+        """The B-spline displacement (query pixels) at query coordinates.
+
+        Summed over the 4 x 4 control points around each coordinate (the others'
+        B-splines are 0 there), not as a product with the dense (N, n * n) basis: a
+        full-resolution grid costs 16 passes over its coordinates, not n * n."""
+        n, box = self.n, self.box
+        first_y, weights_y = _span(np.ravel(ys), box[0], box[1], n)
+        first_x, weights_x = _span(np.ravel(xs), box[2], box[3], n)
+        dy = np.zeros(first_y.shape)
+        dx = np.zeros(first_y.shape)
+        for a in range(4):
+            row = (first_y + a) * n + first_x
+            for b in range(4):
+                weight = weights_y[:, a] * weights_x[:, b]
+                dy += weight * self.coefficients[0, row + b]
+                dx += weight * self.coefficients[1, row + b]
         shape = np.shape(ys)
-        return (basis @ self.coefficients[0]).reshape(shape), (
-            basis @ self.coefficients[1]
-        ).reshape(shape)
+        return dy.reshape(shape), dx.reshape(shape)
 
     def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Example coordinates (y, x) of query coordinates."""
