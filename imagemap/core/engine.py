@@ -245,6 +245,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         level_params = params
         if plan.position_weight is not None:
             level_params = replace(level_params, position_weight=plan.position_weight)
+        if plan.patchmatch_passes is not None:
+            level_params = replace(level_params, patchmatch_passes=plan.patchmatch_passes)
         query = query_levels[level]
         context = None
         if plan.has_context and level < n_levels - 1:

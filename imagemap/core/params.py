@@ -74,6 +74,9 @@ class LevelPlan:
         The final reseed matches without the exemplar costs: where the relief calls for
         a feature, it may come from any exemplar, while the EM keeps each region's
         exemplar.
+    patchmatch_passes : int, optional
+        PatchMatch passes per search at this level (None:
+        ``EngineParams.patchmatch_passes``).
     """
 
     patch_size: int = setting(7, kind="odd_width")
@@ -84,6 +87,7 @@ class LevelPlan:
     final_reseed: float = setting(0.0, minimum=0.0, below=1.0)
     position_weight: float | None = setting(None, minimum=0.0, optional=True)
     final_reseed_any_exemplar: bool = setting(False, kind="bool")
+    patchmatch_passes: int | None = setting(None, kind="int", minimum=1, optional=True)
 
     def __post_init__(self) -> None:
         check_settings(self)
