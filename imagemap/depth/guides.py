@@ -65,7 +65,8 @@ REFINE_ITERATIONS = 2
 #: 4): their matches start from the feature level's, propagated, and half the passes keep
 #: both scan directions. #44 item 5, seed 0 / 1, against 4: 12 fish at 4x macro part
 #: transfer 0.8585 / 0.8629 against 0.8624 / 0.8604, fragments for 90 % 48.5 / 46.5 against
-#: 50 / 44.5, blur ratio 0.962 / 0.960 against 0.968 / 0.964; relief plates / scales /
+#: 50 / 44.5, blur ratio 0.962 / 0.960 against 0.968 / 0.964; 6 busts at 4x 0.834 / 0.845
+#: against 0.840 / 0.840, fragments 18 / 15.5 against 16 / 17.5; relief plates / scales /
 #: bricks at 320x240 seam F1 0.971 / 0.971 / 0.989 against 0.970 / 0.972 / 0.991 (1 pass:
 #: scales 0.966). 1x maps have no such level.
 REFINE_PASSES: int | None = 2
