@@ -72,6 +72,10 @@ NEW_HEAD_ANGLES = ((-65.0, -20.0), (25.0, 35.0), (150.0, 10.0))
 TIME_EXAMPLES = 6
 #: The texture's side in the time measurement (the issue's 512² atlas).
 TIME_TEXTURE = 512
+#: A texel is off every example when its colour differs from each example's at the same
+#: texel by more than this (of 1, any channel): well above uint8 rounding and a seam's
+#: gentle blend, the measure the specks of #46 were first counted with.
+OFF_EXAMPLE = 0.1
 
 
 def flank_difference(front: np.ndarray, back: np.ndarray, mask_f, mask_b) -> float:
@@ -81,6 +85,26 @@ def flank_difference(front: np.ndarray, back: np.ndarray, mask_f, mask_b) -> flo
     mirrored, mask_m = back[:, ::-1], mask_b[:, ::-1]
     both = mask_f & mask_m
     return float(ciede2000(front, mirrored, both))
+
+
+def off_example_texels(
+    image: np.ndarray, mask: np.ndarray, textures: list, label=None, covers=None
+) -> int:
+    """Used texels whose colour differs from every chosen example's resampled texture at
+    the same texel by more than :data:`OFF_EXAMPLE` (in any channel): colour taken from
+    elsewhere in the atlas (another chart, padding), the specks of #46. With ``label``
+    (each texel's example) and ``covers`` (each example's covered texels): only those
+    whose example covers them (elsewhere the example has only padding at the texel)."""
+    from imagemap.mesh.uvspace import _unit
+
+    off = mask.copy()
+    for texture in textures:
+        off &= (
+            np.abs(image[..., :3] - _unit(np.asarray(texture)[..., :3])).max(axis=2) > OFF_EXAMPLE
+        )
+    if label is not None and covers is not None:
+        off &= np.take_along_axis(np.stack(covers), np.clip(label, 0, None)[None], axis=0)[0]
+    return int(off.sum())
 
 
 def transfer(query, example_mesh, size: int, mirror: bool, seed: int = 0):
@@ -127,6 +151,15 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
     made["registered"] = result.mesh
     meshes = {n: load_mesh(data / "meshes" / f"{n}.glb") for n in database.names}
     size = texture_image(truth).shape[0]
+    texture = result.results[0]
+    chosen, _ = registered_examples(truth, meshes, m=1, texture_size=size, seed=seed,
+                                    mirror=bool(texture.config.selection.mirror),
+                                    names=texture.example_names)  # fmt: skip
+    textures = [e.texture for e in chosen]
+    off_example = off_example_texels(texture.image, texture.mask, textures)
+    covers = [e.maps(size).mask for e in chosen]
+    off_covered = off_example_texels(texture.image, texture.mask, textures,
+                                     texture.source[..., 0], covers)  # fmt: skip
     _, residuals = registered_examples(truth, meshes, m=1, texture_size=64, seed=seed)
     first = min(residuals, key=lambda n: residuals[n])
     colour, _ = transfer(truth, meshes[first], size, mirror=True, seed=seed)
@@ -139,7 +172,11 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
         if name != "0.2.0":  # the textured meshes, for other renderers (Blender)
             export_textured(mesh, out / f"fish_008_{name}.glb")
     report: dict = {"seconds": seconds, "first_choice": first,
-                    "examples": result.example_names, "angles": {}}  # fmt: skip
+                    "examples": result.example_names, "angles": {},
+                    "off_example_texels": off_example, "off_example_covered": off_covered,
+                    "used_texels": int(texture.mask.sum())}  # fmt: skip
+    print(f"off-example texels: {off_example} of {int(texture.mask.sum())} used "
+          f"({off_covered} where their example covers them)", flush=True)  # fmt: skip
     renders = {"truth": {a: _render(truth, a) for a in FISH_ANGLES}}
     for name, mesh in made.items():
         renders[name] = {a: _render(mesh, a) for a in FISH_ANGLES}

@@ -11,7 +11,12 @@ from imagemap.database import Database
 from imagemap.depth.config import resolve_config
 from imagemap.errors import InputError
 from imagemap.example import Example
-from imagemap.mesh.colorize import colorize_mesh, registrable_examples, uv_layout_examples
+from imagemap.mesh.colorize import (
+    colorize_mesh,
+    registrable_examples,
+    uv_layout_examples,
+    with_atlas,
+)
 from imagemap.mesh.register import (
     Registration,
     deform,
@@ -19,6 +24,7 @@ from imagemap.mesh.register import (
     registered_examples,
     resample,
 )
+from imagemap.mesh.uvspace import same_texel_source
 from imagemap.scene import textured_mesh
 from imagemap.scene.views import render_mesh, render_textured, texture_image
 
@@ -38,6 +44,15 @@ FOLD = 0.05
 #: Vertex error (RMS radii) of a body registered from an example that has a neck more: measured
 #: 0.021; with the scale taken from the RMS radii and every pair kept, 0.22.
 WITH_A_NECK = 0.08
+#: Rows the engine's matches are moved by in the speck test: across the 16^2 working atlas'
+#: charts (xatlas packs the lumpy body's in 2-5 texel strips), so most land elsewhere.
+SHIFT = 3
+#: A texel copied from elsewhere differs from its own by more than this (of 1) on the
+#: noise texture (uniform in [0, 1]), as the benchmark counts specks.
+ELSEWHERE = 0.1
+#: Texels off the example with the moved matches and the copy through them (measured 51
+#: of 626; the seams and the blend take some back): well above none.
+MOVED_OFF = 20
 
 
 def lumpy(radius: float = 1.0, subdivisions: int = 3) -> trimesh.Trimesh:
@@ -257,6 +272,62 @@ def test_the_engine_runs_coarser_than_the_texture(tmp_path, monkeypatch, caplog)
     assert "32^2 atlas (engine at 16^2)" in caplog.text
     near, far = _side(made.mesh, "0,0"), _side(made.mesh, "180,0")
     assert np.abs(near - RED).mean() < SIDE_COLOUR and np.abs(far - BLUE).mean() < SIDE_COLOUR
+
+
+def test_no_texel_takes_its_colour_from_another_texel(monkeypatch):
+    """The registered path copies every texel from the same texel of its chosen example
+    (#46's specks: an offset into another chart), whatever the engine matched: with the
+    engine's matches moved by SHIFT rows, the texture is still the resampled example's,
+    texel for texel (0.2 s at load 4). Without ``same_texel`` the moved matches show."""
+    import imagemap.mesh.uvspace as uvspace
+
+    real = uvspace.synthesize
+
+    def moved(*args, **kwargs):
+        result = real(*args, **kwargs)
+        for source in (result.source, result.copy_source):
+            if source is not None:
+                source[..., 1] = np.clip(source[..., 1] + SHIFT, 0, source.shape[0] - 1)
+        return result
+
+    monkeypatch.setattr(uvspace, "synthesize", moved)
+    body = lumpy(subdivisions=2)
+    example = two_tone(body, flip=True)
+    noise = np.random.default_rng(0).random((32, 32, 3)).astype(np.float32)
+    example = textured_mesh(example.vertices, example.faces, example.visual.uv, noise)
+    query = with_atlas(body)
+    examples, _ = registered_examples(query, {"noise": example}, m=1, texture_size=32)
+    resampled = examples[0].texture.astype(np.float32) / 255
+    config = resolve_config("humans", m=1)
+    rows, cols = np.indices((32, 32))
+    for same_texel in (True, False):
+        made = uvspace.colorize_uv(query, examples, config, size=32, working_size=16,
+                                   same_texel=same_texel)  # fmt: skip
+        used = made.mask
+        own = (made.source[..., 1] == rows) & (made.source[..., 2] == cols)
+        off = (np.abs(made.image - resampled).max(axis=2) > ELSEWHERE) & used
+        if same_texel:
+            assert own[used].all()
+            assert np.abs(made.image - resampled)[used].max() < SAME_TEXEL
+        else:  # the case can fail: the moved matches copy other texels' colours
+            assert off.sum() > MOVED_OFF
+
+
+def test_same_texel_source_keeps_the_label_and_drops_the_offset():
+    """Two charts (columns 0-1, 3); every match at (2, 1), in the left chart."""
+    source = np.zeros((3, 4, 3), np.int32)
+    source[..., 0] = [[0, 0, 1, 1], [0, 0, 1, 1], [-1, 0, 1, 1]]
+    source[..., 1:] = (2, 1)
+    mask = np.ones((3, 4), bool)
+    mask[:, 2] = False  # padding between the charts
+    covers = [np.ones((3, 4), bool), np.ones((3, 4), bool)]
+    covers[0][0, 0] = False  # example 0 lacks (0, 0): its match in its chart is kept
+    covers[1][0, 3] = False  # example 1 lacks (0, 3): its match in the other chart is not
+    out = same_texel_source(source, mask, covers)
+    assert out[mask, 0].tolist() == [0, 0, 1, 0, 0, 1, 0, 0, 1]  # (2, 0): its neighbours'
+    rows, cols = np.indices((3, 4))
+    own = (out[..., 1] == rows) & (out[..., 2] == cols)
+    assert out[0, 0, 1:].tolist() == [2, 1] and own.sum() == own.size - 1
 
 
 def test_a_degenerate_example_is_named_before_any_work():

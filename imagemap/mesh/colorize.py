@@ -469,6 +469,7 @@ def _colorize_registered(
         seed=seed,
         quiet=quiet,
         working_size=REGISTERED_WORKING_SIZE,
+        same_texel=True,
     )
     vertices, faces, uv = mesh_uv_arrays(query)
     textured = textured_mesh(vertices, faces, uv, result.image)

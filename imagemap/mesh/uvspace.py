@@ -49,11 +49,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import sparse
+from scipy import ndimage, sparse
 
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.core.engine import ReleasableLevels, synthesize
 from imagemap.core.mapping import Mapping
+from imagemap.core.poisson import seamless_copy
 from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
 from imagemap.core.stages import Stage, run_pipeline
 from imagemap.depth.finish import (
@@ -78,6 +79,7 @@ __all__ = [
     "UVExample",
     "colorize_uv",
     "layout_agreement",
+    "same_texel_source",
     "same_uv_layout",
     "select_uv_examples",
     "surface_maps",
@@ -564,6 +566,68 @@ def fine_texture(
     return image, fine
 
 
+def same_texel_source(source: np.ndarray, mask: np.ndarray, covers: list[np.ndarray]) -> np.ndarray:
+    """The source map with every texel copied from the same texel of its example.
+
+    On the registered path every example is resampled into the query's atlas, so texel
+    ``t`` of each is (an estimate of) the query's surface point at ``t``: the synthesis
+    chooses only *which* example a texel comes from. Copying ``t`` from ``t + offset``
+    (the engine's match) lands, near a chart's border, in another chart or the padding:
+    specks of other charts' colours. Here the offset is dropped and the example (the
+    label) kept. One exception: where the example does not cover ``t`` (its surface is
+    farther than the resample's cover distance: a fin of another shape), ``t`` holds only
+    padding, and the engine's match, a covered texel, is kept if it lies in ``t``'s own
+    chart (a connected part of ``mask``). Texels outside ``mask`` or without a source take
+    the label of the nearest used texel with one.
+
+    Parameters
+    ----------
+    source : (T, T, 3) int array
+        Example, y, x per texel (example < 0: none).
+    mask : (T, T) bool
+        The query's used texels.
+    covers : list of (T, T) bool
+        Each example's covered texels.
+
+    Returns
+    -------
+    (T, T, 3) int32: example, y, x; y, x the texel's own but at the exception above.
+
+    Examples
+    --------
+    Two charts (columns 0-1 and 3); example 1 does not cover texel (0, 3): there, the
+    match (1, 2) in the other chart is refused, and texel (1, 1)'s in its own is kept.
+
+    >>> source = np.zeros((2, 4, 3), np.int32); source[..., 0] = [[0, 1, 0, 1], [1, 1, 0, 0]]
+    >>> source[..., 1:] = [1, 2]  # every match at texel (1, 2)
+    >>> source[1, 1, 1:] = [0, 0]
+    >>> mask = np.array([[1, 1, 0, 1], [1, 1, 0, 1]], bool)
+    >>> covers = [np.ones((2, 4), bool), np.array([[1, 1, 1, 0], [1, 0, 1, 1]], bool)]
+    >>> out = same_texel_source(source, mask, covers)
+    >>> out[mask, 0].tolist(), out[0, 3, 1:].tolist(), out[1, 1, 1:].tolist()
+    ([0, 1, 1, 1, 1, 0], [0, 3], [0, 0])
+    """
+    height, width = mask.shape
+    label = source[..., 0].astype(np.int32)
+    known = mask & (label >= 0) & (label < len(covers))
+    if known.any():
+        nearest = ndimage.distance_transform_edt(
+            ~known, return_distances=False, return_indices=True
+        )
+        label = label[tuple(nearest)]
+    else:
+        label = np.zeros_like(label)
+    rows, cols = np.indices((height, width), dtype=np.int32)
+    out = np.stack([label, rows, cols], axis=-1).astype(np.int32)
+    covered = np.take_along_axis(np.stack(covers), label[None], axis=0)[0]
+    charts, _ = ndimage.label(mask)
+    sy = np.clip(source[..., 1], 0, height - 1)
+    sx = np.clip(source[..., 2], 0, width - 1)
+    keep = known & ~covered & (charts[sy, sx] == charts)
+    out[keep] = source[keep]
+    return out
+
+
 def colorize_uv(
     mesh,
     examples: list[UVExample],
@@ -575,6 +639,7 @@ def colorize_uv(
     quiet: bool = True,
     working_size: int = WORKING_SIZE,
     weights: tuple[float, float, float] = (POSITION_WEIGHT, NORMAL_WEIGHT, CURVATURE_WEIGHT),
+    same_texel: bool = False,
 ):
     """Synthesise a texture in the query's UV atlas from examples in the same layout.
 
@@ -598,6 +663,11 @@ def colorize_uv(
         The atlas size the engine runs at (at most ``size``).
     weights : (float, float, float)
         Weights of the position, normal and curvature bands (0 leaves a band out).
+    same_texel : bool
+        Copy every texel from the same texel of the example the synthesis chose for it
+        (:func:`same_texel_source`; the seams are then placed and blended between
+        examples only): for examples resampled into the query's atlas (the registered
+        path), where an offset can only take another chart's colour.
 
     Returns
     -------
@@ -684,11 +754,43 @@ def colorize_uv(
         )
         return state
 
+    def same(state: SynthesisState, config) -> SynthesisState:
+        old = state.made("source")
+        state.source = same_texel_source(old, query.mask, [p.mask for p in pictures])
+        moved = query.mask & np.any(old[..., 1:] != state.source[..., 1:], axis=-1)
+        state.changed = f"{int(moved.sum())} texels copied from their own texel instead"
+        return state
+
+    def blend(state: SynthesisState, config) -> SynthesisState:
+        # The depth finish's blend, but the charts' outlines are not the object's: every
+        # texel (padding too) is copied from its own texel, so across an outline the
+        # copy's own step is kept, not the voted map's (which pulled the border texels
+        # towards the vote: specks along the charts' borders). Only the seams between
+        # examples are blended.
+        scale = max(config.finish.blend_scale * float(np.sqrt(state.mask.sum())), 1.0)
+        state.ycbcr = seamless_copy(
+            state.made("exemplars"),
+            state.made("source"),
+            state.made("ycbcr"),
+            scale=scale,
+            edge_support=config.finish.edge_support,
+            edge_contrast=config.finish.edge_contrast,
+            edge_floor=config.finish.edge_floor,
+        )
+        state.exemplars = None
+        state.changed = f"seams between examples blended at scale {scale:.1f} px"
+        return state
+
     stages = (Stage("select", select), Stage("bands", bands), Stage("synthesize", engine))
+    finish: tuple[Stage, ...] = FINISH_STAGES
+    if same_texel:  # after the copy's source is made, before the seams are placed on it
+        at = finish.index(COPY) + 1
+        finish = (*finish[:at], Stage("same texel", same), *finish[at:])
+        finish = tuple(Stage("blend", blend, BLEND.wanted) if f is BLEND else f for f in finish)
     start = time.perf_counter()
     ran = sized_config(config, query.mask)
     state, records = run_pipeline(
-        SynthesisState(mask=query.mask, seed=seed, quiet=quiet), ran, stages + FINISH_STAGES
+        SynthesisState(mask=query.mask, seed=seed, quiet=quiet), ran, stages + finish
     )
     working_image, source, engine_result = state.image, state.source, state.engine
     if working_image is None or source is None or engine_result is None:
