@@ -628,6 +628,36 @@ def same_texel_source(source: np.ndarray, mask: np.ndarray, covers: list[np.ndar
     return out
 
 
+def _charts_with_seams(source: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Texels (padding: of the nearest chart) whose chart of ``mask`` holds a seam of
+    ``source``: two neighbours copied from different examples or not from neighbouring
+    texels.
+
+    Examples
+    --------
+    >>> mask = np.array([[1, 1, 0, 0, 1, 1]], bool)
+    >>> source = np.zeros((1, 6, 3), np.int32); source[0, :, 2] = np.arange(6)
+    >>> source[0, 5, 0] = 1  # a seam in the right chart
+    >>> _charts_with_seams(source, mask).astype(int).tolist()
+    [[0, 0, 0, 1, 1, 1]]
+    """
+    step = np.zeros(mask.shape, dtype=bool)
+    across = np.any(source[:, 1:] - source[:, :-1] != (0, 0, 1), axis=-1)
+    down = np.any(source[1:] - source[:-1] != (0, 1, 0), axis=-1)
+    step[:, 1:] |= across
+    step[:, :-1] |= across
+    step[1:] |= down
+    step[:-1] |= down
+    charts, count = ndimage.label(mask)
+    nearest = ndimage.distance_transform_edt(
+        charts == 0, return_distances=False, return_indices=True
+    )
+    charts = charts[tuple(nearest)]
+    seamed = np.zeros(count + 1, dtype=bool)
+    seamed[charts[step & mask]] = True
+    return seamed[charts]
+
+
 def colorize_uv(
     mesh,
     examples: list[UVExample],
@@ -757,28 +787,42 @@ def colorize_uv(
     def same(state: SynthesisState, config) -> SynthesisState:
         old = state.made("source")
         state.source = same_texel_source(old, query.mask, [p.mask for p in pictures])
+        # The colours copied are the examples' own at every texel: the copy stage's refill
+        # of an example's uncovered texels from its nearest covered one (in the atlas:
+        # often another chart) would reach the texture through the blend's correction.
+        state.exemplars = [to_ycbcr(texture) for texture in textures]
         moved = query.mask & np.any(old[..., 1:] != state.source[..., 1:], axis=-1)
         state.changed = f"{int(moved.sum())} texels copied from their own texel instead"
         return state
 
     def blend(state: SynthesisState, config) -> SynthesisState:
-        # The depth finish's blend, but the charts' outlines are not the object's: every
-        # texel (padding too) is copied from its own texel, so across an outline the
-        # copy's own step is kept, not the voted map's (which pulled the border texels
-        # towards the vote: specks along the charts' borders). Only the seams between
-        # examples are blended.
+        # The depth finish's blend with two changes. The charts' outlines are not the
+        # object's: every texel (padding too) is copied from its own texel, so across an
+        # outline the copy's own step is kept. And the copy is its own reference: the
+        # examples' colours are already where they belong, so nothing drifts towards the
+        # voted map (whose windows at the charts' borders saw the padding: specks along
+        # the borders); only the seams' steps are spread.
         scale = max(config.finish.blend_scale * float(np.sqrt(state.mask.sum())), 1.0)
-        state.ycbcr = seamless_copy(
-            state.made("exemplars"),
-            state.made("source"),
-            state.made("ycbcr"),
+        exemplars, source = state.made("exemplars"), state.made("source")
+        copied = copy_through(exemplars, source)
+        # The solve is on the atlas' grid: a seam's correction would spread over the
+        # padding into the neighbouring charts. A chart without a seam keeps the copy.
+        blended = seamless_copy(
+            exemplars,
+            source,
+            copied,
             scale=scale,
             edge_support=config.finish.edge_support,
             edge_contrast=config.finish.edge_contrast,
             edge_floor=config.finish.edge_floor,
         )
+        seamed = _charts_with_seams(source, state.mask)
+        state.ycbcr = np.where(seamed[..., None], blended, copied).astype(np.float32)
         state.exemplars = None
-        state.changed = f"seams between examples blended at scale {scale:.1f} px"
+        state.changed = (
+            f"seams blended at scale {scale:.1f} px, the copy as reference; "
+            f"{int((seamed & state.mask).sum())} texels in charts with a seam"
+        )
         return state
 
     stages = (Stage("select", select), Stage("bands", bands), Stage("synthesize", engine))
