@@ -34,7 +34,7 @@ def load(name: str):
 
 @pytest.fixture(scope="module")
 def plates():
-    return load("relief_plates").make_task(256, 192)
+    return load("relief_plates").make_task(160, 120)
 
 
 def test_seams_follow_the_querys_own_grooves(plates):
@@ -47,7 +47,7 @@ def test_seams_follow_the_querys_own_grooves(plates):
     mask = plates.depth > 0
     ours_f1 = plates.features(ours.image, mask)["seam_f1"]
     warped_f1 = plates.features(warped.image, mask)["seam_f1"]
-    assert ours_f1 >= 0.85, ours_f1  # measured 0.96 at 320x240, 0.93 at 768x576
+    assert ours_f1 >= 0.85, ours_f1  # measured 0.98 at 160x120, 0.96 at 320x240, 0.93 at 768x576
     assert ours_f1 >= warped_f1 + 0.1, (ours_f1, warped_f1)
     # Without the relief's say (the registered position everywhere, colours alone in
     # the seams' cut) the examples' layout comes back.
@@ -73,6 +73,13 @@ def fish_class(tmp_path_factory):
     return database, frame
 
 
+@pytest.fixture(scope="module")
+def upright(fish_class):
+    """The upright query's map (fish preset, seed 0): the reference of the two tests below."""
+    database, depth = fish_class
+    return imagemap.colorize(depth, database, "fish", seed=0)
+
+
 def _de00(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     from scipy import ndimage
 
@@ -81,9 +88,8 @@ def _de00(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     return float(color.deltaE_ciede2000(lab_a, lab_b)[inner].mean())
 
 
-def test_a_mirrored_query_gives_the_mirrored_map(fish_class):
+def test_a_mirrored_query_gives_the_mirrored_map(fish_class, upright):
     database, depth = fish_class
-    upright = imagemap.colorize(depth, database, "fish", seed=0)
     mirrored = imagemap.colorize(np.ascontiguousarray(depth[:, ::-1]), database, "fish", seed=0)
     assert mirrored.example_names == upright.example_names
     assert mirrored.poses[0].mirrored != upright.poses[0].mirrored
@@ -97,11 +103,10 @@ def test_a_mirrored_query_gives_the_mirrored_map(fish_class):
     assert _de00(plain.image, upright.image[:, ::-1], plain.mask) > 8.0
 
 
-def test_a_turned_and_scaled_query_gives_the_moved_map(fish_class):
+def test_a_turned_and_scaled_query_gives_the_moved_map(fish_class, upright):
     from skimage.transform import AffineTransform, warp
 
     database, depth = fish_class
-    upright = imagemap.colorize(depth, database, "fish", seed=0)
     centre = np.array([(depth.shape[1] - 1) / 2, (depth.shape[0] - 1) / 2])
     theta, scale = np.deg2rad(-35.0), 0.7
     linear = scale * np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
