@@ -53,11 +53,12 @@ def alpha_masked(mesh):
 
 @pytest.fixture(scope="module")
 def fish(tmp_path_factory):
-    """A database of 3 textured fish meshes; queries: 3 meshes and 1 depth map."""
+    """A database of 3 textured fish meshes; queries: 2 meshes (one alpha-masked) and 1
+    depth map. Three objects: two workers, a stop or a kill mid-way and the rest to do."""
     root = tmp_path_factory.mktemp("fish")
     previous = os.environ.get("IMAGEMAP_CACHE")
     os.environ["IMAGEMAP_CACHE"] = str(root / "cache")
-    for index in range(6):
+    for index in (0, 1, 2, 4, 5):  # xatlas charts each mesh (1 s): no more than needed
         folder = root / ("db" if index < 3 else "queries")
         mesh = instance_mesh(CLASSES["fish"], index, seed=0, texture_size=128)
         if index == 5:
@@ -72,8 +73,13 @@ def fish(tmp_path_factory):
         os.environ["IMAGEMAP_CACHE"] = previous
 
 
+#: The mesh queries of the ``fish`` fixture (with the depth map fish_006: 3 objects).
+MESH_QUERIES = ("fish_004", "fish_005")
+OBJECTS = len(MESH_QUERIES) + 1
+
+
 def assert_valid_outputs(out: Path) -> None:
-    for name in ("fish_003", "fish_004", "fish_005"):
+    for name in MESH_QUERIES:
         assert check_textured(out / f"{name}.glb"), name
     rgba = read_image(out / "fish_006_image.png")
     assert rgba.shape == (45, 60, 3) and rgba.max() > 0.1
@@ -89,12 +95,12 @@ def pool_run(fish, tmp_path_factory):
 
 def test_local_pool_of_two_makes_every_object(pool_run):
     out, summary = pool_run
-    assert (summary.done, summary.skipped, summary.failed) == (4, 0, 0)
+    assert (summary.done, summary.skipped, summary.failed) == (OBJECTS, 0, 0)
     assert summary.per_minute > 0
     assert_valid_outputs(out)
     report = json.loads((out / "batch_report.json").read_text())
-    assert report["done"] == 4 and report["objects_per_minute"] > 0
-    assert {r["name"] for r in report["objects"]} == {f"fish_00{i}" for i in (3, 4, 5, 6)}
+    assert report["done"] == OBJECTS and report["objects_per_minute"] > 0
+    assert {r["name"] for r in report["objects"]} == {f"fish_00{i}" for i in (4, 5, 6)}
     # The mesh queries were synthesized from the database's meshes.
     assert all(
         set(r["examples"]) <= {"fish_000", "fish_001", "fish_002"} for r in report["objects"]
@@ -110,7 +116,7 @@ def test_batch_gives_the_bytes_of_the_single_command(fish, pool_run, tmp_path):
 
     pool_out, _ = pool_run
     db = str(fish / "db")
-    for name in ("fish_003", "fish_004", "fish_005"):
+    for name in MESH_QUERIES:
         single = tmp_path / f"{name}.glb"
         query = str(fish / "queries" / f"{name}.glb")
         assert main(["synthesize", query, "--db", db, "-o", str(single), *SINGLE]) == 0
@@ -147,9 +153,9 @@ def test_dask_local_cluster_of_two_workers_gives_the_same_bytes(fish, pool_run, 
         summary = run_batch(
             fish / "queries", fish / "db", tmp_path, OPTIONS, scheduler=cluster.scheduler_address
         )
-    assert (summary.done, summary.skipped, summary.failed) == (4, 0, 0)
+    assert (summary.done, summary.skipped, summary.failed) == (OBJECTS, 0, 0)
     assert_valid_outputs(tmp_path)
-    names = ("fish_003.glb", "fish_004.glb", "fish_005.glb", "fish_006_image.png")
+    names = (*(f"{name}.glb" for name in MESH_QUERIES), "fish_006_image.png")
     for name in (*names, "fish_006_roughness.png"):
         assert (tmp_path / name).read_bytes() == (pool_out / name).read_bytes(), name
 
@@ -161,7 +167,7 @@ def test_a_changed_engine_redoes_finished_objects(fish, pool_run, monkeypatch):
 
     out, _ = pool_run
     jobs = plan_jobs(fish / "queries", out, OPTIONS)
-    assert len(jobs) == 4 and all(is_complete(job, OPTIONS) for job in jobs)
+    assert len(jobs) == OBJECTS and all(is_complete(job, OPTIONS) for job in jobs)
     monkeypatch.setattr(imagemap.batch.plan, "engine_digest", lambda: "another engine")
     assert not any(is_complete(job, OPTIONS) for job in jobs)
 
@@ -173,15 +179,15 @@ def test_stop_mid_batch_then_resume(fish, tmp_path):
     with pytest.raises(KeyboardInterrupt):
         run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS, workers=2, on_result=stop)
     finished = len(list((tmp_path / ".imagemap-done").glob("*.json")))
-    assert 1 <= finished < 4
+    assert 1 <= finished < OBJECTS
     summary = run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS)
-    assert (summary.done, summary.skipped, summary.failed) == (4 - finished, finished, 0)
+    assert (summary.done, summary.skipped, summary.failed) == (OBJECTS - finished, finished, 0)
     assert_valid_outputs(tmp_path)
     # A damaged output is redone; complete ones are skipped.
     damaged = tmp_path / "fish_004.glb"
     damaged.write_bytes(damaged.read_bytes()[:100])
     summary = run_batch(fish / "queries", fish / "db", tmp_path, OPTIONS)
-    assert (summary.done, summary.skipped) == (1, 3)
+    assert (summary.done, summary.skipped) == (1, OBJECTS - 1)
     assert_valid_outputs(tmp_path)
     # Other options are other outputs: nothing is skipped.
     other = BatchOptions(preset="fish", size=SIZE, texture_size=64, seed=1)
@@ -212,14 +218,14 @@ def test_killed_batch_resumes_with_every_output_complete(fish, tmp_path):
     process.send_signal(signal.SIGKILL)
     process.wait()
     finished = len(list((out / ".imagemap-done").glob("*.json")))
-    assert 1 <= finished < 4, "the batch must be killed mid-way"
+    assert 1 <= finished < OBJECTS, "the batch must be killed mid-way"
     (out / ".fish_005.stale123.imagemap-tmp.glb").write_bytes(b"half a file")  # as a kill leaves it
     mine = out / ".fish_005.holiday.png"  # a user's file that merely looks like one
     mine.write_bytes(b"keep me")
     again = subprocess.run(command, env=env, capture_output=True, text=True)
     assert again.returncode == 0, again.stderr
     report = json.loads((out / "batch_report.json").read_text())
-    assert (report["skipped"], report["done"]) == (finished, 4 - finished)
+    assert (report["skipped"], report["done"]) == (finished, OBJECTS - finished)
     assert mine.read_bytes() == b"keep me"
     mine.unlink()
     assert_valid_outputs(out)
@@ -228,13 +234,13 @@ def test_killed_batch_resumes_with_every_output_complete(fish, tmp_path):
 def test_a_failing_object_is_reported_and_the_rest_go_on(fish, tmp_path, caplog):
     queries = tmp_path / "queries"
     queries.mkdir()
-    shutil.copy(fish / "queries" / "fish_003.glb", queries)
+    shutil.copy(fish / "queries" / "fish_004.glb", queries)
     (queries / "broken.glb").write_bytes(b"glTF but not really")
     summary = run_batch(queries, fish / "db", tmp_path / "out", OPTIONS)
     assert (summary.done, summary.failed) == (1, 1)
     failed = [r for r in summary.records if r["status"] == "failed"]
     assert "broken.glb" in failed[0]["error"]
-    assert check_textured(tmp_path / "out" / "fish_003.glb")
+    assert check_textured(tmp_path / "out" / "fish_004.glb")
     assert not (tmp_path / "out" / "broken.glb").exists()
 
 
@@ -323,9 +329,10 @@ def test_data_gen_meshes_look_like_their_image_maps(tmp_path):
         return resize(image[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1], (40, 80))
 
     assert np.abs(crop(seen) - crop(truth)).mean() < 0.06
-    # Same seed, same mesh file.
+    # Same seed, same mesh file (whatever the count: one object is enough to compare).
     again = tmp_path / "again"
-    assert data_gen_main([*args, "--out", str(again), "-q"]) == 0
+    alone = ["fish", "--count", "1", "--size", "80x60", "--meshes"]
+    assert data_gen_main([*alone, "--out", str(again), "-q"]) == 0
     first = (out / "meshes" / "fish_000.glb").read_bytes()
     assert first == (again / "meshes" / "fish_000.glb").read_bytes()
 
