@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 from dataclasses import replace
@@ -22,17 +24,28 @@ def bench():
 
 
 # The quick run (the tests marked slow + ci_slow below) takes about 40 s: every case, both
-# backends, two fresh processes. Out of the default run; CI keeps it, as the check that
-# the benchmark script still works.
+# backends, two fresh processes, and the quality group. Out of the default run; CI keeps
+# it, as the check that the benchmark script (and ``imagemap bench``) still works.
 
 
 @pytest.fixture(scope="module")
-def quick_report(bench, tmp_path_factory):
+def quick_run(tmp_path_factory):
+    """``imagemap bench --quick --quality``: the report and what it printed. One run for
+    the rows and the quality group (each run starts with the JIT warm-up)."""
     tmp = tmp_path_factory.mktemp("bench")
     out = tmp / "results.json"
-    code = bench.main(["--quick", "--json", str(out), "--data", str(tmp / "data")])
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        code = imagemap_main(
+            ["bench", "--quick", "--quality", "--json", str(out), "--data", str(tmp / "data")]
+        )
     assert code == 0
-    return json.loads(out.read_text())
+    return json.loads(out.read_text()), printed.getvalue()
+
+
+@pytest.fixture(scope="module")
+def quick_report(quick_run):
+    return quick_run[0]
 
 
 def test_memory_probe_sees_an_allocation(bench):
@@ -106,16 +119,14 @@ def test_quick_run_report_names_the_machine_and_breaks_down_stages(bench, quick_
     assert "| synthesize.search |" in text
 
 
-def test_imagemap_bench_quality(tmp_path, capsys):
-    out = tmp_path / "q.json"
-    code = imagemap_main(
-        ["bench", "--quick", "--only", "quality", "--json", str(out), "--data", str(tmp_path)]
-    )
-    assert code == 0
-    quality = json.loads(out.read_text())["quality"]
+@pytest.mark.slow
+@pytest.mark.ci_slow
+def test_imagemap_bench_quality(quick_run):
+    report, printed = quick_run
+    quality = report["quality"]
     assert quality["objects"] == 4
     assert 0 < quality["ciede2000"] < 100
-    assert "mean CIEDE2000" in capsys.readouterr().out
+    assert "mean CIEDE2000" in printed
 
 
 def test_unknown_group_is_an_input_error(bench, tmp_path):
