@@ -434,7 +434,7 @@ class Finish:
     #: solve's time grows faster than its pixels (512^2 1.2 s, 1024^2 12-16 s, 4096^2 214
     #: s) and it leaves more fragments the larger the map. 512^2: maps up to it unchanged;
     #: the ellipsoid fish at 1024^2 (896x1011): 12.8 -> 2.6 s, same energy, 24 fragments
-    #: instead of 25 (64^2 = 65536, a coarsest level 4x smaller: energy 10 % higher); a
+    #: instead of 25 (256^2 = 65536, a coarsest level 4x smaller: energy 10 % higher); a
     #: 2048^2 fish 73 -> 56 fragments; 4096^2: 214 -> 18.5 s (docs/performance.md).
     seam_coarse_above: int = setting(512 * 512, kind="int", minimum=0)
     #: Half-width in pixels of that band. Ellipsoid fish at 1024^2, energy against the
