@@ -78,14 +78,13 @@ _EXEMPLAR_LEVEL_BYTES = 25  # a level of an example's pyramid: guide and colour 
 _OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
 _MEMORY_FACTOR = 0.8
 # Seconds per window centre and feature dimension, all iterations, the whole pipeline
-# (engine and finish) in one figure: the CPU seconds of fresh-process runs of
-# benchmarks/memory.py (generated fish, m = 2, 2026-11-28, load 4-5 on the shared 2-core
-# machine, where the wall time was within 5 % of the CPU time) over the work: 3.1x,
-# 3.4x and 3.9x the earlier 4.0e-7 at 1024^2, 2048^2 and 4096^2 (22.2, 87.6 and 384 s);
-# 1.4e-6 is about the middle (the estimate 25.4, 90.6 and 348 s: +14 %, +3 %, -9 %). An
-# idle machine runs the engine's two threads at once: earlier quiet runs of older code
-# took 0.65-0.77x these CPU times (the estimate errs long there).
-_SECONDS_PER_FEATURE = 1.4e-6
+# (engine and finish) in one figure, from fresh-process runs of benchmarks/memory.py
+# (generated fish, m = 2). 2026-11-29, after the speed round (REFINE_PASSES, the PatchMatch
+# early stop), quiet machine (load 0.2-1.2): 11.4 / 40.2 / 178.1 s of wall time and 13.1 /
+# 48.1 / 218.2 s of CPU at 1024^2, 2048^2 and 4096^2; 7.5e-7 gives 13.7 / 48.7 / 186.6 s
+# (wall +20 %, +21 %, +5 %; CPU +5 %, +1 %, -14 %). The 1.4e-6 before it (2026-11-28, CPU at
+# load 4-5 of the code before the round) erred long by 2x on these runs.
+_SECONDS_PER_FEATURE = 7.5e-7
 _SECONDS_OVERHEAD = 0.3
 
 #: Runs estimated to take longer than this are announced with a warning (not refused).
