@@ -294,3 +294,19 @@ def test_db_check_lists_meshes_as_a_synthesis_opens_them(tmp_path, monkeypatch, 
     assert any("ball.glb: an example named 'ball' exists already" in p for p in problems)
     assert any("plain.stl" in p and "needs colours" in p for p in problems)
     assert main(["db", "check", str(db_dir)]) == 1
+
+
+def test_a_database_whose_meshes_are_in_its_meshes_folder_gets_a_hint(tmp_path):
+    """data_gen's layout: depth examples in OUT/, meshes in OUT/meshes/ (not read by --db OUT)."""
+    from imagemap.cli.mesh import mesh_folder_hint
+
+    (tmp_path / "fish_000_depth.png").write_bytes(b"")
+    assert mesh_folder_hint(tmp_path) is None  # no meshes/ folder
+    (tmp_path / "meshes").mkdir()
+    assert mesh_folder_hint(tmp_path) is None  # an empty one
+    (tmp_path / "meshes" / "fish_000.glb").write_bytes(b"")
+    (tmp_path / "meshes" / "fish_001.glb").write_bytes(b"")
+    hint = mesh_folder_hint(tmp_path)
+    assert hint is not None and "2 in" in hint and f"--db {tmp_path / 'meshes'}" in hint
+    (tmp_path / "other.glb").write_bytes(b"")
+    assert mesh_folder_hint(tmp_path) is None  # the folder has mesh examples of its own

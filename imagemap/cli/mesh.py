@@ -87,6 +87,30 @@ def _guard_memory(args: argparse.Namespace, mesh, views) -> None:
     guard_mesh(size, max(len(views), 1), texture, str(args.depth[0]), check)
 
 
+def mesh_folder_hint(db) -> str | None:
+    """A hint when ``db`` holds no mesh examples but ``db/meshes/`` does.
+
+    ``python -m data_gen ... --meshes`` writes the depth examples in ``OUT/`` and the
+    textured meshes in ``OUT/meshes/``, which ``--db OUT`` does not read: a mesh query then
+    takes the views path from the depth examples, where ``--db OUT/meshes`` would register
+    the meshes onto it (one palette on every side, docs/meshes.md).
+    """
+    from imagemap.scene.files import TEXTURED_SUFFIXES
+
+    folder = Path(db)
+    sub = folder / "meshes"
+    if not sub.is_dir() or any(p.suffix.lower() in TEXTURED_SUFFIXES for p in folder.iterdir()):
+        return None
+    found = [p for p in sub.iterdir() if p.suffix.lower() in TEXTURED_SUFFIXES]
+    if not found:
+        return None
+    return (
+        f"{folder}: no mesh examples here, but {len(found)} in {sub}: this mesh is made "
+        f"through views from the depth examples; --db {sub} registers the meshes onto it "
+        "in 3-D instead (docs/meshes.md)"
+    )
+
+
 def run_mesh_synthesize(args: argparse.Namespace) -> int:
     """``imagemap synthesize MESH -o out.glb|out.obj|out.png``: one mesh, one or more views."""
     import time
@@ -131,6 +155,9 @@ def run_mesh_synthesize(args: argparse.Namespace) -> int:
         if not quiet:
             print(f"imagemap: views at {args.size[0]}x{args.size[1]}", file=sys.stderr)
     database = Database.from_directory(args.db, view=views[0], size=args.size)
+    hint = mesh_folder_hint(args.db)
+    if hint is not None and not quiet:
+        print(f"imagemap: {hint}", file=sys.stderr)
     if args.exclude:
         database = database.without(*[n.strip() for n in args.exclude.split(",")])
     examples = [n.strip() for n in args.examples.split(",")] if args.examples else None
