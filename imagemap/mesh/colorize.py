@@ -370,14 +370,9 @@ def colorize_mesh(
             ", ".join(e.name for e in uv_examples),
             texture_size,
         )
-        if step is not None:
-            step(f"synthesizing in the UV atlas ({texture_size}^2)")
-        result = colorize_uv(
-            mesh, uv_examples, config, size=int(texture_size), names=names, seed=seed, quiet=quiet
+        return _synthesize_in_atlas(
+            mesh, uv_examples, config, texture_size, names, seed, quiet, step, "uv-space"
         )
-        vertices, faces, uv = mesh_uv_arrays(mesh)
-        textured = textured_mesh(vertices, faces, uv, result.image)
-        return MeshResult(mesh=textured, renders=[], results=[result], path="uv-space")
     to_register = (
         registrable_examples(examples_set, names)
         if registered or (registered is None and uv_space is not False)
@@ -458,19 +453,32 @@ def _colorize_registered(
         ", ".join(e.name for e in examples),
         texture_size,
     )
-    if step is not None:
-        step(f"synthesizing in the UV atlas ({texture_size}^2)")
-    result = colorize_uv(
+    return _synthesize_in_atlas(
         query,
         list[UVExample](examples),
         config,
-        size=int(texture_size),
-        names=[e.name for e in examples],
-        seed=seed,
-        quiet=quiet,
+        texture_size,
+        [e.name for e in examples],
+        seed,
+        quiet,
+        step,
+        "registered",
         working_size=REGISTERED_WORKING_SIZE,
         same_texel=True,
     )
-    vertices, faces, uv = mesh_uv_arrays(query)
+
+
+def _synthesize_in_atlas(
+    mesh, examples, config, texture_size, names, seed, quiet, step, path: str, **options
+) -> MeshResult:
+    """The two UV paths' synthesis in ``mesh``'s atlas (:func:`colorize_uv`, with
+    ``options``) and the textured mesh it makes."""
+    if step is not None:
+        step(f"synthesizing in the UV atlas ({texture_size}^2)")
+    result = colorize_uv(
+        mesh, examples, config, size=int(texture_size), names=names, seed=seed, quiet=quiet,
+        **options,
+    )  # fmt: skip
+    vertices, faces, uv = mesh_uv_arrays(mesh)
     textured = textured_mesh(vertices, faces, uv, result.image)
-    return MeshResult(mesh=textured, renders=[], results=[result], path="registered")
+    return MeshResult(mesh=textured, renders=[], results=[result], path=path)
