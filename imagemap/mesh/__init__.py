@@ -10,6 +10,20 @@ Meshes, views, ray casting and mesh files are :mod:`imagemap.scene`, below the d
 
 from __future__ import annotations
 
-from imagemap.mesh.colorize import MeshResult, colorize_mesh
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from imagemap.mesh.colorize import MeshResult, colorize_mesh
 
 __all__ = ["MeshResult", "colorize_mesh"]
+
+
+def __getattr__(name: str) -> Any:
+    # Deferred (PEP 562): importing a submodule such as ``imagemap.mesh.library`` (every
+    # batch worker does) must not import the colorization and its registration, which pull
+    # in trimesh and networkx (about 0.45 s of a worker's start).
+    if name in __all__:
+        from imagemap.mesh import colorize
+
+        return getattr(colorize, name)
+    raise AttributeError(f"module 'imagemap.mesh' has no attribute {name!r}")
