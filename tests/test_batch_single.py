@@ -214,15 +214,40 @@ def test_the_input_roughness_map_is_kept_where_the_examples_have_none():
     assert middle == pytest.approx(expected, abs=0.03)
 
 
+def _with_maps(source: Path, target: Path) -> None:
+    """``source``'s textured mesh written to ``target`` with a normal map (leaning
+    along +u in its top half) and a roughness ramp in its material."""
+    from PIL import Image
+
+    mesh = load_mesh(source)
+    size = 64
+    normal = np.zeros((size, size, 3), np.uint8)
+    normal[...] = (128, 128, 255)
+    normal[: size // 2] = (204, 128, 230)
+    packed = np.zeros((size, size, 3), np.uint8)
+    packed[..., 1] = np.linspace(40, 220, size).astype(np.uint8)[None, :]
+    mesh.visual.material.normalTexture = Image.fromarray(normal, "RGB")
+    mesh.visual.material.metallicRoughnessTexture = Image.fromarray(packed, "RGB")
+    mesh.visual.material.roughnessFactor = 1.0
+    export_textured(mesh, target)
+
+
 @pytest.mark.parametrize(
-    "path", ["views auto", "uv-space", pytest.param("default size", marks=pytest.mark.slow)]
+    "path",
+    [
+        "views auto",
+        "uv-space",
+        pytest.param("registered", marks=pytest.mark.slow),  # 7 s per command
+        pytest.param("default size", marks=pytest.mark.slow),
+    ],
 )
 def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tmp_path):
     """``--views auto`` (each mesh chooses among the six candidates the batch prepared),
-    the uv-space path (the batch ships its mesh examples' meshes) and no ``--size`` (views
-    as fine as the texels, each mesh its own, issue #46 item 2: the fin at 256² asks for
-    317x238): the batch's GLB is the single command's, byte for byte, and the path is the
-    one asked for."""
+    the uv-space path (the batch ships its mesh examples' meshes), the registered path
+    (a head with normal and roughness maps registered onto the fin: the maps carried, a
+    TANGENT written) and no ``--size`` (views as fine as the texels, each mesh its own,
+    issue #46 item 2: the fin at 256² asks for 317x238): the batch's GLB is the single
+    command's, byte for byte, and the path is the one asked for."""
     import shutil
 
     queries, db = tmp_path / "queries", tmp_path / "db"
@@ -232,6 +257,10 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
         shutil.copy(shared_heads / "head_00.glb", db)
         shutil.copy(shared_heads / "head_01.glb", queries / "query.glb")
         options = ["--preset", "busts", "--texture-size", "64", "--uv-space", "-q"]
+    elif path == "registered":  # a head in its own layout, the fin in another
+        _with_maps(shared_heads / "head_00.glb", db / "head_00.glb")
+        shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
+        options = ["--preset", "busts", "--texture-size", "64", "-q"]
     elif path == "default size":
         shutil.copytree(routes / "db", db, dirs_exist_ok=True)
         shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
@@ -252,6 +281,15 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
     report = json.loads((tmp_path / "report.json").read_text())
     if path == "uv-space":
         assert report["path"] == "uv-space" and report["views"] == []
+    elif path == "registered":
+        from tests.test_glb import glb_json
+
+        assert report["path"] == "registered" and report["views"] == []
+        gltf = glb_json(batch / "query.glb")
+        material = gltf["materials"][0]
+        assert "normalTexture" in material
+        assert "metallicRoughnessTexture" in material["pbrMetallicRoughness"]
+        assert "TANGENT" in gltf["meshes"][0]["primitives"][0]["attributes"]
     elif path == "default size":
         assert report["path"] == "views" and len(report["views"]) == 2
         assert tuple(report["size"]) == (317, 238)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -99,12 +99,17 @@ class MeshResult:
         One per view; on the uv-space path one, whose image is the texture.
     path : str
         ``"uv-space"``, ``"registered"`` or ``"views"`` (:data:`PATHS`).
+    examples : list of UVExample
+        The two atlas paths: the examples the texture was copied from, in the order of
+        ``results[0].example_names`` (their PBR maps are carried the same way,
+        :func:`imagemap.mesh.maps.atlas_maps`); empty on the views path.
     """
 
     mesh: object  # trimesh.Trimesh with UVs and texture
     renders: list[MeshRender]
     results: list  # one ColorizeResult per view (uv-space: one, the atlas)
     path: str = "views"
+    examples: list = field(default_factory=list)
 
     @property
     def image(self) -> np.ndarray:
@@ -481,4 +486,6 @@ def _synthesize_in_atlas(
     )  # fmt: skip
     vertices, faces, uv = mesh_uv_arrays(mesh)
     textured = textured_mesh(vertices, faces, uv, result.image)
-    return MeshResult(mesh=textured, renders=[], results=[result], path=path)
+    by_name = {e.name: e for e in examples}
+    used = [by_name[name] for name in result.example_names]
+    return MeshResult(mesh=textured, renders=[], results=[result], path=path, examples=used)

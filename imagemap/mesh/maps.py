@@ -1,12 +1,25 @@
-"""PBR maps on the mesh route: each view's maps copied through its source map and baked
-through the colour's own bake (:func:`with_mesh_maps`), normals turned into the atlas'
-tangent frame."""
+"""PBR maps on the mesh route, carried from the examples by the colour's own choices.
+
+- **Views path**: each view's maps copied through its source map and baked through the
+  colour's own bake (:func:`with_mesh_maps`), normals turned into the atlas' tangent frame.
+- **uv-space and registered paths** (:func:`atlas_maps`): every texel of the texture says
+  which example and which texel its colour came from (the result's source map); the
+  examples' normal, roughness, metallic and ao maps are read at the same place, so they
+  stay in register with the colour. On the uv-space path that place is in the example's
+  own atlas (the query's layout): its tangent-space normals copy as they are. On the
+  registered path it is the example's surface point resampled into the query's atlas
+  (:attr:`imagemap.mesh.register.Resampled.correspondence`): the example's normals are
+  turned into world directions (its MikkTSpace frames), by the registration, onto the
+  query's surface normal there (the relief is relative to the surface) and into the
+  frames of the mesh as written.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from imagemap.materials import (
+    MAP_KINDS,
     MIN_NORMAL_Z,
     NEUTRAL,
     SIDE_MAPS,
@@ -17,11 +30,28 @@ from imagemap.materials import (
     transfer_maps,
 )
 from imagemap.scene.bake import rasterize_uv
-from imagemap.scene.files import _base_colour_texture, material_of, textured_mesh
-from imagemap.scene.views import fill_from_nearest
+from imagemap.scene.files import (
+    _base_colour_texture,
+    _material_maps,
+    material_of,
+    textured_mesh,
+)
+from imagemap.scene.views import fill_from_nearest, sample_image
 from imagemap.tangents import corner_tangents, tangent_frames
 
-__all__ = ["SIDE_MAPS", "bake_maps", "mesh_maps", "with_mesh_maps", "with_surface_maps"]
+__all__ = [
+    "SIDE_MAPS",
+    "atlas_maps",
+    "bake_maps",
+    "mesh_maps",
+    "with_mesh_maps",
+    "with_surface_maps",
+]
+
+#: The maps a glTF material holds that the atlas paths carry (a mesh example's material
+#: has no height slot: :data:`SIDE_MAPS` are not read from mesh examples).
+ATLAS_KINDS = ("normal", "roughness", "metallic", "ao")
+MAP_CHANNELS = MAP_KINDS
 
 
 def _baked(out, what: str = "bake_maps: bake's result") -> np.ndarray:
@@ -198,3 +228,164 @@ def with_mesh_maps(
     """
     maps = mesh_maps(textured, mesh, renders, results, databases, bake, projection)
     return with_surface_maps(textured, {k: v for k, v in maps.items() if k not in SIDE_MAPS})
+
+
+def _example_mesh(example):
+    """The mesh an atlas example's maps are read from: a registered example's own mesh
+    (its ``mesh`` is the query's), else the example's."""
+    own = getattr(example, "example_mesh", None)
+    return own if own is not None else example.mesh
+
+
+def _rotate_onto(vectors: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """``vectors`` (N, 3) turned by the least rotation taking unit ``start`` onto unit
+    ``end`` (rows); where the two are opposite, ``end`` itself (flat).
+
+    Examples
+    --------
+    >>> x, y, z = np.eye(3)
+    >>> _rotate_onto(np.array([[0.6, 0.0, 0.8]]), z[None], x[None]).round(6).tolist()
+    [[0.8, 0.0, -0.6]]
+    """
+    w = np.cross(start, end)
+    c = np.einsum("ij,ij->i", start, end)[:, None]
+    wv = np.cross(w, vectors)
+    turned = vectors + wv + np.cross(w, wv) / np.maximum(1.0 + c, 1e-12)
+    return np.where(1.0 + c > 1e-6, turned, end)
+
+
+def _query_texels(frames, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The written mesh's used texels at ``size``: (texel, face, barycentrics, unit
+    normal (N, 3) as a renderer interpolates it)."""
+    texel, face, bary = rasterize_uv(np.asarray(frames.visual.uv), frames.faces, size)
+    normals = np.asarray(frames.vertex_normals, dtype=np.float64)
+    corners = np.asarray(frames.faces, dtype=np.int64)[face]
+    normal = np.einsum("nk,nkc->nc", bary.astype(np.float64), normals[corners])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    return texel, face, bary, normal
+
+
+def _registered_map(example, kind: str, found: np.ndarray | None, size: int, query_normal):
+    """A registered example's map of ``kind`` in the query's atlas at ``size``
+    ((T, T) grey, or (T, T, 3) world normals onto the query's surface), read at its
+    correspondence; its neutral value (a flat normal: the query's own) where it has none."""
+    texel, face, bary = example.correspondence
+    face = face.astype(np.int64)
+    bary = bary.astype(np.float64)
+    mesh = _example_mesh(example)
+    covered = np.zeros((size, size), dtype=bool)
+    covered.flat[texel] = True
+    if kind != "normal":
+        out = np.full((size, size), NEUTRAL[kind][0], dtype=np.float32)
+        if found is not None:
+            uv = np.asarray(mesh.visual.uv, dtype=np.float64)
+            point_uv = np.einsum("nk,nkc->nc", bary, uv[np.asarray(mesh.faces)[face]])
+            point_uv -= np.floor(point_uv)  # textures repeat
+            out.flat[texel] = sample_image(found[..., None], point_uv)[:, 0]
+        return fill_from_nearest(out, covered)
+    here = query_normal.reshape(-1, 3)[texel]
+    if found is None:
+        world = here
+    else:
+        uv = np.asarray(mesh.visual.uv, dtype=np.float64)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
+        point_uv = np.einsum("nk,nkc->nc", bary, uv[faces[face]])
+        point_uv -= np.floor(point_uv)
+        local = decode_normals(sample_image(found, point_uv)).astype(np.float64)
+        t, b, n = tangent_frames(corner_tangents(mesh.vertices, faces, normals, uv), normals,
+                                 faces, face, bary)  # fmt: skip
+        vectors = local[:, :1] * t + local[:, 1:2] * b + local[:, 2:] * n
+        # Into the query's world by the registration (rotation, scale, a reflection), then
+        # onto the query's surface: what the deformation and the fit leave is not relief.
+        linear = np.asarray(example.registration.matrix, dtype=np.float64)[:3, :3]
+        vectors, n = vectors @ linear.T, n @ linear.T
+        vectors /= np.maximum(np.linalg.norm(vectors, axis=1, keepdims=True), 1e-12)
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        world = _rotate_onto(vectors, n, here)
+    out = query_normal.astype(np.float32, copy=True)
+    out.reshape(-1, 3)[texel] = world
+    return out
+
+
+def atlas_maps(result, examples: list, frames) -> dict[str, np.ndarray]:
+    """The examples' PBR maps in the query's atlas, each texel read where its colour was.
+
+    Parameters
+    ----------
+    result : ColorizeResult
+        Of :func:`imagemap.mesh.uvspace.colorize_uv`: ``source`` (T, T, 3) gives every
+        texel's example and texel (in the example's own texture on the uv-space path, in
+        its resampled texture, the query's atlas, on the registered path), ``mask`` the
+        used texels.
+    examples : list of UVExample
+        In ``result.example_names`` order (:attr:`~imagemap.mesh.colorize.MeshResult.examples`);
+        registered examples carry their correspondence.
+    frames : trimesh.Trimesh
+        The mesh as written (UVs, vertex normals; :func:`imagemap.scene.surface.frame_mesh`):
+        the normal map is in the frames of its MikkTSpace tangents.
+
+    Returns
+    -------
+    dict
+        ``{kind: (T, T) or (T, T, 3) float32}`` for every kind of :data:`ATLAS_KINDS` at
+        least one example has (none: empty); an example without a kind gives its neutral
+        value; texels outside ``mask`` hold the nearest used texel's value (as the colour).
+    """
+    have = [_material_maps(getattr(_example_mesh(e).visual, "material", None)) for e in examples]
+    kinds = [k for k in ATLAS_KINDS if any(k in m for m in have)]
+    if not kinds:
+        return {}
+    source = np.asarray(result.source)
+    mask = np.asarray(result.mask, dtype=bool)
+    size = source.shape[0]
+    index = np.clip(source[..., 0], 0, len(examples) - 1)
+    rows, cols = source[..., 1], source[..., 2]
+    registered = all(getattr(e, "correspondence", None) is not None for e in examples)
+    query = _query_texels(frames, size) if registered and "normal" in kinds else None
+    query_normal = None
+    if query is not None:
+        query_normal = np.zeros((size, size, 3), dtype=np.float32)
+        query_normal[..., 2] = 1.0
+        query_normal.reshape(-1, 3)[query[0]] = query[3]
+        known = np.zeros((size, size), dtype=bool)
+        known.flat[query[0]] = True
+        query_normal = fill_from_nearest(query_normal, known)
+    out: dict[str, np.ndarray] = {}
+    for kind in kinds:
+        channels = MAP_CHANNELS[kind]
+        carried = np.empty((size, size, channels), dtype=np.float32)
+        for k, (example, maps) in enumerate(zip(examples, have, strict=True)):
+            here = index == k
+            if not here.any():
+                continue
+            found = maps.get(kind)
+            if registered:
+                picture = _registered_map(example, kind, found, size, query_normal)
+                ys, xs = np.clip(rows[here], 0, size - 1), np.clip(cols[here], 0, size - 1)
+            elif found is None:
+                carried[here] = NEUTRAL[kind]
+                continue
+            else:
+                # The uv-space source is in the example's own texture; its maps may be of
+                # another size: the same place, scaled.
+                picture = found
+                height, width = np.asarray(example.texture).shape[:2]
+                ys = np.clip(((rows[here] + 0.5) * found.shape[0] / height).astype(np.int64),
+                             0, found.shape[0] - 1)  # fmt: skip
+                xs = np.clip(((cols[here] + 0.5) * found.shape[1] / width).astype(np.int64),
+                             0, found.shape[1] - 1)  # fmt: skip
+            carried[here] = picture[ys, xs].reshape(-1, channels)
+        if kind == "normal" and registered and query is not None:
+            texel, face, bary, _ = query
+            world = carried.reshape(-1, 3)[texel].astype(np.float64)
+            local = _to_tangent_space(world, frames, face, bary)
+            flat = np.zeros((size, size, 3), dtype=np.float32)
+            flat[..., 2] = 1.0
+            flat.reshape(-1, 3)[texel] = local
+            carried = encode_normals(flat)
+        elif kind == "normal":
+            carried = encode_normals(decode_normals(carried))
+        carried = fill_from_nearest(carried, mask) if mask.any() else carried
+        out[kind] = carried if channels == 3 else carried[..., 0]
+    return out

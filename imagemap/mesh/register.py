@@ -642,11 +642,16 @@ class Resampled:
         The example's guides at each texel (position in the query's normalised frame).
     covered : (T, T) bool
         Texels the deformed example passes near (:data:`COVER_DISTANCE`).
+    correspondence : (texel (N,), face (N,), barycentrics (N, 3)) or None
+        Each used texel's (flat index) surface point on the example: a face of its own
+        and barycentrics in its own winding, where its colour was sampled (its PBR maps
+        are carried the same way, :func:`imagemap.mesh.maps.registered_maps`).
     """
 
     colour: np.ndarray
     maps: SurfaceMaps
     covered: np.ndarray
+    correspondence: tuple | None = None
 
 
 def _query_frame(vertices, faces, uv, size) -> tuple[np.ndarray, float, tuple]:
@@ -698,7 +703,8 @@ def resample(example, registration: Registration, query, size: int, seed: int = 
         f, b, d = closest_points(registration.deformed, faces[subset], points[here], seed)
         face[here], bary[here], distance[here] = subset[f], b, d
     # The colour: the example's own faces (its own winding, its own UVs).
-    colour = surface_colours(example, face, bary[:, ::-1] if registration.mirrored else bary)
+    own_bary = bary[:, ::-1] if registration.mirrored else bary
+    colour = surface_colours(example, face, own_bary)
     # The guides: the same surface point on the rigidly registered example.
     welded, welded_faces, index = _weld(registration.vertices, faces)
     normals = _vertex_normals(welded, welded_faces)
@@ -728,7 +734,8 @@ def resample(example, registration: Registration, query, size: int, seed: int = 
         normal=stack[..., 3:6].copy(),
         curvature=stack[..., 6].copy(),
     )
-    return Resampled(np.clip(stack[..., 7:10], 0.0, 1.0), maps, covered)
+    where = (texel, face.astype(np.int32), own_bary.astype(np.float32))
+    return Resampled(np.clip(stack[..., 7:10], 0.0, 1.0), maps, covered, where)
 
 
 @dataclass
@@ -744,6 +751,7 @@ class RegisteredExample(UVExample):
     query: object = None
     registration: Registration | None = None
     seed: int = 0
+    correspondence: tuple | None = None  # Resampled.correspondence at the output size
 
     def maps(self, size: int) -> SurfaceMaps:
         """Its guides in the query's atlas at ``size`` (resampled on first use)."""
@@ -818,6 +826,7 @@ def registered_examples(
                 query=query,
                 registration=fit,
                 seed=seed,
+                correspondence=resampled.correspondence,
             )  # fmt: skip
         )
     log.info(

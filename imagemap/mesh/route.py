@@ -2,8 +2,9 @@
 ``imagemap synthesize MESH`` and for every mesh of ``imagemap batch``.
 
 :func:`texture_mesh` chooses the path (uv-space when the examples share the query's UV
-layout, else views; ``auto`` views by coverage), synthesizes, carries the examples'
-PBR maps and what the artist set on the input (normals, alpha, material);
+layout, registered when mesh examples are in other layouts, else views; ``auto`` views by
+coverage), synthesizes, carries the examples' PBR maps (on every path) and what the
+artist set on the input (normals, alpha, material);
 :func:`mesh_writers` stages the files (the mesh in its format, and beside it what glTF
 has no slot for). Both commands call these two with the same :class:`MeshRequest`, so
 the same options give the same bytes through either (``tests/test_batch.py``).
@@ -26,7 +27,7 @@ from imagemap.mesh.colorize import (
     uv_layout_examples,
 )
 from imagemap.mesh.library import ExampleSet
-from imagemap.mesh.maps import mesh_maps, with_surface_maps
+from imagemap.mesh.maps import atlas_maps, mesh_maps, with_surface_maps
 from imagemap.outputs import exported
 from imagemap.progress import progress, step_line
 from imagemap.scene.bake import bake_views, project_texture
@@ -137,6 +138,16 @@ def _render_mesh_examples(examples: ExampleSet, views, size, quiet: bool) -> Non
             _ = example.depth  # renders and caches
 
 
+def _with_atlas_maps(made: MeshResult, mesh):
+    """``made.mesh`` with the examples' PBR maps carried beside its colour (uv-space and
+    registered paths: each texel's from where its colour came, :func:`atlas_maps`)."""
+    if made.path == "views" or not made.examples:
+        return made.mesh
+    # The normal map in the frames of the mesh as written, as on the views path.
+    maps = atlas_maps(made.results[0], made.examples, frame_mesh(made.mesh, mesh))
+    return with_surface_maps(made.mesh, maps)
+
+
 def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
     """``made.mesh`` with the examples' PBR maps baked beside its colour (views path),
     and the maps glTF has no slot for (:data:`~imagemap.mesh.maps.SIDE_MAPS`), by kind."""
@@ -243,6 +254,7 @@ def texture_mesh(
         if views:
             step("baking the examples' PBR maps")
         coloured, side = _with_view_maps(made, mesh, examples, request.size)
+        coloured = _with_atlas_maps(made, mesh) if made.path != "views" else coloured
     textured = keep_surface(coloured, mesh)
     return TexturedResult(made=made, textured=textured, views=views, side_maps=side)
 
