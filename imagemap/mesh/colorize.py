@@ -33,6 +33,7 @@ from imagemap.depth.config import resolve_config
 from imagemap.depth.pipeline import colorize
 from imagemap.depth.selection import selection_distances
 from imagemap.io import InputError
+from imagemap.mesh.fineviews import fine_factor, fine_views
 from imagemap.mesh.library import ExampleSet
 from imagemap.mesh.register import registered_examples
 from imagemap.mesh.uvspace import (
@@ -298,6 +299,7 @@ def colorize_mesh(
     examples: list[str] | None = None,
     quiet: bool = True,
     step: Callable[[str], None] | None = None,
+    fine: bool = True,
     **colorize_options,
 ) -> MeshResult:
     """Synthesize a texture for a mesh: in its UV atlas, or from views (see the module notes).
@@ -327,6 +329,10 @@ def colorize_mesh(
         Called with a line of text as each long step begins: the synthesis in the atlas
         (uv-space), or each view's synthesis and then the bake (views): one call per view
         plus one (the mesh command's progress lines, :func:`imagemap.progress.step_line`).
+    fine : bool
+        Views path, several views: each view's map is copied again at the texels'
+        resolution before the bake (:mod:`imagemap.mesh.fineviews`; #46 item 2, no stair
+        steps); False bakes the synthesized maps as they are.
 
     Returns
     -------
@@ -418,7 +424,13 @@ def colorize_mesh(
     if len(views) == 1:
         textured = project_texture(mesh, renders[0], results[0].image)
     else:
-        textured = bake_views(mesh, renders, [r.image for r in results], texture_size)
+        # Baked from each view copied again at the texels' resolution (#46 item 2).
+        factor = fine_factor(mesh, views, size, texture_size) if fine else 1
+        images = [r.image for r in results]
+        if factor > 1:
+            images = fine_views(examples_set, renders, results, databases, factor)
+            log.info("views copied at %dx their size for the bake", factor)
+        textured = bake_views(mesh, renders, images, texture_size)
     return MeshResult(mesh=textured, renders=renders, results=results, path="views")
 
 

@@ -234,7 +234,6 @@ def texture_mesh(
         done += 1
         say(step_line(done, total, text))
 
-    sizing = {"texture_size": request.texture_size} if request.texture_size else {}
     made = colorize_mesh(
         mesh,
         examples,
@@ -247,7 +246,7 @@ def texture_mesh(
         uv_space=in_layout if in_layout is not None else False,
         registered=to_register is not None,
         step=step,
-        **sizing,
+        texture_size=request.texture_size or None,
     )
     coloured, side = made.mesh, {}
     if request.maps:

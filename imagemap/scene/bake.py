@@ -505,7 +505,8 @@ def bake_views(
     renders : list of MeshRender
         One per view (from :func:`render_mesh` of this mesh).
     images : list of (H, W, 3) arrays
-        The map synthesized for each view.
+        The map synthesized for each view (or copied at a whole factor of its view's
+        size, :func:`imagemap.mesh.fineviews.fine_view`: sampled at the same points).
     texture_size : int, optional
         Width and height of the texture; default :func:`texture_size_for` the mesh at
         the views' pixel size.
@@ -545,7 +546,13 @@ def bake_views(
     colours = np.zeros((len(renders), texel.size, 3), dtype=np.float32)
     for k, (render, image) in enumerate(zip(renders, images, strict=True)):
         scores[k], col, row = view_scores(render, position, normal)
-        filled = fill_from_nearest(np.asarray(image, dtype=np.float32)[..., :3], render.mask)
+        # An image a whole factor finer than its view (the final copy at the texels'
+        # resolution, imagemap.mesh.fineviews) is sampled at the same points.
+        fine = max(1, int(np.shape(image)[0]) // render.depth.shape[0])
+        if fine > 1:
+            col, row = (col + 0.5) * fine - 0.5, (row + 0.5) * fine - 0.5
+        mask = np.repeat(np.repeat(render.mask, fine, axis=0), fine, axis=1)
+        filled = fill_from_nearest(np.asarray(image, dtype=np.float32)[..., :3], mask)
         colours[k] = sample_pixels(filled, col, row)
     texel_world = np.sqrt(world_per_uv(vertices, faces, uv)) / texture_size
     band = seam_band * pixel_size / texel_world

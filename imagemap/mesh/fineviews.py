@@ -1,0 +1,228 @@
+"""The views path's final copy at the texture's resolution (issue #46 item 2: no stair steps).
+
+A view synthesized coarser than the texels it is baked into draws its pixels' steps into
+the texture (the generated fish at 512²: one texel per view pixel needs 734x550, the
+default views are capped at 317x238). Synthesizing at the finer size costs 2.3x the CPU
+(docs/meshes.md). Here the synthesis stays at its size and each view's map is *copied*
+again at ``k`` times it (:func:`fine_factor`: the smallest whole ``k`` at which a view
+pixel covers no more of the surface than a texel), as the uv-space path copies its
+texture at the output size:
+
+- every fine pixel lies in one synthesized pixel; it copies from that pixel's example at
+  the source position moved by the fine pixel's offset within the pixel, through the
+  source map's local derivative (:func:`source_derivatives`: the pose's turn, scale and
+  mirror as the neighbouring sources show it), so an edge that runs across a copied
+  patch is the example's own edge at the fine size, not the synthesized pixels' steps;
+- from the example's picture at the fine size (a mesh example rendered at ``k`` times the
+  view's size; a picture example at its own size, sampled between its pixels);
+- plus the finish's smooth correction (blend minus plain copy) of the synthesized map,
+  interpolated.
+
+Seams between two examples, or two patches, stay where the synthesis put them, on its
+pixels' grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imagemap.core.blend import copy_through, fill_background
+from imagemap.scene.views import sample_pixels
+
+__all__ = ["MAX_SOURCE_STEP", "fine_factor", "fine_view", "source_derivatives"]
+
+#: Two neighbouring pixels copy from one patch when their sources (same example) are at
+#: most this many example pixels apart along each axis: a pose's scale of up to 2, a turn.
+MAX_SOURCE_STEP = 2
+#: The largest fine factor: the copy's pictures grow with its square (4: 16x the pixels).
+MAX_FINE_FACTOR = 4
+
+
+def fine_factor(mesh, views, size: tuple[int, int], texture_size: int | None) -> int:
+    """The whole factor ``k`` (1 to :data:`MAX_FINE_FACTOR`) by which views of ``size``
+    are copied so that one pixel covers no more of the surface than one texel
+    (:func:`imagemap.scene.bake.view_size_for` without its cap); 1 without a texture size
+    (the atlas is then sized from the views).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> plane = trimesh.creation.box(extents=(2.0, 2.0, 0.01))
+    >>> plane.visual = trimesh.visual.TextureVisuals(uv=plane.vertices[:, :2] / 2 + 0.5)
+    >>> [fine_factor(plane, ["front"], (200, 150), texels) for texels in (64, 512)]
+    [1, 4]
+    """
+    from imagemap.scene.bake import view_size_for  # deferred: start-up (trimesh)
+
+    width = int(size[0])
+    wanted = view_size_for(mesh, views, texture_size, base=(width, int(size[1])),
+                           max_pixels=2**62)  # fmt: skip
+    return int(min(max(1, -(-wanted[0] // width)), MAX_FINE_FACTOR))
+
+
+def source_derivatives(source: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The source map's derivative per pixel (H, W, 2, 2): d(source y, x) / d(row, column).
+
+    From the neighbours on either side that copy from the same example within
+    :data:`MAX_SOURCE_STEP` (the mean of the two differences; one if only one qualifies);
+    a pixel with neither takes its example's median derivative (its pose).
+
+    Examples
+    --------
+    A mirrored patch: columns run backwards in the example, rows forwards.
+
+    >>> source = np.zeros((3, 4, 3), np.int32)
+    >>> source[..., 1] = np.arange(3)[:, None] + 5
+    >>> source[..., 2] = 10 - np.arange(4)[None, :]
+    >>> d = source_derivatives(source, np.ones((3, 4), bool))
+    >>> d[1, 1].tolist()
+    [[1.0, 0.0], [0.0, -1.0]]
+    """
+    height, width = mask.shape
+    label = source[..., 0]
+    position = source[..., 1:].astype(np.float64)
+    out = np.zeros((height, width, 2, 2))
+    known = np.zeros((height, width, 2), dtype=bool)
+    for axis in (0, 1):
+        step = np.diff(position, axis=axis)  # (H-1, W, 2) or (H, W-1, 2)
+        same = np.diff(label, axis=axis) == 0
+        both = (mask[1:] & mask[:-1]) if axis == 0 else (mask[:, 1:] & mask[:, :-1])
+        good = same & both & (np.abs(step).max(axis=-1) <= MAX_SOURCE_STEP)
+        total = np.zeros((height, width, 2))
+        count = np.zeros((height, width))
+        ahead = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+        behind = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+        for part in (ahead, behind):  # the difference is the pixel's forward or backward one
+            total[part] += np.where(good[..., None], step, 0.0)
+            count[part] += good
+        found = count > 0
+        out[..., :, axis] = np.where(found[..., None], total / np.maximum(count, 1)[..., None], 0)
+        known[..., axis] = found
+    for example in np.unique(label[mask]):
+        mine = mask & (label == example)
+        for axis in (0, 1):
+            have = mine & known[..., axis]
+            pose = np.median(out[have][:, :, axis], axis=0) if have.any() else np.eye(2)[axis]
+            missing = mine & ~known[..., axis]
+            out[missing, :, axis] = pose
+    return out
+
+
+def fine_view(result, coarse: list[np.ndarray], fine: list[np.ndarray], factor: int) -> np.ndarray:
+    """A view's synthesized map copied again at ``factor`` times its size.
+
+    Parameters
+    ----------
+    result : ColorizeResult
+        The view's synthesis: ``image``, ``mask``, ``source`` (example, y, x in the
+        example's picture at the view's size).
+    coarse : list of (h_k, w_k, 3) arrays
+        Each example's picture as the synthesis copied it (the order of
+        ``result.example_names``).
+    fine : list of (H_k, W_k, 3) arrays
+        The same pictures at the fine size: a mesh example rendered at ``factor`` times,
+        a picture example its own (then ``H_k = h_k``).
+    factor : int
+
+    Returns
+    -------
+    (factor H, factor W, 3) float32 in [0, 1]; 0 outside the synthesized map's object.
+
+    Examples
+    --------
+    A diagonal edge copied from an example twice as fine keeps its fine steps:
+
+    >>> yy, xx = np.mgrid[:8, :8]
+    >>> example = np.repeat((xx > yy)[..., None], 3, axis=2).astype(np.float32)
+    >>> small = example[::2, ::2]
+    >>> source = np.zeros((4, 4, 3), np.int32)
+    >>> source[..., 1], source[..., 2] = np.mgrid[:4, :4]
+    >>> from types import SimpleNamespace
+    >>> result = SimpleNamespace(image=small, mask=np.ones((4, 4), bool), source=source)
+    >>> out = fine_view(result, [small], [example], 2)
+    >>> bool(np.array_equal(out[..., 0] > 0.5, example[..., 0] > 0.5))
+    True
+    """
+    source = np.asarray(result.source)
+    mask = np.asarray(result.mask, dtype=bool)
+    height, width = mask.shape
+    k = int(factor)
+    image = np.zeros((height * k, width * k, 3), dtype=np.float32)
+    if not mask.any():
+        return image
+    # Where the synthesis left no source, the nearest pixel's (the fine mask is the coarse
+    # one's footprint).
+    plain = copy_through([np.asarray(c, dtype=np.float32)[..., :3] for c in coarse], source)
+    correction = fill_background(np.asarray(result.image, np.float32)[..., :3] - plain, mask)
+    source = fill_background(source, mask & (source[..., 0] >= 0))
+    derivative = source_derivatives(source, mask)
+    offsets = (np.arange(k) + 0.5) / k - 0.5  # a fine pixel's offset within its pixel
+    rows = np.repeat(np.arange(height), k)
+    cols = np.repeat(np.arange(width), k)
+    dy = np.tile(offsets, height)[:, None]
+    dx = np.tile(offsets, width)[None, :]
+    inside = np.repeat(np.repeat(mask, k, axis=0), k, axis=1)
+    cell = source[rows][:, cols]  # (kH, kW, 3)
+    d = derivative[rows][:, cols]  # (kH, kW, 2, 2)
+    sy = cell[..., 1] + d[..., 0, 0] * dy + d[..., 0, 1] * dx
+    sx = cell[..., 2] + d[..., 1, 0] * dy + d[..., 1, 1] * dx
+    for index, (small, large) in enumerate(zip(coarse, fine, strict=True)):
+        here = inside & (cell[..., 0] == index)
+        if not here.any():
+            continue
+        scale_y = large.shape[0] / small.shape[0]
+        scale_x = large.shape[1] / small.shape[1]
+        picture = np.asarray(large, dtype=np.float32)[..., :3]
+        image[here] = sample_pixels(picture, (sx[here] + 0.5) * scale_x - 0.5,
+                                    (sy[here] + 0.5) * scale_y - 0.5)  # fmt: skip
+    # The finish's smooth correction, between the synthesized pixels' centres.
+    fy = (np.arange(height * k) + 0.5) / k - 0.5
+    fx = (np.arange(width * k) + 0.5) / k - 0.5
+    grid_y, grid_x = np.meshgrid(fy, fx, indexing="ij")
+    smooth = sample_pixels(correction, grid_x[inside], grid_y[inside])
+    image[inside] = np.clip(image[inside] + smooth, 0.0, 1.0)
+    return image
+
+
+def _example_picture(examples, name: str, view, size: tuple[int, int]) -> np.ndarray:
+    """Mesh example ``name``'s colours seen from ``view`` at ``size``: its cached render
+    (``imagemap synthesize``), else rendered from its loaded mesh as the cache would
+    (a batch's prepared set, which holds the meshes but not this size)."""
+    from imagemap.io import InputError
+    from imagemap.scene.views import DEFAULT_MARGIN, render_colours, render_mesh
+
+    try:
+        return examples.at_view(view, size)[name].image
+    except InputError:
+        mesh = examples.mesh(name)
+        return render_colours(mesh, render_mesh(mesh, view, size, DEFAULT_MARGIN))
+
+
+def fine_views(examples, renders: list, results: list, databases: list, factor: int) -> list:
+    """Every view's map copied at ``factor`` times its size (:func:`fine_view`), each mesh
+    example seen at that size, each picture example as it is.
+
+    Parameters
+    ----------
+    examples : ExampleSet
+        The database (its mesh examples are rendered at the fine size, or their cached
+        renders read).
+    renders, results, databases : lists, one entry per view
+        The views' renders, syntheses and the databases they were made from.
+    factor : int
+        :func:`fine_factor`.
+    """
+    out = []
+    for render, result, database in zip(renders, results, databases, strict=True):
+        width, height = render.size
+        fine_size = (int(width) * factor, int(height) * factor)
+        coarse, fine = [], []
+        for name in result.example_names:
+            picture = np.asarray(database[name].image, dtype=np.float32)
+            coarse.append(picture)
+            if name in examples.mesh_names:
+                fine.append(_example_picture(examples, name, render.view, fine_size))
+            else:
+                fine.append(picture)
+        out.append(fine_view(result, coarse, fine, factor))
+    return out
