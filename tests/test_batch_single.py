@@ -238,6 +238,7 @@ def _with_maps(source: Path, target: Path) -> None:
         "views auto",
         "uv-space",
         pytest.param("registered", marks=pytest.mark.slow),  # 7 s per command
+        pytest.param("views of mesh examples", marks=pytest.mark.slow),
         pytest.param("default size", marks=pytest.mark.slow),
     ],
 )
@@ -245,9 +246,11 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
     """``--views auto`` (each mesh chooses among the six candidates the batch prepared),
     the uv-space path (the batch ships its mesh examples' meshes), the registered path
     (a head with normal and roughness maps registered onto the fin: the maps carried, a
-    TANGENT written) and no ``--size`` (views as fine as the texels, each mesh its own,
-    issue #46 item 2: the fin at 256² asks for 317x238): the batch's GLB is the single
-    command's, byte for byte, and the path is the one asked for."""
+    TANGENT written), the views path from a mesh example (copied again at the texels'
+    resolution: the batch renders the example at that size) and no ``--size`` (views as
+    fine as the texels, each mesh its own, issue #46 item 2: the fin at 256² asks for
+    317x238): the batch's GLB is the single command's, byte for byte, and the path is the
+    one asked for."""
     import shutil
 
     queries, db = tmp_path / "queries", tmp_path / "db"
@@ -261,6 +264,12 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
         _with_maps(shared_heads / "head_00.glb", db / "head_00.glb")
         shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
         options = ["--preset", "busts", "--texture-size", "64", "-q"]
+    elif path == "views of mesh examples":  # copied again at 2x (#46 item 2): the batch
+        # renders the example at the fine size from the mesh it ships
+        shutil.copy(shared_heads / "head_00.glb", db)
+        shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
+        options = ["--preset", "busts", "--size", "40x30", "--texture-size", "64", "-q"]
+        options += ["--views", "front,back", "--no-register"]
     elif path == "default size":
         shutil.copytree(routes / "db", db, dirs_exist_ok=True)
         shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
@@ -290,6 +299,11 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
         assert "normalTexture" in material
         assert "metallicRoughnessTexture" in material["pbrMetallicRoughness"]
         assert "TANGENT" in gltf["meshes"][0]["primitives"][0]["attributes"]
+    elif path == "views of mesh examples":
+        from imagemap.mesh.fineviews import fine_factor
+
+        assert report["path"] == "views" and len(report["views"]) == 2
+        assert fine_factor(load_mesh(queries / "query.glb"), ["front"], (40, 30), 64) > 1
     elif path == "default size":
         assert report["path"] == "views" and len(report["views"]) == 2
         assert tuple(report["size"]) == (317, 238)

@@ -91,3 +91,24 @@ def test_the_bake_samples_a_finer_image_at_the_same_points():
     # points without the factor, the fine picture's corner would give 0.28 and -0.05).
     assert np.mean(np.abs(a - b)) < SAME_POINTS_DIFFERENCE
     assert np.corrcoef(a.ravel(), b.ravel())[0, 1] > SAME_POINTS_CORRELATION
+
+
+def test_a_prepared_set_renders_the_pictures_the_database_caches(
+    shared_heads, tmp_path, monkeypatch
+):
+    """A batch's prepared set has no file: a mesh example at a size it was not prepared
+    for is rendered from the mesh it ships, the same array as the single command's
+    cached render (so the batch writes the same bytes), and kept for the next object."""
+    from imagemap.database import Database
+    from imagemap.mesh.library import ExampleSet
+    from imagemap.scene.views import FRONT
+
+    monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path / "cache"))
+    database = ExampleSet.of(Database.from_directory(shared_heads))
+    prepared = database.prepared([FRONT], (32, 24), pictures=False)
+    assert prepared.source is None
+    fine = (96, 72)
+    made = prepared.picture("head_00", FRONT, fine)
+    assert made.shape == (72, 96, 3)
+    assert np.array_equal(made, database.picture("head_00", FRONT, fine))
+    assert prepared.picture("head_00", FRONT, fine) is made

@@ -330,9 +330,10 @@ def colorize_mesh(
         (uv-space), or each view's synthesis and then the bake (views): one call per view
         plus one (the mesh command's progress lines, :func:`imagemap.progress.step_line`).
     fine : bool
-        Views path, several views: each view's map is copied again at the texels'
-        resolution before the bake (:mod:`imagemap.mesh.fineviews`; #46 item 2, no stair
-        steps); False bakes the synthesized maps as they are.
+        Views path, several views, mesh examples among those used: each view's map is
+        copied again at the texels' resolution before the bake
+        (:mod:`imagemap.mesh.fineviews`; #46 item 2, no stair steps); False bakes the
+        synthesized maps as they are.
 
     Returns
     -------
@@ -424,8 +425,10 @@ def colorize_mesh(
     if len(views) == 1:
         textured = project_texture(mesh, renders[0], results[0].image)
     else:
-        # Baked from each view copied again at the texels' resolution (#46 item 2).
-        factor = fine_factor(mesh, views, size, texture_size) if fine else 1
+        # Baked from each view copied again at the texels' resolution (#46 item 2), when
+        # an example can be seen that finely (a mesh example; a picture has its pixels).
+        meshes = any(n in examples_set.mesh_names for r in results for n in r.example_names)
+        factor = fine_factor(mesh, views, size, texture_size) if fine and meshes else 1
         images = [r.image for r in results]
         if factor > 1:
             images = fine_views(examples_set, renders, results, databases, factor)

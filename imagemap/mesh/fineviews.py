@@ -184,20 +184,6 @@ def fine_view(result, coarse: list[np.ndarray], fine: list[np.ndarray], factor: 
     return image
 
 
-def _example_picture(examples, name: str, view, size: tuple[int, int]) -> np.ndarray:
-    """Mesh example ``name``'s colours seen from ``view`` at ``size``: its cached render
-    (``imagemap synthesize``), else rendered from its loaded mesh as the cache would
-    (a batch's prepared set, which holds the meshes but not this size)."""
-    from imagemap.io import InputError
-    from imagemap.scene.views import DEFAULT_MARGIN, render_colours, render_mesh
-
-    try:
-        return examples.at_view(view, size)[name].image
-    except InputError:
-        mesh = examples.mesh(name)
-        return render_colours(mesh, render_mesh(mesh, view, size, DEFAULT_MARGIN))
-
-
 def fine_views(examples, renders: list, results: list, databases: list, factor: int) -> list:
     """Every view's map copied at ``factor`` times its size (:func:`fine_view`), each mesh
     example seen at that size, each picture example as it is.
@@ -205,8 +191,8 @@ def fine_views(examples, renders: list, results: list, databases: list, factor: 
     Parameters
     ----------
     examples : ExampleSet
-        The database (its mesh examples are rendered at the fine size, or their cached
-        renders read).
+        The database (its mesh examples seen at the fine size,
+        :meth:`~imagemap.mesh.library.ExampleSet.picture`).
     renders, results, databases : lists, one entry per view
         The views' renders, syntheses and the databases they were made from.
     factor : int
@@ -221,7 +207,7 @@ def fine_views(examples, renders: list, results: list, databases: list, factor: 
             picture = np.asarray(database[name].image, dtype=np.float32)
             coarse.append(picture)
             if name in examples.mesh_names:
-                fine.append(_example_picture(examples, name, render.view, fine_size))
+                fine.append(examples.picture(name, render.view, fine_size))
             else:
                 fine.append(picture)
         out.append(fine_view(result, coarse, fine, factor))

@@ -22,7 +22,11 @@ from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import load_mesh
 from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
 
-__all__ = ["ExampleSet", "view_key"]
+__all__ = ["KEPT_PICTURES", "ExampleSet", "view_key"]
+
+#: Renders :meth:`ExampleSet.picture` keeps (a worker's next objects often choose the same
+#: examples): 16 pictures at 951x714 are 130 MB.
+KEPT_PICTURES = 16
 
 
 @dataclass
@@ -44,6 +48,9 @@ class ExampleSet:
         The names of the examples that are meshes, in the database's order.
     names : list of str
         Every example's name, in the database's order.
+    pictures : dict
+        Mesh examples' colours rendered on demand at a view and size the set was not
+        prepared for (:meth:`picture`), the latest :data:`KEPT_PICTURES`.
     """
 
     source: Database | None
@@ -51,6 +58,7 @@ class ExampleSet:
     meshes: dict[str, Any] = field(default_factory=dict)
     mesh_names: tuple[str, ...] = ()
     names: list[str] = field(default_factory=list)
+    pictures: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, database: Database | dict[str, Database] | ExampleSet) -> ExampleSet:
@@ -79,6 +87,26 @@ class ExampleSet:
                 f"view {view}: not among the prepared views ({', '.join(self.views) or 'none'})"
             )
         return database_at_view(self.source, view, size)
+
+    def picture(self, name: str, view: View, size: tuple[int, int]) -> np.ndarray:
+        """Mesh example ``name``'s colours seen from ``view`` at ``size`` (H, W, 3): its
+        render (cached on disk) when the set reads a database, else rendered from its
+        loaded mesh as that render is made (a batch's prepared set, which ships the meshes
+        but not every size) and kept for the next objects of the worker."""
+        key = f"{name}|{view_key(view, size)}"
+        if key in self.pictures:
+            return self.pictures[key]
+        # A set keyed by ``str(view)`` alone holds another size: rendered here instead.
+        if self.source is not None or view_key(view, size) in self.views:
+            return self.at_view(view, size)[name].image
+        from imagemap.scene.views import DEFAULT_MARGIN, render_colours, render_mesh
+
+        mesh = self.mesh(name)
+        picture = render_colours(mesh, render_mesh(mesh, view, size, DEFAULT_MARGIN))
+        while len(self.pictures) >= KEPT_PICTURES:
+            self.pictures.pop(next(iter(self.pictures)))
+        self.pictures[key] = picture
+        return picture
 
     def mesh(self, name: str):
         """The loaded mesh of the mesh example ``name`` (loaded once)."""
