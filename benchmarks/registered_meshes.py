@@ -4,7 +4,11 @@ and against a closest-point transfer, judged by renders from many angles.
 ``fish``: generated fish meshes (``data_gen fish --meshes``; each its own xatlas atlas),
 the held-out one textured by the views path (``--views auto``, what the command ran
 before), by the registered path, and by the closest-point transfer of the rigidly
-registered first-choice example (the baseline: no synthesis). Rendered by the library's
+registered first-choice example (the baseline: no synthesis), and by the "copy": the
+first choice as the registered path resamples it (deformed fit), no synthesis, which
+shows what the synthesis itself changes. ``--hold NAME`` holds out another of the nine
+(the other eight are the examples; default fish_008, the data's own holdout), so that a
+change is checked on more than one fish. Rendered by the library's
 orthographic ray caster (:func:`imagemap.scene.render_textured`, the same geometry for
 all, so pixels compare) from 8 angles: both flanks, back, belly, head-on, tail-on and two
 three-quarter views. Per angle: mean CIEDE2000 against the truth and crispness (fine-band
@@ -20,6 +24,7 @@ synthesis view: this path has none), and from :data:`NEW_HEAD_ANGLES` (``NAME_ne
 truth | registered | transfer).
 
     python benchmarks/registered_meshes.py fish [--data DIR] [--out OUT] [--baseline GLB]
+        [--hold NAME]
     python benchmarks/registered_meshes.py heads [--data DIR] [--out OUT] [--only NAME ...]
         [--size N]
     python benchmarks/registered_meshes.py time [--data DIR] [--pairs 3]
@@ -27,13 +32,16 @@ truth | registered | transfer).
 ``--only`` holds out only these heads; ``--size`` sets the heads' texture size (default: their
 own, 1024): smaller to explore, the default to report.
 
-``--baseline GLB`` adds a column for a release's own output for fish_008, e.g. 0.2.0's
-(no tag; the release commit is cc4a2ac, whose default was ``--views auto``)::
+``--baseline GLB`` adds a column for a release's own output for the held-out fish, e.g.
+0.2.0's (no tag; the release commit is cc4a2ac, whose default was ``--views auto``)::
 
     git archive cc4a2ac imagemap | tar -x -C v020
     cd v020 && PYTHONPATH=. python -m imagemap synthesize \
         ../scratch/registered/fish/holdout/meshes/fish_008.glb \
         --db ../scratch/registered/fish/meshes -o fish_008_v020.glb --preset fish
+
+(for ``--hold NAME``: ``NAME.glb`` and ``--db OUT/examples_NAME``, the folder of the
+other eight that the benchmark links).
 
 ``time`` (#46, item 6): the views path (``--views auto``) against the registered path on
 fish_008 (10 560 faces, 512² texture) with :data:`TIME_EXAMPLES` mesh examples, each run
@@ -62,6 +70,8 @@ FISH_ANGLES = ("0,0", "180,0", "0,90", "0,-90", "90,0", "-90,0", "40,25", "-140,
 #: Render size of the fish pictures (width, height).
 FISH_RENDER = (240, 180)
 DEFAULT_FISH = ROOT / "scratch" / "registered" / "fish"
+#: The fish held out by default (the data's own split: ``holdout/meshes/``).
+HELD_OUT = "fish_008"
 DEFAULT_OUT = ROOT / "scratch" / "registered" / "out"
 #: Three angles of the heads that neither the examples' views (front, left, right) nor the
 #: four evaluation angles of ``benchmarks/real_meshes.py`` use: from the left and below,
@@ -87,14 +97,10 @@ def flank_difference(front: np.ndarray, back: np.ndarray, mask_f, mask_b) -> flo
     return float(ciede2000(front, mirrored, both))
 
 
-def off_example_texels(
-    image: np.ndarray, mask: np.ndarray, textures: list, label=None, covers=None
-) -> int:
+def off_example_texels(image: np.ndarray, mask: np.ndarray, textures: list) -> int:
     """Used texels whose colour differs from every chosen example's resampled texture at
     the same texel by more than :data:`OFF_EXAMPLE` (in any channel): colour taken from
-    elsewhere in the atlas (another chart, padding), the specks of #46. With ``label``
-    (each texel's example) and ``covers`` (each example's covered texels): only those
-    whose example covers them (elsewhere the example has only padding at the texel)."""
+    elsewhere in the atlas (another chart, padding), the specks of #46."""
     from imagemap.mesh.uvspace import _unit
 
     off = mask.copy()
@@ -102,8 +108,6 @@ def off_example_texels(
         off &= (
             np.abs(image[..., :3] - _unit(np.asarray(texture)[..., :3])).max(axis=2) > OFF_EXAMPLE
         )
-    if label is not None and covers is not None:
-        off &= np.take_along_axis(np.stack(covers), np.clip(label, 0, None)[None], axis=0)[0]
     return int(off.sum())
 
 
@@ -123,7 +127,30 @@ def _render(mesh, angle: str):
     return render_textured(mesh, angle, FISH_RENDER), render.mask
 
 
-def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None) -> dict:
+def fish_pool(data: Path, hold: str, out: Path) -> tuple[Path, Path]:
+    """(the held-out fish's GLB, a folder of the other fish as mesh examples).
+
+    ``hold`` is any of the generated fish (``meshes/`` and ``holdout/meshes/``); the folder
+    (``out/examples_HOLD``) links the others, so that a release's command can take it as
+    ``--db`` too."""
+    pool = {p.stem: p for p in sorted((data / "meshes").glob("*.glb"))}
+    pool.update({p.stem: p for p in sorted((data / "holdout" / "meshes").glob("*.glb"))})
+    if hold not in pool:
+        raise SystemExit(f"--hold: no {hold}.glb in {data}/meshes or {data}/holdout/meshes")
+    if hold == HELD_OUT and (data / "holdout" / "meshes" / f"{hold}.glb").is_file():
+        return pool[hold], data / "meshes"  # the data's own split
+    folder = out / f"examples_{hold}"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, path in pool.items():
+        link = folder / path.name
+        if name != hold and not link.exists():
+            link.symlink_to(path.resolve())
+    return pool[hold], folder
+
+
+def run_fish(
+    data: Path, out: Path, seed: int = 0, baseline: Path | None = None, hold: str = HELD_OUT
+) -> dict:
     from imagemap.database import Database
     from imagemap.mesh import colorize_mesh
     from imagemap.mesh.register import registered_examples
@@ -137,8 +164,9 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
 
         write_class("fish", data, count=9, seed=0, holdout=1, meshes=True, quiet=True)
     out.mkdir(parents=True, exist_ok=True)
-    truth = load_mesh(data / "holdout" / "meshes" / "fish_008.glb")
-    database = Database.from_directory(data / "meshes")
+    truth_path, examples_folder = fish_pool(data, hold, out)
+    truth = load_mesh(truth_path)
+    database = Database.from_directory(examples_folder)
     made, seconds = {}, {}
     start = time.perf_counter()
     views = choose_views(truth)
@@ -149,17 +177,18 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
     result = colorize_mesh(truth, database, preset="fish", seed=seed)
     seconds["registered"] = time.perf_counter() - start
     made["registered"] = result.mesh
-    meshes = {n: load_mesh(data / "meshes" / f"{n}.glb") for n in database.names}
+    meshes = {n: load_mesh(examples_folder / f"{n}.glb") for n in database.names}
     size = texture_image(truth).shape[0]
     texture = result.results[0]
     chosen, _ = registered_examples(truth, meshes, m=1, texture_size=size, seed=seed,
                                     mirror=bool(texture.config.selection.mirror),
                                     names=texture.example_names)  # fmt: skip
     textures = [e.texture for e in chosen]
+    # The first choice as resampled (deformed fit), no synthesis: what a copy of that one
+    # example gives; the synthesis' own doing is the difference from it.
+    made["copy"] = textured_mesh(truth.vertices, truth.faces, truth.visual.uv,
+                                 np.asarray(textures[0], dtype=np.float32) / 255.0)  # fmt: skip
     off_example = off_example_texels(texture.image, texture.mask, textures)
-    covers = [e.maps(size).mask for e in chosen]
-    off_covered = off_example_texels(texture.image, texture.mask, textures,
-                                     texture.source[..., 0], covers)  # fmt: skip
     _, residuals = registered_examples(truth, meshes, m=1, texture_size=64, seed=seed)
     first = min(residuals, key=lambda n: residuals[n])
     colour, _ = transfer(truth, meshes[first], size, mirror=True, seed=seed)
@@ -170,13 +199,13 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
 
     for name, mesh in made.items():
         if name != "0.2.0":  # the textured meshes, for other renderers (Blender)
-            export_textured(mesh, out / f"fish_008_{name}.glb")
+            export_textured(mesh, out / f"{hold}_{name}.glb")
     report: dict = {"seconds": seconds, "first_choice": first,
                     "examples": result.example_names, "angles": {},
-                    "off_example_texels": off_example, "off_example_covered": off_covered,
+                    "off_example_texels": off_example,
                     "used_texels": int(texture.mask.sum())}  # fmt: skip
-    print(f"off-example texels: {off_example} of {int(texture.mask.sum())} used "
-          f"({off_covered} where their example covers them)", flush=True)  # fmt: skip
+    print(f"off-example texels: {off_example} of {int(texture.mask.sum())} used",
+          flush=True)  # fmt: skip
     renders = {"truth": {a: _render(truth, a) for a in FISH_ANGLES}}
     for name, mesh in made.items():
         renders[name] = {a: _render(mesh, a) for a in FISH_ANGLES}
@@ -198,7 +227,8 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
                for k in ("de00", "crisp")}
         for name in made
     }  # fmt: skip
-    columns = ["truth", *(["0.2.0"] if baseline else []), "views", "registered", "transfer"]
+    columns = ["truth", *(["0.2.0"] if baseline else []), "views", "registered", "copy",
+               "transfer"]  # fmt: skip
     rows = [
         np.concatenate(
             [render_textured(truth if c == "truth" else made[c], a, FISH_RENDER, shaded=True)
@@ -207,8 +237,9 @@ def run_fish(data: Path, out: Path, seed: int = 0, baseline: Path | None = None)
     ]  # fmt: skip
     import imagemap
 
-    imagemap.write_image(out / "fish_8_angles.png", np.concatenate(rows, axis=0))
-    (out / "fish.json").write_text(json.dumps(report, indent=1))
+    stem = "" if hold == HELD_OUT else f"_{hold}"
+    imagemap.write_image(out / f"fish{stem}_8_angles.png", np.concatenate(rows, axis=0))
+    (out / f"fish{stem}.json").write_text(json.dumps(report, indent=1))
     return report
 
 
@@ -360,7 +391,10 @@ def main(argv=None) -> int:
     parser.add_argument("--only", nargs="+", help="heads: only these held out")
     parser.add_argument("--size", type=int, help="heads: texture size (default: their own)")
     parser.add_argument(
-        "--baseline", type=Path, help="fish: a release's fish_008 GLB, a column of its own"
+        "--baseline", type=Path, help="fish: a release's output for the held-out fish"
+    )
+    parser.add_argument(
+        "--hold", default=HELD_OUT, help="fish: the fish held out (default %(default)s)"
     )
     args = parser.parse_args(argv)
     if args.what == "time-one":
@@ -369,7 +403,9 @@ def main(argv=None) -> int:
     if args.what == "time":
         report = run_time(args.data or DEFAULT_FISH, args.pairs)
     elif args.what == "fish":
-        report = run_fish(args.data or DEFAULT_FISH, args.out, baseline=args.baseline)
+        report = run_fish(
+            args.data or DEFAULT_FISH, args.out, baseline=args.baseline, hold=args.hold
+        )
     else:
         report = run_heads(
             args.data or ROOT / "scratch" / "realdata" / "faces",

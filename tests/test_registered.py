@@ -53,6 +53,13 @@ ELSEWHERE = 0.1
 #: Texels off the example with the moved matches and the copy through them (measured 51
 #: of 626; the seams and the blend take some back): well above none.
 MOVED_OFF = 20
+#: Texels this far (RMS radii) from the example were padding before #46's fix (0.08 then).
+FAR = 0.08
+#: The example's strip's length as a share of the query's: its far half has no counterpart.
+STRIP_SHARE = 0.6
+#: A texel resampled from its own surface point, registered onto itself, is at distance 0
+#: but for float rounding.
+SAME_POINT = 1e-6
 
 
 def lumpy(radius: float = 1.0, subdivisions: int = 3) -> trimesh.Trimesh:
@@ -146,7 +153,7 @@ def test_an_example_resampled_into_its_own_layout_is_its_texture():
     # candidate faces: a thin side's may be missed).
     assert np.abs(deform(fit, mesh).deformed - mesh.vertices).max() < SELF_DEFORMATION
     out = resample(mesh, fit, mesh, 32)
-    assert out.covered.all()  # the sheet's top covers the whole atlas
+    assert out.distance.max() < SAME_POINT  # every texel is its own point
     assert np.abs(out.colour - texture).max() < SAME_TEXEL
 
 
@@ -320,14 +327,40 @@ def test_same_texel_source_keeps_the_label_and_drops_the_offset():
     source[..., 1:] = (2, 1)
     mask = np.ones((3, 4), bool)
     mask[:, 2] = False  # padding between the charts
-    covers = [np.ones((3, 4), bool), np.ones((3, 4), bool)]
-    covers[0][0, 0] = False  # example 0 lacks (0, 0): its match in its chart is kept
-    covers[1][0, 3] = False  # example 1 lacks (0, 3): its match in the other chart is not
-    out = same_texel_source(source, mask, covers)
+    out = same_texel_source(source, mask, 2)
     assert out[mask, 0].tolist() == [0, 0, 1, 0, 0, 1, 0, 0, 1]  # (2, 0): its neighbours'
     rows, cols = np.indices((3, 4))
-    own = (out[..., 1] == rows) & (out[..., 2] == cols)
-    assert out[0, 0, 1:].tolist() == [2, 1] and own.sum() == own.size - 1
+    assert (out[..., 1] == rows).all() and (out[..., 2] == cols).all()
+
+
+def test_a_texel_the_example_passes_far_from_keeps_its_own_closest_point():
+    """A query strip longer than the example's (a fin's tip the example's fin lacks): its
+    texels beyond the example's end take the colour of the example's strip, not the
+    padding's, the nearest texel in the atlas, here another chart's (the body's tan on the
+    generated fish's fins, #46). Both meshes: a strip (red in the example's texture) and a
+    square 5 apart (blue), the square's chart beside the strip's far end in the atlas."""
+    square = _sheet(lambda s, t: np.c_[s, t, np.full_like(s, 5.0)], 3, 3)
+    flat = np.zeros((32, 32, 3), np.float32)
+    flat[:, :16], flat[:, 16:] = RED, BLUE  # u < 0.5: the strip's chart; above: the square's
+
+    def strip_and_square(length: float, u_end: float) -> trimesh.Trimesh:
+        strip = _sheet(lambda s, t: np.c_[length * s, 0.3 * t, 0.0 * s], 9, 3)
+        both = trimesh.util.concatenate([strip, square])
+        v = both.vertices
+        on_strip = v[:, 2] < 2.5
+        u = np.where(on_strip, u_end * v[:, 0] / length, 0.5 + 0.45 * v[:, 0])
+        w = np.where(on_strip, 0.3 + 0.4 * v[:, 1] / 0.3, 0.3 + 0.4 * v[:, 1])
+        return textured_mesh(v, both.faces, np.c_[u, w], flat)
+
+    query = strip_and_square(2.0, 0.47)
+    example = strip_and_square(STRIP_SHARE * 2.0, 0.47)
+    fit = Registration(np.eye(4), False, 0.0, example.vertices, example.vertices, example.faces)
+    out = resample(example, fit, query, 32)
+    used = out.maps.mask
+    beyond = used & (out.distance > FAR)  # the strip's texels past the example's end
+    assert beyond.any() and not beyond[:, 16:].any()  # (all on the strip's chart)
+    colour = out.colour[beyond]
+    assert np.abs(colour - RED).max() < SIDE_COLOUR  # the strip's red, not the square's blue
 
 
 def test_a_degenerate_example_is_named_before_any_work():

@@ -66,7 +66,6 @@ from imagemap.scene.bake import rasterize_uv
 from imagemap.scene.views import surface_colours
 
 __all__ = [
-    "COVER_DISTANCE",
     "Registration",
     "RegisteredExample",
     "deform",
@@ -115,9 +114,6 @@ PULL_DISTANCE = 0.25
 #: are not pulled out onto the query's face (FFHQ-UV's FLAME head from teaser3: 8.29 ->
 #: 8.07 ΔE00 of the transfer with the main part re-centred, 6.48 -> 6.46 without).
 NORMAL_AGREEMENT = 0.5
-#: A query texel is covered by an example when the deformed example passes within this
-#: (in RMS radii of the query) of it: elsewhere (a fin the example lacks) it is no source.
-COVER_DISTANCE = 0.08
 #: Two connected parts (a fin, an eye) correspond when their centroids (in RMS radii of
 #: the query) plus the log of their sizes' ratio differ by less than this: generated fish
 #: (body, tail, three fins, eye) match part for part at 0.1-0.3; a part of no match
@@ -637,11 +633,13 @@ class Resampled:
     Attributes
     ----------
     colour : (T, T, 3) float32
-        The example's texture at each texel's corresponding point; padded.
+        The example's texture at each used texel's corresponding point; padded.
     maps : SurfaceMaps
-        The example's guides at each texel (position in the query's normalised frame).
-    covered : (T, T) bool
-        Texels the deformed example passes near (:data:`COVER_DISTANCE`).
+        The example's guides at each texel (position in the query's normalised frame);
+        its mask is the query's used texels.
+    distance : (T, T) float32
+        Each used texel's distance to its corresponding point (on the deformed example),
+        in RMS radii of the query; 0 outside the charts.
     correspondence : (texel (N,), face (N,), barycentrics (N, 3)) or None
         Each used texel's (flat index) surface point on the example: a face of its own
         and barycentrics in its own winding, where its colour was sampled (its PBR maps
@@ -650,7 +648,7 @@ class Resampled:
 
     colour: np.ndarray
     maps: SurfaceMaps
-    covered: np.ndarray
+    distance: np.ndarray
     correspondence: tuple | None = None
 
 
@@ -718,24 +716,29 @@ def resample(example, registration: Registration, query, size: int, seed: int = 
     texel_curvature = spread * np.tanh(texel_curvature / spread)
     used = np.zeros((size, size), dtype=bool)
     used.flat[texel] = True
-    covered = np.zeros((size, size), dtype=bool)
-    covered.flat[texel[distance < COVER_DISTANCE * radius]] = True
-    if not covered.any():
-        covered = used
+    distance_map = np.zeros((size, size), dtype=np.float32)
+    distance_map.flat[texel] = distance / radius
+    # Every used texel is the example's: its colour and guides are its own closest point's,
+    # however far (a fin's tip the example's fin lacks is still of its matched part, the
+    # fin's rim); the guides' position, the example's point against the query's, tells the
+    # synthesis how well the example fits there. Padding outside the charts only: the
+    # nearest texel in the atlas is often another chart's (#46: with the texels farther than
+    # 0.08 RMS radii padded too, tan blocks of the body on the generated fish's fins, and
+    # 1822 texels of fish_008 off every chosen example where now 0).
     stack = np.zeros((size * size, 10), dtype=np.float32)
     stack[texel, :3] = (position - centre) / radius
     stack[texel, 3:6] = normal
     stack[texel, 6] = texel_curvature
     stack[texel, 7:10] = colour
-    stack = fill_background(stack.reshape(size, size, 10), covered)
+    stack = fill_background(stack.reshape(size, size, 10), used)
     maps = SurfaceMaps(
-        mask=covered,
+        mask=used,
         position=stack[..., :3].copy(),
         normal=stack[..., 3:6].copy(),
         curvature=stack[..., 6].copy(),
     )
     where = (texel, face.astype(np.int32), own_bary.astype(np.float32))
-    return Resampled(np.clip(stack[..., 7:10], 0.0, 1.0), maps, covered, where)
+    return Resampled(np.clip(stack[..., 7:10], 0.0, 1.0), maps, distance_map, where)
 
 
 @dataclass

@@ -566,19 +566,16 @@ def fine_texture(
     return image, fine
 
 
-def same_texel_source(source: np.ndarray, mask: np.ndarray, covers: list[np.ndarray]) -> np.ndarray:
+def same_texel_source(source: np.ndarray, mask: np.ndarray, examples: int) -> np.ndarray:
     """The source map with every texel copied from the same texel of its example.
 
     On the registered path every example is resampled into the query's atlas, so texel
-    ``t`` of each is (an estimate of) the query's surface point at ``t``: the synthesis
-    chooses only *which* example a texel comes from. Copying ``t`` from ``t + offset``
-    (the engine's match) lands, near a chart's border, in another chart or the padding:
-    specks of other charts' colours. Here the offset is dropped and the example (the
-    label) kept. One exception: where the example does not cover ``t`` (its surface is
-    farther than the resample's cover distance: a fin of another shape), ``t`` holds only
-    padding, and the engine's match, a covered texel, is kept if it lies in ``t``'s own
-    chart (a connected part of ``mask``). Texels outside ``mask`` or without a source take
-    the label of the nearest used texel with one.
+    ``t`` of each is (an estimate of) the query's surface point at ``t``, at every used
+    texel (:func:`imagemap.mesh.register.resample`): the synthesis chooses only *which*
+    example a texel comes from. Copying ``t`` from ``t + offset`` (the engine's match)
+    lands, near a chart's border, in another chart or the padding: specks of other charts'
+    colours. Here the offset is dropped and the example (the label) kept. Texels outside
+    ``mask`` or without a source take the label of the nearest used texel with one.
 
     Parameters
     ----------
@@ -586,30 +583,28 @@ def same_texel_source(source: np.ndarray, mask: np.ndarray, covers: list[np.ndar
         Example, y, x per texel (example < 0: none).
     mask : (T, T) bool
         The query's used texels.
-    covers : list of (T, T) bool
-        Each example's covered texels.
+    examples : int
+        How many examples there are (a label outside ``0 .. examples - 1`` is none).
 
     Returns
     -------
-    (T, T, 3) int32: example, y, x; y, x the texel's own but at the exception above.
+    (T, T, 3) int32: example, y, x; y, x the texel's own.
 
     Examples
     --------
-    Two charts (columns 0-1 and 3); example 1 does not cover texel (0, 3): there, the
-    match (1, 2) in the other chart is refused, and texel (1, 1)'s in its own is kept.
+    Two charts (columns 0-1 and 3), every match at texel (1, 2) (padding); texel (1, 0)
+    has no source and takes its nearest neighbour's label:
 
-    >>> source = np.zeros((2, 4, 3), np.int32); source[..., 0] = [[0, 1, 0, 1], [1, 1, 0, 0]]
-    >>> source[..., 1:] = [1, 2]  # every match at texel (1, 2)
-    >>> source[1, 1, 1:] = [0, 0]
+    >>> source = np.zeros((2, 4, 3), np.int32); source[..., 0] = [[0, 1, 0, 1], [-1, 0, 0, 0]]
+    >>> source[..., 1:] = [1, 2]
     >>> mask = np.array([[1, 1, 0, 1], [1, 1, 0, 1]], bool)
-    >>> covers = [np.ones((2, 4), bool), np.array([[1, 1, 1, 0], [1, 0, 1, 1]], bool)]
-    >>> out = same_texel_source(source, mask, covers)
+    >>> out = same_texel_source(source, mask, 2)
     >>> out[mask, 0].tolist(), out[0, 3, 1:].tolist(), out[1, 1, 1:].tolist()
-    ([0, 1, 1, 1, 1, 0], [0, 3], [0, 0])
+    ([0, 1, 1, 0, 0, 0], [0, 3], [1, 1])
     """
     height, width = mask.shape
     label = source[..., 0].astype(np.int32)
-    known = mask & (label >= 0) & (label < len(covers))
+    known = mask & (label >= 0) & (label < examples)
     if known.any():
         nearest = ndimage.distance_transform_edt(
             ~known, return_distances=False, return_indices=True
@@ -618,14 +613,7 @@ def same_texel_source(source: np.ndarray, mask: np.ndarray, covers: list[np.ndar
     else:
         label = np.zeros_like(label)
     rows, cols = np.indices((height, width), dtype=np.int32)
-    out = np.stack([label, rows, cols], axis=-1).astype(np.int32)
-    covered = np.take_along_axis(np.stack(covers), label[None], axis=0)[0]
-    charts, _ = ndimage.label(mask)
-    sy = np.clip(source[..., 1], 0, height - 1)
-    sx = np.clip(source[..., 2], 0, width - 1)
-    keep = known & ~covered & (charts[sy, sx] == charts)
-    out[keep] = source[keep]
-    return out
+    return np.stack([label, rows, cols], axis=-1).astype(np.int32)
 
 
 def _charts_with_seams(source: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -786,9 +774,9 @@ def colorize_uv(
 
     def same(state: SynthesisState, config) -> SynthesisState:
         old = state.made("source")
-        state.source = same_texel_source(old, query.mask, [p.mask for p in pictures])
+        state.source = same_texel_source(old, query.mask, len(pictures))
         # The colours copied are the examples' own at every texel: the copy stage's refill
-        # of an example's uncovered texels from its nearest covered one (in the atlas:
+        # of the texels outside an example's mask from the nearest inside it (in the atlas:
         # often another chart) would reach the texture through the blend's correction.
         state.exemplars = [to_ycbcr(texture) for texture in textures]
         moved = query.mask & np.any(old[..., 1:] != state.source[..., 1:], axis=-1)
