@@ -25,9 +25,15 @@ truth | registered | transfer).
 
     python benchmarks/registered_meshes.py fish [--data DIR] [--out OUT] [--baseline GLB]
         [--hold NAME]
+    python benchmarks/registered_meshes.py copies [--data DIR] [--out OUT] [--hold NAME]
     python benchmarks/registered_meshes.py heads [--data DIR] [--out OUT] [--only NAME ...]
         [--size N]
     python benchmarks/registered_meshes.py time [--data DIR] [--pairs 3]
+
+``copies``: each of the nine fish held out in turn (or ``--hold NAME`` only), every other
+fish's copy onto it (registered and resampled, no synthesis): its residual, per-angle
+ΔE00 and crispness, the rank correlation of residual and error, and where the example of
+least residual (the first choice) ranks (``OUT/fish_copies.json``).
 
 ``--only`` holds out only these heads; ``--size`` sets the heads' texture size (default: their
 own, 1024): smaller to explore, the default to report.
@@ -64,6 +70,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+#: Texture side of ``copies``' resampled examples (72 of them for nine fish: a quarter of
+#: 512²'s texels; the renders are 240x180).
+COPY_TEXTURE = 256
 #: The 8 angles of the fish: flanks (front, back), back (top), belly (bottom), head-on
 #: and tail-on (right, left), two three-quarter views.
 FISH_ANGLES = ("0,0", "180,0", "0,90", "0,-90", "90,0", "-90,0", "40,25", "-140,25")
@@ -243,6 +252,63 @@ def run_fish(
     return report
 
 
+def run_copies(data: Path, out: Path, holds: list[str] | None = None, seed: int = 0) -> dict:
+    """Each fish held out in turn (all nine by default), and every other fish's copy onto it
+    (registered, deformed, resampled at :data:`COPY_TEXTURE`, no synthesis): its rigid
+    residual and its per-angle ΔE00 and crispness against the truth. Does a closer shape
+    give closer colours? (#46 item 6: the palette and pattern are what the per-angle
+    figures against 0.2.0 measure.)"""
+    from scipy.stats import spearmanr
+
+    from imagemap.mesh.register import registered_examples
+    from imagemap.metrics import ciede2000, fine_energy
+    from imagemap.scene import load_mesh, textured_mesh
+    from imagemap.scene.views import render_mesh, render_textured
+
+    pool = {p.stem: p for p in sorted((data / "meshes").glob("*.glb"))}
+    pool.update({p.stem: p for p in sorted((data / "holdout" / "meshes").glob("*.glb"))})
+    meshes = {name: load_mesh(path) for name, path in pool.items()}
+    report: dict = {"holds": {}}
+    for hold in holds or list(meshes):
+        truth = meshes[hold]
+        others = {n: m for n, m in meshes.items() if n != hold}
+        reference = {a: (render_textured(truth, a, FISH_RENDER),
+                         render_mesh(truth, a, FISH_RENDER).mask) for a in FISH_ANGLES}  # fmt: skip
+        _, residuals = registered_examples(truth, others, m=1, texture_size=64, mirror=True,
+                                           seed=seed)  # fmt: skip
+        rows = {}
+        for name in others:
+            (copy,), _ = registered_examples(truth, others, m=1, texture_size=COPY_TEXTURE,
+                                             mirror=True, names=[name], seed=seed)  # fmt: skip
+            mesh = textured_mesh(truth.vertices, truth.faces, truth.visual.uv,
+                                 copy.texture.astype(np.float32) / 255.0)  # fmt: skip
+            images = {a: render_textured(mesh, a, FISH_RENDER) for a in FISH_ANGLES}
+            rows[name] = {
+                "residual": residuals[name],
+                "de00": [ciede2000(images[a], *reference[a]) for a in FISH_ANGLES],
+                "crisp": [fine_energy(images[a], reference[a][1])
+                          / fine_energy(*reference[a]) for a in FISH_ANGLES],
+            }  # fmt: skip
+        names = list(rows)
+        residual = np.array([rows[n]["residual"] for n in names])
+        error = np.array([np.mean(rows[n]["de00"]) for n in names])
+        first = int(np.argmin(residual))
+        report["holds"][hold] = {
+            "copies": rows,
+            "first_choice": names[first],
+            "first_choice_rank": int((error < error[first]).sum()) + 1,
+            "spearman_residual_de00": float(spearmanr(residual, error).correlation),
+        }
+        print(hold, json.dumps({k: v for k, v in report["holds"][hold].items()
+                                if k != "copies"}), flush=True)  # fmt: skip
+    holds_done = report["holds"].values()
+    report["mean_spearman"] = float(np.mean([h["spearman_residual_de00"] for h in holds_done]))
+    report["mean_first_choice_rank"] = float(np.mean([h["first_choice_rank"] for h in holds_done]))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "fish_copies.json").write_text(json.dumps(report, indent=1))
+    return report
+
+
 def run_heads(
     data: Path, out: Path, seed: int = 0, only: list[str] | None = None, size: int | None = None
 ) -> dict:
@@ -383,7 +449,7 @@ def run_time(data: Path, pairs: int) -> dict:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("what", choices=("fish", "heads", "time", "time-one"))
+    parser.add_argument("what", choices=("fish", "copies", "heads", "time", "time-one"))
     parser.add_argument("route", nargs="?", choices=("views", "registered"))
     parser.add_argument("--data", type=Path)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -394,7 +460,7 @@ def main(argv=None) -> int:
         "--baseline", type=Path, help="fish: a release's output for the held-out fish"
     )
     parser.add_argument(
-        "--hold", default=HELD_OUT, help="fish: the fish held out (default %(default)s)"
+        "--hold", help=f"fish, copies: the fish held out (fish: default {HELD_OUT}; copies: each)"
     )
     args = parser.parse_args(argv)
     if args.what == "time-one":
@@ -402,9 +468,11 @@ def main(argv=None) -> int:
         return 0
     if args.what == "time":
         report = run_time(args.data or DEFAULT_FISH, args.pairs)
+    elif args.what == "copies":
+        report = run_copies(args.data or DEFAULT_FISH, args.out, [args.hold] if args.hold else None)
     elif args.what == "fish":
         report = run_fish(
-            args.data or DEFAULT_FISH, args.out, baseline=args.baseline, hold=args.hold
+            args.data or DEFAULT_FISH, args.out, baseline=args.baseline, hold=args.hold or HELD_OUT
         )
     else:
         report = run_heads(
@@ -413,7 +481,7 @@ def main(argv=None) -> int:
             only=args.only,
             size=args.size,
         )
-    print(json.dumps({k: v for k, v in report.items() if k != "objects"}, indent=1,
+    print(json.dumps({k: v for k, v in report.items() if k not in ("objects", "holds")}, indent=1,
                      default=float))  # fmt: skip
     return 0
 
