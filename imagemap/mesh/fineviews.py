@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from imagemap.core.blend import copy_through, fill_background
+from imagemap.scene.bake import view_size_for
 from imagemap.scene.views import sample_pixels
 
 __all__ = ["MAX_SOURCE_STEP", "fine_factor", "fine_view", "source_derivatives"]
@@ -52,8 +53,6 @@ def fine_factor(mesh, views, size: tuple[int, int], texture_size: int | None) ->
     >>> [fine_factor(plane, ["front"], (200, 150), texels) for texels in (64, 512)]
     [1, 4]
     """
-    from imagemap.scene.bake import view_size_for  # deferred: start-up (trimesh)
-
     width = int(size[0])
     wanted = view_size_for(mesh, views, texture_size, base=(width, int(size[1])),
                            max_pixels=2**62)  # fmt: skip

@@ -20,7 +20,14 @@ from imagemap.example import Example
 from imagemap.io import InputError
 from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import load_mesh
-from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
+from imagemap.scene.views import (
+    DEFAULT_MARGIN,
+    DEFAULT_SIZE,
+    FRONT,
+    View,
+    render_colours,
+    render_mesh,
+)
 
 __all__ = ["KEPT_PICTURES", "ExampleSet", "view_key"]
 
@@ -99,8 +106,6 @@ class ExampleSet:
         # A set keyed by ``str(view)`` alone holds another size: rendered here instead.
         if self.source is not None or view_key(view, size) in self.views:
             return self.at_view(view, size)[name].image
-        from imagemap.scene.views import DEFAULT_MARGIN, render_colours, render_mesh
-
         mesh = self.mesh(name)
         picture = render_colours(mesh, render_mesh(mesh, view, size, DEFAULT_MARGIN))
         while len(self.pictures) >= KEPT_PICTURES:
