@@ -23,7 +23,7 @@ def __getattr__(name: str) -> Any:
     # batch worker does) must not import the colorization and its registration, which pull
     # in trimesh and networkx (about 0.45 s of a worker's start).
     if name in __all__:
-        from imagemap.mesh import colorize
+        from imagemap.mesh import colorize  # deferred: start-up (trimesh, networkx; above)
 
         return getattr(colorize, name)
     raise AttributeError(f"module 'imagemap.mesh' has no attribute {name!r}")
