@@ -128,6 +128,15 @@ class Pyramid:
     #: drawn, 16 fragments for 90 %): 0.1 -> 0.820, a bust with a feature not drawn (5 of 6 with
     #: every one).
     context_fraction: float = setting(0.05, minimum=0.0)
+    #: The largest object (square root of its area, pixels) the engine searches at: a
+    #: larger query and its examples are block-averaged by the smallest power of two that
+    #: brings the query's object to this size or less, the engine and the seams run
+    #: there, and every pixel is copied at full size from the same sub-position of its
+    #: source's block (:func:`imagemap.depth.pipeline.fine_source`), then blended at full
+    #: size. A 4096^2 map then has the layout of copies of a 1024^2 map by construction
+    #: (#44 item 5: 122 fragments for 90 % against 71, the eye's pupil lumpy); 512 keeps
+    #: every map up to 1024^2 (object 431 px) and the 4x evaluation as it was. 0: no cap.
+    search_size: float = setting(512.0, minimum=0.0)
 
     def __post_init__(self) -> None:
         check_settings(self)

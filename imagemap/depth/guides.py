@@ -201,12 +201,7 @@ def sized_pyramid(mask: np.ndarray, pyramid: Pyramid) -> Pyramid:
     )
     if levels == pyramid.levels:
         return pyramid
-    return Pyramid(
-        patch_sizes=level_patch_sizes(pyramid.patch_sizes, levels),
-        grow=pyramid.grow,
-        add_windows_across=pyramid.add_windows_across,
-        context_fraction=pyramid.context_fraction,
-    )
+    return replace(pyramid, patch_sizes=level_patch_sizes(pyramid.patch_sizes, levels))
 
 
 def sized_config(config: DepthConfig, mask: np.ndarray) -> DepthConfig:

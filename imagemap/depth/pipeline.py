@@ -15,6 +15,8 @@ stage                  what it does
 =====================  ==================================================
 ``units``              the query at the examples' depth scale; not an example
 ``select``             the examples: named, or the nearest ``m`` in depth
+``working``            a large query and its examples block-averaged to
+                       the search size (``pyramid.search_size``)
 ``register``           each example warped onto the query (whole regions)
 ``bands``              guide bands of query and examples, their colour levels
 ``synthesize``         the engine, coarse to fine, by the level plan
@@ -23,6 +25,7 @@ stage                  what it does
 ``complete_features``  small features the copy cut, copied whole
 ``relief``             the relief's detail and the seams' weights, for the seams
 ``seams``              a few whole copies, their seams where they agree
+``fine``               a large query's sources and map at full size
 ``outside``            the blend's reference outside the object: the copy
 ``blend``              the seams blended in the gradient domain
 ``rgb``                back to RGB, background 0
@@ -43,7 +46,7 @@ Examples
 >>> result.image.shape, result.example_names
 ((40, 48, 3), ['blob_0', 'blob_2'])
 >>> [stage.name for stage in result.stages][:3]
-['select', 'pose', 'register']
+['select', 'pose', 'working']
 """
 
 from __future__ import annotations
@@ -140,6 +143,10 @@ class State(SynthesisState):
     mirrored: list[bool] = field(default_factory=list)  # chosen[i] is the example mirrored
     angles: list[float] = field(default_factory=list)  # each example's turn from the frame
     warps: list[Warp] = field(default_factory=list)  # each example onto the query
+    # Above the search size: the block-averaging factor, and the full-size depth, mask and
+    # examples while the synthesis and the seams run on the averaged ones.
+    factor: int = 1
+    full: tuple[np.ndarray, np.ndarray, list[Any]] | None = None
 
     def __post_init__(self) -> None:
         self.query_depth = self.depth
@@ -211,6 +218,173 @@ def _pose(state: State, config: DepthConfig) -> State:
         f"{' (left to the warp)' if first.scale == 1.0 and first.angle == 0.0 else ''}; "
         f"{sum(state.mirrored)} examples used mirrored"
     )
+    return state
+
+
+@dataclass
+class WorkingExample:
+    """A posed example block-averaged to the search size (:func:`block_average`): what
+    the synthesis reads of an example (name, depth, mask, image)."""
+
+    name: str
+    depth: np.ndarray
+    image: np.ndarray
+    mirrored: bool = False  # already arranged as its posed example was
+    labels: np.ndarray | None = None
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.depth > 0
+
+
+def working_factor(mask: np.ndarray, search_size: float, align: int) -> int:
+    """The power of two (at most ``align``) by which a query whose object is ``mask`` is
+    block-averaged: the smallest that brings the object's size (square root of its area)
+    to ``search_size`` or less; 1 when it is no larger or ``search_size`` is 0.
+
+    Examples
+    --------
+    >>> mask = np.zeros((2048, 2048), bool); mask[200:1100, 300:1100] = True
+    >>> working_factor(mask, 512, 32), working_factor(mask, 1024, 32), working_factor(mask, 0, 32)
+    (2, 1, 1)
+    """
+    size = float(np.sqrt(mask.sum()))
+    factor = 1
+    while search_size > 0 and size / factor > search_size and factor * 2 <= align:
+        factor *= 2
+    return factor
+
+
+def _block_sums(array: np.ndarray, factor: int, pad: str = "constant") -> np.ndarray:
+    """Sums over ``factor`` x ``factor`` blocks (the last ones padded) in float32."""
+    height, width = array.shape[:2]
+    h, w = -(-height // factor), -(-width // factor)
+    widths = [(0, h * factor - height), (0, w * factor - width)] + [(0, 0)] * (array.ndim - 2)
+    padded = np.pad(np.asarray(array, dtype=np.float32), widths, mode=pad)  # type: ignore[call-overload]
+    blocks = padded.reshape(h, factor, w, factor, *array.shape[2:])
+    return blocks.sum(axis=(1, 3), dtype=np.float32)
+
+
+def block_average(depth: np.ndarray, factor: int) -> np.ndarray:
+    """A depth map averaged over ``factor`` x ``factor`` blocks: a block is object where at
+    least half its pixels are, with the mean depth of those (pixel ``i`` of the result is
+    pixels ``factor * i`` to ``factor * i + factor - 1`` of ``depth``).
+
+    Examples
+    --------
+    >>> depth = np.array([[0, 0, 2, 4], [0, 2, 2, 4]], np.float32)
+    >>> block_average(depth, 2).tolist()
+    [[0.0, 3.0]]
+    """
+    mask = depth > 0
+    counts = _block_sums(mask, factor)
+    sums = _block_sums(np.where(mask, depth, 0), factor)
+    kept = counts * 2 >= factor * factor
+    return np.where(kept, sums / np.maximum(counts, 1), 0).astype(np.float32)
+
+
+def _working(state: State, config: DepthConfig) -> State:
+    # A query larger than the search size: the synthesis, the copy and the seams run on
+    # it and its (posed) examples block-averaged by a power of two; the fine stage
+    # brings the sources back to full size. The frame's origin is on a multiple of the
+    # pyramid's coarsest step (the pose stage), so the averaged examples' blocks and the
+    # averaged query's share their corners.
+    levels = sized_config(config, state.chosen[0].mask).pyramid.levels
+    factor = working_factor(state.mask, config.pyramid.search_size, 2 ** (levels - 1))
+    if factor == 1:
+        state.changed = "none: the object is within the search size"
+        return state
+    state.full = (state.depth, state.mask, state.chosen)
+    state.factor = factor
+    state.depth = block_average(state.depth, factor)
+    state.mask = state.depth > 0
+    state.chosen = [
+        WorkingExample(
+            name=e.name,
+            depth=block_average(e.depth, factor),
+            image=_block_sums(e.image, factor, pad="edge") / np.float32(factor * factor),
+        )
+        for e in state.chosen
+    ]
+    state.changed = (
+        f"averaged by {factor}: {state.mask.shape[1]}x{state.mask.shape[0]}, object "
+        f"{np.sqrt(state.mask.sum()):.0f} px across"
+    )
+    return state
+
+
+def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
+                example_shapes: list[tuple[int, int]]) -> np.ndarray:  # fmt: skip
+    """A source map of block-averaged pictures at full size: pixel ``(y, x)`` copies the
+    pixel at the same place in its source's block, ``(e, factor * sy + y % factor,
+    factor * sx + x % factor)`` where ``(e, sy, sx)`` is the source of block ``(y //
+    factor, x // factor)``; clipped to its example, -1 kept where there is no source.
+
+    Examples
+    --------
+    >>> source = np.array([[[0, 3, 5], [1, 0, 0]]], np.int32)
+    >>> fine = fine_source(source, 2, (2, 3), [(8, 12), (8, 12)])
+    >>> fine[..., 1].tolist(), fine[..., 2].tolist()
+    ([[6, 6, 0], [7, 7, 1]], [[10, 11, 0], [10, 11, 0]])
+    """
+    height, width = shape
+    heights = np.array([s[0] for s in example_shapes], dtype=np.int32)
+    widths = np.array([s[1] for s in example_shapes], dtype=np.int32)
+    cols = np.arange(width) // factor
+    dx = (np.arange(width) % factor).astype(np.int32)
+    fine = np.empty((height, width, 3), dtype=np.int32)
+    for y0 in range(0, height, _ROWS):
+        ys = np.arange(y0, min(y0 + _ROWS, height))
+        cell = source[ys // factor][:, cols]
+        index = cell[..., 0]
+        known = np.clip(index, 0, len(example_shapes) - 1)
+        dy = (ys % factor).astype(np.int32)[:, None]
+        fine[y0 : y0 + len(ys), :, 0] = index
+        fine[y0 : y0 + len(ys), :, 1] = np.clip(cell[..., 1] * factor + dy, 0, heights[known] - 1)
+        fine[y0 : y0 + len(ys), :, 2] = np.clip(cell[..., 2] * factor + dx, 0, widths[known] - 1)
+    return fine
+
+
+_ROWS = 256  # rows per block where a full-size map is made block by block
+
+
+def _fine(state: State, config: DepthConfig) -> State:
+    # The sources at full size (each pixel from the same place in its source's block of
+    # the full-size example: the examples' own detail), the map being finished (the
+    # blend's reference) upsampled; the blend then runs at full size.
+    if state.full is None:
+        state.changed = "none: the synthesis ran at full size"
+        return state
+    factor = state.factor
+    small_mask = state.mask
+    state.depth, state.mask, state.chosen = state.full
+    state.full = None
+    shape = state.mask.shape
+    source = state.made("source")
+    # A full-size object pixel whose block is not object (its outline) may have no
+    # source: the nearest block's that has one.
+    missing = source[..., 0] < 0
+    if missing.any():
+        reach = ndimage.binary_dilation(small_mask, iterations=2) & missing
+        _, (iy, ix) = ndimage.distance_transform_edt(missing, return_indices=True)
+        source[reach] = source[iy[reach], ix[reach]]
+    state.source = fine_source(source, factor, shape, [e.mask.shape for e in state.chosen])
+    del source
+    ycbcr = state.made("ycbcr")
+    state.ycbcr = np.ascontiguousarray(
+        ndimage.zoom(ycbcr, (factor, factor, 1), order=1, mode="nearest", grid_mode=True)[
+            : shape[0], : shape[1]
+        ],
+        dtype=np.float32,
+    )
+    del ycbcr
+    if state.exemplars is not None:
+        state.exemplars = [example_ycbcr(example) for example in state.chosen]
+    state.features = None
+    if state.engine is not None:
+        cost = state.engine.cost
+        state.engine.cost = np.repeat(np.repeat(cost, factor, 0), factor, 1)[: shape[0], : shape[1]]
+    state.changed = f"sources and map at full size ({shape[1]}x{shape[0]}, x{factor})"
     return state
 
 
@@ -414,12 +588,17 @@ def _warp_copy(state: State, config: DepthConfig) -> State:
     return state
 
 
+def _capped(config: DepthConfig) -> bool:
+    return config.pyramid.search_size > 0
+
+
 #: The pipeline, in order: the depth front end's own stages, then the shared finish
 #: (:mod:`imagemap.depth.finish`) with the completion of small features, which reads the
 #: relief, after the copy.
 STAGES: tuple[Stage[State, DepthConfig], ...] = (
     Stage("select", _select),
     Stage("pose", _pose),
+    Stage("working", _working, _capped),
     Stage("register", _register, lambda c: c.guides.registration),
     Stage("bands", _bands),
     Stage("synthesize", _synthesize),
@@ -432,6 +611,7 @@ STAGES: tuple[Stage[State, DepthConfig], ...] = (
     ),
     Stage("relief", _relief, SEAMS.wanted),
     SEAMS,
+    Stage("fine", _fine, _capped),
     OUTSIDE,
     BLEND,
     Stage("unpose", _unpose),

@@ -552,9 +552,12 @@ def unpose(
 def unpose_nearest(frame: CanonicalFrame, shape: tuple[int, int], values: np.ndarray):
     """A canonical per-pixel array (a cost map) in the query's frame: each query pixel
     takes its nearest canonical pixel's value (NaN outside the canonical frame)."""
-    cy, cx = frame.from_query(shape)
-    iy, ix = np.rint(cy).astype(np.int64), np.rint(cx).astype(np.int64)
-    inside = (iy >= 0) & (iy < values.shape[0]) & (ix >= 0) & (ix < values.shape[1])
     out = np.full(shape, np.nan, dtype=np.float32)
-    out[inside] = values[iy[inside], ix[inside]]
+    for y0 in range(0, shape[0], _ROWS):  # by blocks of rows: no full-size float64 grids
+        ys, xs = np.mgrid[y0 : min(shape[0], y0 + _ROWS), 0 : shape[1]].astype(np.float64)
+        cy, cx = frame.pose.forward(ys, xs)
+        iy = np.rint(cy - frame.origin[0]).astype(np.int64)
+        ix = np.rint(cx - frame.origin[1]).astype(np.int64)
+        inside = (iy >= 0) & (iy < values.shape[0]) & (ix >= 0) & (ix < values.shape[1])
+        out[y0 : y0 + len(ys)][inside] = values[iy[inside], ix[inside]]
     return out
