@@ -210,18 +210,20 @@ def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
     assert more.levels == pyramid_levels(depth > 0, patch_sizes) > with_band.pyramid.levels
 
 
-#: Fresh-process runs of ``benchmarks/memory.py`` (generated fish, m = 2, 2026-11-29, quiet
-#: machine, after the speed round): the guard's inputs (query shape, object and border
-#: pixels, the two largest examples', the window sizes, PCA fraction, guide bands), the
-#: peak RSS the call added (MB) and its CPU seconds.
+#: Fresh-process runs of ``benchmarks/memory.py`` (generated fish, m = 2, 2026-11-29): the
+#: guard's inputs (query shape, object and border pixels, the two largest examples' crops
+#: or frames, the window sizes, PCA fraction, guide bands, search size), the peak RSS the
+#: call added (MB) and its CPU seconds. 1024^2: quiet machine, after the speed round; 2048^2
+#: and 4096^2: above the search size (#44 item 5; load 8.5-9.6, CPU seconds, the mean of
+#: two runs at 2048^2).
 MEASURED_RUNS = [
     (((1024, 1024), 185723, 3384, [((1024, 1024), 133698, 3102), ((1024, 1024), 169081, 3496)],
-      (7, 7, 11, 9), 0.2, 3), 219, 13.1),
-    (((2048, 2048), 742912, 6784, [((2048, 2048), 534808, 6230), ((2048, 2048), 676361, 6982)],
-      (7, 7, 7, 11, 9), 0.2, 3), 675, 48.1),
+      (7, 7, 11, 9), 0.2, 3, 512.0), 219, 13.1),
+    (((2048, 2048), 742912, 6784, [((1330, 2048), 534808, 6230), ((1394, 2048), 676361, 6982)],
+      (7, 7, 7, 11, 9), 0.2, 3, 512.0), 483, 25.0),
     (((4096, 4096), 2971692, 13576,
-      [((4096, 4096), 2139318, 12476), ((4096, 4096), 2705426, 13986)],
-      (7, 7, 7, 7, 11, 9), 0.2, 3), 2541, 218.2),
+      [((2661, 4096), 2139318, 12476), ((2788, 4096), 2705426, 13986)],
+      (7, 7, 7, 7, 11, 9), 0.2, 3, 512.0), 1680, 56.7),
 ]  # fmt: skip
 
 

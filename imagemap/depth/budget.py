@@ -87,6 +87,17 @@ _MEMORY_FACTOR = 0.8
 _SECONDS_PER_FEATURE = 7.5e-7
 _SECONDS_OVERHEAD = 0.3
 
+# Above the search size (pyramid.search_size), the full-size finish: bytes per query pixel
+# (sources, the map and its reference, the blend's solve, the pose undone) and per example
+# pixel (its colours, copied from at full size), and seconds per pixel of either (the
+# full-size stages: select, pose, averaging, the finish). Fresh-process runs of
+# benchmarks/memory.py (generated fish, m = 2, 2026-11-29, load 8.5-9.6): 2048^2 483 MB
+# added, 25.0 s of CPU (two runs), 4096^2 1680 MB, 56.7 s; these give 485 MB, 23.5 s and
+# 1701 MB, 52.8 s (+0 %, -6 %; +1 %, -7 %). The peak is the full-size blend's.
+_FULL_PIXEL_BYTES = 80
+_FULL_EXAMPLE_PIXEL_BYTES = 16
+_SECONDS_PER_FULL_PIXEL = 1.0e-6
+
 #: Runs estimated to take longer than this are announced with a warning (not refused).
 LONG_RUN_SECONDS = 300.0
 
@@ -132,6 +143,17 @@ def _feature_dims(k: int, pca_fraction: float, guide_bands: int = 2, appearance_
     return guide + appearance + 3
 
 
+def _working_factor(foreground: int, search_size: float, levels: int) -> int:
+    """The block-averaging factor of a query with ``foreground`` object pixels (as
+    :func:`imagemap.depth.pipeline.working_factor`, the object's size taken here in the
+    query's pixels, not the synthesis frame's)."""
+    size = float(np.sqrt(foreground))
+    factor = 1
+    while search_size > 0 and size / factor > search_size and factor * 2 <= 2 ** (levels - 1):
+        factor *= 2
+    return factor
+
+
 def _boundary(mask: np.ndarray) -> int:
     """Pixels on the mask's border (vertical plus horizontal transitions)."""
     return int(
@@ -147,6 +169,7 @@ def estimate_colorize(
     patch_sizes: Sequence[int],
     pca_fraction: float = 0.2,
     guide_bands: int = 2,
+    search_size: float = 0.0,
 ) -> Estimate:
     """Estimate peak memory and time of a colorization from sizes alone.
 
@@ -164,7 +187,35 @@ def estimate_colorize(
         Fraction of the PCA basis kept.
     guide_bands : int
         Guide bands per pixel (depth, its detail, and the silhouette band if on).
+    search_size : float
+        ``pyramid.search_size``: above it the engine and the seams run on the query and
+        examples block-averaged (their estimate, with the coarser levels' windows), and
+        the full-size finish (the copy's sources and colours, the blend, the pose
+        undone) is estimated per full-size pixel; 0: no cap.
     """
+    factor = _working_factor(foreground, search_size, len(patch_sizes))
+    if factor > 1:
+        skipped = factor.bit_length() - 1  # the finest levels, not searched
+        working = estimate_colorize(
+            (-(-shape[0] // factor), -(-shape[1] // factor)),
+            foreground // factor**2,
+            boundary // factor,
+            [
+                ((-(-h // factor), -(-w // factor)), f // factor**2, b // factor)
+                for (h, w), f, b in exemplars
+            ],
+            patch_sizes[skipped:],
+            pca_fraction,
+            guide_bands,
+        )
+        pixels = shape[0] * shape[1]
+        example_pixels = sum(h * w for (h, w), _, _ in exemplars)
+        finish = _FULL_PIXEL_BYTES * pixels + _FULL_EXAMPLE_PIXEL_BYTES * example_pixels
+        return replace(
+            working,
+            bytes=int(max(working.bytes, _OVERHEAD_BYTES + finish)),
+            seconds=working.seconds + _SECONDS_PER_FULL_PIXEL * (pixels + example_pixels),
+        )
     height, width = shape
     n_ex = len(exemplars)
     ex_h = max((e[0][0] for e in exemplars), default=0)
@@ -282,6 +333,7 @@ def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Est
         pyramid.patch_sizes,
         config.matching.pca_fraction,
         guide_bands,
+        config.pyramid.search_size,
     )
 
 
