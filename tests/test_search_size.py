@@ -45,6 +45,8 @@ def test_a_large_query_is_copied_by_blocks_from_the_full_size_examples():
     capped = _run(search_size=20.0)  # 48 px: averaged by 4 (12 px across)
     working = next(record for record in capped.stages if record.name == "working")
     assert working.changed.startswith("averaged by 4")
+    # The configuration as it ran: the pyramid of the averaged object (12 px: 2 levels).
+    assert capped.config.pyramid.levels < _run(search_size=0.0).config.pyramid.levels
     assert capped.image.shape == (*SHAPE, 3) and capped.source.shape == (*SHAPE, 3)
     assert np.array_equal(capped.mask, blob(SHAPE, (32, 48), RADII, 0.02, 9) > 0)
     # Every pixel copies the pixel at its own place in its source's 4x4 block: one phase

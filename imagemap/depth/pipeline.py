@@ -147,6 +147,7 @@ class State(SynthesisState):
     # examples while the synthesis and the seams run on the averaged ones.
     factor: int = 1
     full: tuple[np.ndarray, np.ndarray, list[Any]] | None = None
+    searched: np.ndarray | None = None  # the object the engine searched, when averaged
 
     def __post_init__(self) -> None:
         self.query_depth = self.depth
@@ -297,7 +298,7 @@ def _working(state: State, config: DepthConfig) -> State:
     state.full = (state.depth, state.mask, state.chosen)
     state.factor = factor
     state.depth = block_average(state.depth, factor)
-    state.mask = state.depth > 0
+    state.mask = state.searched = state.depth > 0
     state.chosen = [
         WorkingExample(
             name=e.name,
@@ -818,8 +819,11 @@ def _run(depth, database, config, stages, names, seed, quiet) -> ColorizeResult:
     state, records = run_pipeline(state, config, stages)
     frame: CanonicalFrame = state.made("frame")
     # The configuration as it ran: its pyramid sized for the object in the synthesis'
-    # frame (as many levels as its size calls for).
-    config = sized_config(config, resample_depth(state.query_depth, frame) > 0)
+    # frame (as many levels as its size calls for), averaged above the search size.
+    searched = state.searched
+    if searched is None:
+        searched = resample_depth(state.query_depth, frame) > 0
+    config = sized_config(config, searched)
     engine = state.engine
     return ColorizeResult(
         image=state.made("image"),
