@@ -134,9 +134,11 @@ class Pyramid:
     #: there, and every pixel is copied at full size from the same sub-position of its
     #: source's block (:func:`imagemap.depth.pipeline.fine_source`), then blended at full
     #: size. A 4096^2 map then has the layout of copies of a 1024^2 map by construction
-    #: (#44 item 5: 122 fragments for 90 % against 71, the eye's pupil lumpy); 512 keeps
-    #: every map up to 1024^2 (object 431 px) and the 4x evaluation as it was. 0: no cap.
-    search_size: float = setting(512.0, minimum=0.0)
+    #: (#44 item 5: 122 fragments for 90 % against 71, the eye's pupil lumpy). 640 keeps
+    #: the 1024^2 fish (object 431 px), the 4x evaluation (busts up to 503 px) and the relief
+    #: tasks at 768x576 (459-485 px) as they were, with a quarter to spare; the 2048^2 and
+    #: 4096^2 fish (862, 1724 px) are averaged by 2 and 4. 0: no cap.
+    search_size: float = setting(640.0, minimum=0.0)
 
     def __post_init__(self) -> None:
         check_settings(self)
