@@ -124,7 +124,11 @@ sys.exit(code)
 FLOOR_CHILD = r"""
 import gc, time
 begin = time.perf_counter()
-gc.set_threshold(10_000, 10, 10)  # as imagemap.cli.main
+try:  # as imagemap.cli.main
+    from imagemap.cli import GC_THRESHOLDS
+except ImportError:  # a checkout from before the constant
+    GC_THRESHOLDS = (10_000, 10, 10)
+gc.set_threshold(*GC_THRESHOLDS)
 import base64, importlib, json, pickle, sys, warnings
 
 plan = json.load(open(sys.argv[1]))

@@ -14,18 +14,39 @@ import numbers
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from imagemap.example import Example
 from imagemap.io import InputError
 from imagemap.materials import MAP_KINDS, example_maps
-from imagemap.scene.examples import MeshExample, mesh_examples
-from imagemap.scene.views import View
+from imagemap.outputs import MESH_SUFFIXES
+
+if TYPE_CHECKING:
+    from imagemap.scene.views import View
 
 __all__ = ["Database", "Example", "check_database", "database_at_view", "prepare_database"]
 
 #: The smallest object an example may have: one window of the finest level (7x7 in every
 #: preset, the paper's Table 1). A smaller example cannot give a single whole window.
 MIN_EXAMPLE_PIXELS = 49
+
+
+def _meshes(path, view, size, taken) -> tuple[list, list[str]]:
+    """:func:`imagemap.scene.examples.mesh_examples`; that module (and the rest of
+    :mod:`imagemap.scene`: 30-45 ms of a fresh process's CPU) only imported when the folder
+    holds a mesh file or a view is given: a folder of pictures has no mesh examples."""
+    root = Path(path)
+    if view is None and not (
+        root.is_dir()
+        and any(
+            entry.suffix.lower() in MESH_SUFFIXES and entry.is_file() for entry in root.iterdir()
+        )
+    ):
+        return [], []
+    from imagemap.scene.examples import mesh_examples  # deferred: start-up (above)
+
+    return mesh_examples(path, view, size, taken)
+
 
 _DEPTH_RE = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
 _IMAGE_RE = re.compile(r"^(?P<name>.+)_image\.(?:png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
@@ -81,7 +102,7 @@ class Database:
         if not isinstance(path, str | os.PathLike) or not str(path):
             raise InputError(f"Database.from_directory: expected a folder, got {path!r}")
         examples, problems = _scan(Path(path))
-        meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
+        meshes, mesh_problems = _meshes(path, view, size, {e.name for e in examples})
         examples, problems = [*examples, *meshes], problems + mesh_problems
         if strict and problems:
             raise InputError("; ".join(problems))
@@ -250,7 +271,7 @@ def check_database(
     >>> shutil.rmtree(folder)
     """
     examples, problems = _scan(Path(path))
-    meshes, mesh_problems = mesh_examples(path, view, size, {e.name for e in examples})
+    meshes, mesh_problems = _meshes(path, view, size, {e.name for e in examples})
     examples, problems = [*examples, *meshes], problems + mesh_problems
     rows = []
     for example in examples:
@@ -291,6 +312,8 @@ def database_at_view(
     database: Database, view: View, size: tuple[int, int] | None = None
 ) -> Database:
     """The database with its mesh examples rendered from ``view`` (pictures unchanged)."""
+    from imagemap.scene.examples import MeshExample  # deferred: start-up (imagemap.scene)
+
     examples = [
         e.at_view(view, size) if isinstance(e, MeshExample) else e for e in database.examples
     ]
@@ -305,6 +328,8 @@ def prepare_database(database: Database, loaded: dict[int, Example] | None = Non
     ``id`` of the example) shares the prepared copy of an example that several
     databases hold (a picture example at every view and size).
     """
+    from imagemap.scene.examples import MeshExample  # deferred: start-up (imagemap.scene)
+
     loaded = {} if loaded is None else loaded
     examples = []
     for example in database:

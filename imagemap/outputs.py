@@ -69,6 +69,7 @@ __all__ = [
     "EXAMPLE_KINDS",
     "MESH_SUFFIXES",
     "OVERWRITE_KINDS",
+    "TEXTURED_SUFFIXES",
     "TRUTH_SUFFIXES",
     "OutputPlan",
     "check_output_directory",
@@ -158,6 +159,9 @@ TRUTH_SUFFIXES = (
 #: Suffixes read as meshes (anything trimesh loads that holds triangles); also
 #: :data:`imagemap.scene.MESH_SUFFIXES`.
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".stl", ".off")
+#: Suffixes written as textured meshes; also :data:`imagemap.scene.TEXTURED_SUFFIXES`
+#: (here, so that ``imagemap synthesize`` tells a mesh request without imagemap.scene).
+TEXTURED_SUFFIXES = (".glb", ".obj")
 #: Suffixes of a depth map ``NAME_depth.*`` (what a database and a batch read as one).
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
 #: The files of an example or a held-out truth beside its ``NAME_depth.*`` or ``NAME``

@@ -200,3 +200,33 @@ def test_the_startup_benchmark_counts_top_level_imports_only():
     )
     assert startup._import_seconds(text, set()) == pytest.approx(1350e-6)
     assert startup._import_seconds(text, {"numba.np.arraymath", "scipy"}) == pytest.approx(300e-6)
+
+
+def test_a_folder_of_pictures_does_not_import_the_mesh_modules(tmp_path):
+    # imagemap.scene (mesh examples: 30-45 ms of a fresh process's CPU) is imported for a
+    # database folder only when it holds a mesh file.
+    import numpy as np
+
+    from imagemap.io import write_image
+
+    depth = np.zeros((16, 24), np.float32)
+    depth[4:12, 6:18] = 0.5
+    np.save(tmp_path / "fish_000_depth.npy", depth)
+    write_image(tmp_path / "fish_000_image.png", np.ones((16, 24, 3)))
+    probe = (
+        "import argparse, sys\n"
+        "from imagemap.cli.mesh import is_mesh_request\n"
+        "from imagemap.database import Database\n"
+        "import imagemap.depth.pipeline\n"
+        f"db = Database.from_directory({str(tmp_path)!r})\n"
+        "request = argparse.Namespace(depth=['q_depth.png'], output='map.png')\n"
+        "print(len(db), is_mesh_request(request), 'imagemap.scene' in sys.modules)\n"
+        f"open({str(tmp_path / 'fish_001.glb')!r}, 'wb').close()\n"
+        f"db = Database.from_directory({str(tmp_path)!r})\n"
+        "print(len(db), 'imagemap.scene' in sys.modules)"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, env=env
+    ).stdout.split()
+    assert out == ["1", "False", "False", "2", "True"]

@@ -143,13 +143,19 @@ def add_common_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-v", "--verbose", action="store_true", help="log the engine's steps")
 
 
+#: The ``imagemap`` program's garbage collector thresholds (``gc.set_threshold``): a
+#: collection of the youngest objects every 10,000 allocations instead of 700, as numba
+#: loading its cached kernels allocates many short-lived objects (290 collections, about
+#: 0.15-0.3 s, in a 200x150 synthesis; 20 after); the middle generation every 100 of those
+#: instead of 10: its one collection in a 200x150 or 512^2 synthesis walked the objects the
+#: imports and kernel loads left, 26-51 ms of CPU (none after). Same maps and peak RSS.
+GC_THRESHOLDS = (10_000, 100, 10)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run a command; ``argv`` None (the ``imagemap`` program) reads ``sys.argv``."""
     if argv is None:
-        # A collection of the youngest objects every 10,000 allocations instead of 700:
-        # numba loading its cached kernels allocates many short-lived objects (290
-        # collections, about 0.15-0.3 s, in a 200x150 synthesis; 20 after). Same peak RSS.
-        gc.set_threshold(10_000, 10, 10)
+        gc.set_threshold(*GC_THRESHOLDS)
     try:
         return _main(argv, own_process=argv is None)
     finally:

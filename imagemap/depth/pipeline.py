@@ -98,7 +98,7 @@ from imagemap.depth.pose import (
 from imagemap.depth.register import (
     Warp,
     position_scales,
-    register,
+    register_all,
     registered_positions,
     relief_agreement,
     relief_detail,
@@ -390,10 +390,12 @@ def _fine(state: State, config: DepthConfig) -> State:
 
 
 def _register(state: State, config: DepthConfig) -> State:
-    state.warps = [
-        register(state.depth, example.depth, registration=config.registration, angle=angle)
-        for example, angle in zip(state.chosen, state.angles, strict=True)
-    ]
+    state.warps = register_all(
+        state.depth,
+        [example.depth for example in state.chosen],
+        registration=config.registration,
+        angles=state.angles,
+    )
     state.changed = f"{len(state.warps)} examples warped onto the query"
     return state
 

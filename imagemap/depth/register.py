@@ -45,6 +45,7 @@ __all__ = [
     "Warp",
     "position_scales",
     "register",
+    "register_all",
     "registered_positions",
     "registration_guide",
     "relief_detail",
@@ -321,7 +322,33 @@ def register(
     -------
     Warp
     """
-    query_mask, example_mask = query_depth > 0, example_depth > 0
+    return register_all(query_depth, [example_depth], registration=registration, angles=[angle])[0]
+
+
+def register_all(
+    query_depth: np.ndarray,
+    example_depths: list[np.ndarray],
+    *,
+    registration: Registration = _REGISTRATION,
+    angles: list[float] | None = None,
+) -> list[Warp]:
+    """:func:`register` of the query onto each example, the query's guide image and relief
+    detail made once, not once per example: the same warps as one :func:`register` each.
+
+    Examples
+    --------
+    >>> yy, xx = np.mgrid[:60, :80]
+    >>> def blob(ry, rx):
+    ...     u = ((yy - 30) / ry) ** 2 + ((xx - 40) / rx) ** 2
+    ...     return np.where(u < 1, 0.2 + np.sqrt(np.clip(1 - u, 0, 1)), 0).astype(np.float32)
+    >>> query, examples = blob(12, 25), [blob(15, 30), blob(10, 20)]
+    >>> warps = register_all(query, examples)
+    >>> all(np.array_equal(w.coefficients, register(query, e).coefficients)
+    ...     for w, e in zip(warps, examples))
+    True
+    """
+    angles = [0.0] * len(example_depths) if angles is None else list(angles)
+    query_mask = query_depth > 0
     size = float(np.sqrt(query_mask.sum()))
     zoom = min(1.0, registration.work_size / max(size, 1.0))
 
@@ -346,24 +373,30 @@ def register(
         return small, small_mask if small_mask.any() else small > 0.25
 
     fixed, fixed_mask = working(query_depth, query_mask)
-    moving, moving_mask = working(example_depth, example_mask)
-    with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
-        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
-    if zoom < 1.0:
-        # Back to full-resolution pixels: a working pixel centre j is full-resolution
-        # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
-        def full(v):
-            return (np.asarray(v) + 0.5) / zoom - 0.5
+    query_detail = _detail_grid(query_depth, query_mask, registration)
 
-        warp = Warp(
-            query_centre=full(warp.query_centre),
-            example_centre=full(warp.example_centre),
-            linear=warp.linear,
-            box=tuple(float(full(b)) for b in warp.box),  # type: ignore[arg-type]
-            coefficients=warp.coefficients / zoom,
-            n=warp.n,
-        )
-    return _with_relief_residual(warp, query_depth, example_depth, registration)
+    def one(task: tuple[np.ndarray, float]) -> Warp:
+        example_depth, angle = task
+        moving, moving_mask = working(example_depth, example_depth > 0)
+        with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
+            warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
+        if zoom < 1.0:
+            # Back to full-resolution pixels: a working pixel centre j is full-resolution
+            # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
+            def full(v):
+                return (np.asarray(v) + 0.5) / zoom - 0.5
+
+            warp = Warp(
+                query_centre=full(warp.query_centre),
+                example_centre=full(warp.example_centre),
+                linear=warp.linear,
+                box=tuple(float(full(b)) for b in warp.box),  # type: ignore[arg-type]
+                coefficients=warp.coefficients / zoom,
+                n=warp.n,
+            )
+        return _with_relief_residual(warp, query_detail, example_depth, registration)
+
+    return [one(task) for task in zip(example_depths, angles, strict=True)]
 
 
 def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarray:
@@ -415,30 +448,38 @@ def _smooth_inside(values: np.ndarray, mask: np.ndarray, sigma: float) -> np.nda
     return np.where(mask, full, 0.0)
 
 
+def _detail_grid(
+    depth: np.ndarray, mask: np.ndarray, registration: Registration
+) -> tuple[np.ndarray, int]:
+    """The relief's detail with the object about ``detail_size`` pixels across (block
+    averages of larger maps), and the block's side."""
+    block = max(1, int(round(np.sqrt(mask.sum()) / registration.detail_size)))
+    if block > 1:
+        depth, mask = _block_average(depth, mask, block)
+    return relief_detail(depth, mask, registration.relief_detail_scale), block
+
+
 def _with_relief_residual(
-    warp: Warp, query_depth: np.ndarray, example_depth: np.ndarray, registration: Registration
+    warp: Warp,
+    query_detail: tuple[np.ndarray, int],
+    example_depth: np.ndarray,
+    registration: Registration,
 ) -> Warp:
-    """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail against the
-    example's carried onto it by the warp, with the object about ``detail_size`` pixels
-    across (block averages of larger maps)."""
-    query_mask, example_mask = query_depth > 0, example_depth > 0
-
-    def small(depth, mask):
-        block = max(1, int(round(np.sqrt(mask.sum()) / registration.detail_size)))
-        if block > 1:
-            depth, mask = _block_average(depth, mask, block)
-        return relief_detail(depth, mask, registration.relief_detail_scale), block
-
-    query_detail, step = small(query_depth, query_mask)
-    example_detail, example_step = small(example_depth, example_mask)
+    """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail
+    (:func:`_detail_grid`) against the example's carried onto it by the warp, with the
+    object about ``detail_size`` pixels across (block averages of larger maps)."""
+    query_detail_map, step = query_detail
+    example_detail, example_step = _detail_grid(example_depth, example_depth > 0, registration)
     # The query's grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
-    gy, gx = np.mgrid[0 : query_detail.shape[0], 0 : query_detail.shape[1]].astype(np.float64)
+    gy, gx = np.mgrid[0 : query_detail_map.shape[0], 0 : query_detail_map.shape[1]].astype(
+        np.float64
+    )
     ey, ex = warp.forward((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
     landed = ndimage.map_coordinates(
         example_detail, [(ey + 0.5) / example_step - 0.5, (ex + 0.5) / example_step - 0.5],
         order=1, mode="constant", cval=0.0,
     )  # fmt: skip
-    residual = np.square(query_detail - landed).astype(np.float32)
+    residual = np.square(query_detail_map - landed).astype(np.float32)
     return replace(warp, relief_residual=residual, relief_step=float(step))
 
 

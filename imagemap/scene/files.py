@@ -30,7 +30,10 @@ from typing import Any
 import numpy as np
 
 from imagemap.io import InputError, atomic_path
-from imagemap.outputs import MESH_SUFFIXES  # one list: the overwrite rule reads it too
+from imagemap.outputs import (  # one list each: the overwrite rule and the CLI read them too
+    MESH_SUFFIXES,
+    TEXTURED_SUFFIXES,
+)
 from imagemap.scene.views import texture_image
 from imagemap.validate import check_mesh
 
@@ -54,8 +57,6 @@ __all__ = [
     "unit_scale",
 ]
 
-#: Suffixes written as textured meshes.
-TEXTURED_SUFFIXES = (".glb", ".obj")
 #: Roughness written when neither the input nor a roughness map gives one: a matte
 #: dielectric (skin, scales, painted wood are 0.4-0.8 in the usual PBR charts); the
 #: old export's 0.904 came from trimesh's glossiness conversion, not from a choice.
