@@ -94,6 +94,65 @@ def _run_each(function, items: list) -> None:
         future.result()
 
 
+def run_each(function, items: list) -> None:
+    """``function(item)`` for every item, on the thread pool (in order with one thread)."""
+    _run_each(function, items)
+
+
+def run_blocks(function, n_items: int, size: int) -> None:
+    """``function(start, stop, alone)`` over [0, n_items) in blocks of ``size`` items at
+    fixed edges (0, size, 2 size...: the same blocks at any thread count), the blocks on
+    the thread pool. ``alone`` is True when there is a single block, run on the calling
+    thread: ``function`` may then use the pool itself (never from a pooled block: a block
+    waiting for work queued behind it would wait forever)."""
+    edges = list(range(0, n_items, size)) + [n_items]
+    blocks = list(zip(edges[:-1], edges[1:], strict=True))
+    if len(blocks) <= 1:
+        function(0, n_items, True)
+        return
+    _run_each(lambda block: function(block[0], block[1], False), blocks)
+
+
+@njit(cache=True, nogil=True)
+def _gather_windows(bands, e, y, x, channels, k, scale, out, start, stop):
+    """Rows [start, stop) of :func:`gather_windows`."""
+    n_channels = channels.shape[0]
+    scaled = scale.shape[0] > 0
+    area = k * k
+    for i in range(start, stop):
+        ee = e[i] if e.shape[0] > 0 else 0
+        yy = y[i]
+        xx = x[i]
+        # Written in the row's order (twice as fast as read in the bands' order).
+        for ci in range(n_channels):
+            c = channels[ci]
+            for oy in range(k):
+                j = ci * area + oy * k
+                for ox in range(k):
+                    value = bands[ee, yy + oy, xx + ox, c]
+                    if scaled:
+                        value = value * scale[j + ox]
+                    out[i, j + ox] = value
+
+
+def gather_windows(bands, e, y, x, channels, k, scale, out, threads=True) -> None:
+    """The k x k windows of some channels of a band stack, flattened, into ``out``.
+
+    Row i of ``out`` (N, len(channels) k^2) float32 becomes the window whose top-left is
+    ``bands[e[i], y[i], x[i]]`` (``bands`` (E, H, W, C) float32; ``e`` empty: exemplar 0),
+    in ``(channel, ky, kx)`` order (a sliding-window view's), each value times
+    ``scale[j]`` (float32, one per column; empty: none): the same float32 products as
+    ``view[e, y, x][:, channels].reshape(N, -1) * scale``. ``threads``: rows split over
+    the thread pool (False from a pooled block, see :func:`run_blocks`).
+    """
+    n = y.shape[0]
+    args = (bands, e, y, x, channels, k, scale, out)
+    if not threads:
+        _gather_windows(*args, 0, n)
+        return
+    _run(lambda a, b: _gather_windows(*args, a, b), n, 1024)
+
+
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)

@@ -12,12 +12,12 @@ import contextlib
 import ctypes
 import logging
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy import ndimage
 
 from imagemap.core import kernels as _kernels
@@ -30,7 +30,8 @@ __all__ = ["FINAL_RESEED_WORST", "RESEED_WORST", "LevelSolver", "Timer", "trim_h
 log = logging.getLogger("imagemap")
 
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
-_GATHER_ROWS = 2048  # windows per gather of one channel into such a block (see _Windows)
+#: Up to this many dimensions the PCA's directions come from the covariance (eigh).
+_COVARIANCE_DIMS = 1024
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
 # at least _BAND_ROWS rows, since propagation does not cross band borders.
 _MAX_BANDS = 8
@@ -178,6 +179,18 @@ def _channels(array: np.ndarray, channels: np.ndarray) -> np.ndarray:
     return array[..., channels]
 
 
+def _randomised(dim: int, n_keep: int) -> bool:
+    """Whether :func:`_fit_pca` finds the directions by a randomised range finder (it
+    draws random numbers) rather than from the covariance: too large a covariance."""
+    return dim > _COVARIANCE_DIMS and 4 * n_keep <= dim
+
+
+def _n_keep(dim: int, params: EngineParams) -> int:
+    """Principal directions kept of ``dim``-dimensional windows (see :meth:`_Projection.fit`)."""
+    n_keep = max(1, int(round(params.pca_fraction * dim)))
+    return n_keep if params.pca_max_components is None else min(n_keep, params.pca_max_components)
+
+
 def _fit_pca(
     samples: np.ndarray, n_keep: int, rng: np.random.Generator, overwrite: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -189,7 +202,7 @@ def _fit_pca(
     else:
         centered = (samples - mean).astype(np.float32, copy=False)
     dim = centered.shape[1]
-    if dim <= 1024 or 4 * n_keep > dim:
+    if not _randomised(dim, n_keep):
         cov = (centered.T @ centered).astype(np.float64)
         eigvals, eigvecs = np.linalg.eigh(cov)
         basis = eigvecs[:, ::-1][:, :n_keep]
@@ -208,56 +221,71 @@ def _fit_pca(
 class _Windows:
     """Flattened k x k windows of some channels of a band stack, optionally scaled.
 
-    ``view`` is a sliding-window view, (..., C, k, k); ``channels`` a slice (free on
-    the view) or an index array (applied after the gather), None for all; ``scale``
-    one factor per selected channel (the exemplars' appearance is stored unscaled,
-    once, and scaled per block of windows: the same float32 products as a scaled
-    copy, without the copy).
+    ``bands`` is the stack, (E, H, W, C) (exemplars, indexed by (e, y, x)) or (H, W, C)
+    (the query, indexed by (y, x)), float32; a window's top-left is the index.
+    ``channels`` a slice or an index array, None for all; ``scale`` one factor per
+    selected channel (the exemplars' appearance is stored unscaled, once, and scaled per
+    block of windows: the same float32 products as a scaled copy, without the copy).
+    The windows are gathered by a numba kernel (:func:`~imagemap.core.kernels.gather_windows`)
+    straight into their block, in a sliding-window view's ``(channel, ky, kx)`` order.
     """
 
-    def __init__(self, view: np.ndarray, channels=None, scale: np.ndarray | None = None) -> None:
-        self.view = view
-        self.channels = channels
-        k = view.shape[-1]
-        self.scale = None if scale is None else np.repeat(scale.astype(np.float32), k * k)
+    def __init__(
+        self, bands: np.ndarray, k: int, channels=None, scale: np.ndarray | None = None
+    ) -> None:
+        self.bands = bands if bands.ndim == 4 else bands[None]
+        self.k = k
+        every = np.arange(self.bands.shape[-1])
+        picked = every if channels is None else every[channels]
+        self.channels = np.ascontiguousarray(picked, dtype=np.int64)
+        self.scale = np.empty(0, dtype=np.float32)
+        if scale is not None:
+            self.scale = np.repeat(np.asarray(scale, dtype=np.float32), k * k)
 
     @property
     def width(self) -> int:
         """Values per window (selected channels times k^2)."""
-        view = self.view
-        if isinstance(self.channels, slice):
-            return view[..., self.channels, :, :].shape[-3] * view.shape[-1] ** 2
-        n = view.shape[-3] if self.channels is None else len(self.channels)
-        return n * view.shape[-1] ** 2
+        return len(self.channels) * self.k**2
 
-    def __call__(self, index: tuple[np.ndarray, ...], out: np.ndarray | None = None) -> np.ndarray:
+    def __call__(
+        self, index: tuple[np.ndarray, ...], out: np.ndarray | None = None, threads: bool = True
+    ) -> np.ndarray:
         """The (N, width) windows at ``index``, into the first N rows of ``out`` if given
-        (a buffer reused from block to block)."""
-        view = self.view
-        if isinstance(self.channels, slice):
-            view = view[..., self.channels, :, :]
-        channels = range(view.shape[-3])
-        if self.channels is not None and not isinstance(self.channels, slice):
-            channels = self.channels
-        # Gathered one channel at a time into the (N, C, k, k) block: the gather of all
-        # channels at once comes out in the view's memory order (not C-contiguous), and
-        # flattening it copied the whole block a second time.
-        k, n = view.shape[-1], index[0].shape[0]
-        if out is None:
-            block = np.empty((n, len(channels), k, k), dtype=view.dtype)
-        else:
-            block = out[:n].reshape(n, len(channels), k, k)
-        # In runs of _GATHER_ROWS windows: each channel's gather makes a temporary, and
-        # small ones are reused from the heap instead of being mapped and faulted in anew.
-        for start in range(0, n, _GATHER_ROWS):
-            sub = tuple(i[start : start + _GATHER_ROWS] for i in index)
-            rows = block[start : start + _GATHER_ROWS]
-            for i, channel in enumerate(channels):
-                rows[:, i] = view[..., channel, :, :][sub]
-        block = block.reshape(n, -1)
-        if self.scale is not None:
-            block *= self.scale
+        (a buffer reused from block to block); ``threads``: the rows split over the
+        kernels' threads (False inside a block that already runs on one of them)."""
+        *exemplar, y, x = (np.ascontiguousarray(i, dtype=np.int32) for i in index)
+        e = exemplar[0] if exemplar else np.empty(0, dtype=np.int32)
+        n = y.shape[0]
+        block = np.empty((n, self.width), dtype=np.float32) if out is None else out[:n]
+        _kernels.gather_windows(
+            self.bands, e, y, x, self.channels, self.k, self.scale, block, threads
+        )
         return block
+
+
+class _Scratch:
+    """Scratch buffers for blocks of work that may run at once on the kernels' threads:
+    ``with scratch as buffers`` lends a set no other block is using (made by ``make``
+    when none is free; at most one set per thread is ever made)."""
+
+    def __init__(self, make) -> None:
+        self.make = make
+        self.free: list[Any] = []
+        self.lock = threading.Lock()
+        self.lent = threading.local()
+
+    def __enter__(self):
+        with self.lock:
+            buffers = self.free.pop() if self.free else None
+        if buffers is None:
+            buffers = self.make()
+        self.lent.buffers = buffers
+        return buffers
+
+    def __exit__(self, *exc) -> None:
+        with self.lock:
+            self.free.append(self.lent.buffers)
+        self.lent.buffers = None
 
 
 class _Projection:
@@ -291,27 +319,42 @@ class _Projection:
         index: tuple[np.ndarray, ...],
         out: np.ndarray | None = None,
         inverse_unit: float | None = None,
+        threads: bool = True,
     ) -> np.ndarray:
         """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
-        which may be a column slice of a larger array), in blocks of windows; with
+        which may be a column slice of a larger array), in blocks of ``_CHUNK`` windows
+        (at fixed edges: each block's product is the same BLAS call at any thread count),
+        the blocks on the kernels' threads unless ``threads`` is False; with
         ``inverse_unit``, quantized (see :func:`_store`)."""
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
-        # One buffer for the windows and one for their product, reused by every block (not
-        # a fresh large array per block: each would be mapped and faulted in anew).
-        rows = min(_CHUNK, n)
         matrix, offset = self.matrix, self.offset
         if matrix is None or offset is None:
             raise RuntimeError("the projection is projected before it is fitted")
-        gathered = np.empty((rows, windows.width), dtype=np.float32)
-        product = np.empty((rows, self.n_components), dtype=np.float32)
-        for start in range(0, n, _CHUNK):
-            sub = tuple(i[start : start + _CHUNK] for i in index)
-            m = sub[0].shape[0]
-            values = np.matmul(windows(sub, gathered), matrix, out=product[:m])
-            np.subtract(values, offset, out=values)
-            _store(out[start : start + m], values, inverse_unit)
+        # Buffers for the windows and their product, reused from block to block (not a
+        # fresh large array per block: each would be mapped and faulted in anew).
+        rows = min(_CHUNK, n)
+        scratch = _Scratch(
+            lambda: (
+                np.empty((rows, windows.width), dtype=np.float32),
+                np.empty((rows, self.n_components), dtype=np.float32),
+            )
+        )
+
+        def block(start: int, stop: int, alone: bool) -> None:
+            with scratch as (gathered, product):
+                sub = tuple(i[start:stop] for i in index)
+                gathered = windows(sub, gathered, threads and alone)
+                values = np.matmul(gathered, matrix, out=product[: stop - start])
+                np.subtract(values, offset, out=values)
+                _store(out[start:stop], values, inverse_unit)
+
+        if threads:
+            _kernels.run_blocks(block, n, _CHUNK)
+        else:
+            for start in range(0, n, _CHUNK):
+                block(start, min(start + _CHUNK, n), False)
         return out
 
 
@@ -529,9 +572,10 @@ class LevelSolver:
         start = time.perf_counter()
         all_appearance = np.array_equal(self.appearance_active, np.arange(n_appearance))
         self.exemplar_windows = (
-            _Windows(sliding_window_view(self.exemplar_guide, (k, k), axis=(1, 2))),
+            _Windows(self.exemplar_guide, k),
             _Windows(
-                sliding_window_view(self.exemplar_appearance, (k, k), axis=(1, 2)),
+                self.exemplar_appearance,
+                k,
                 None if all_appearance else self.appearance_active,
                 self.appearance_scale,
             ),
@@ -542,17 +586,37 @@ class LevelSolver:
         pick = np.sort(rng.choice(len(self.cand_e), size=n_samples, replace=False))
         sample_index = (self.cand_e[pick], self.band_y[pick], self.band_x[pick])
         projections = (self.guide_projection, self.appearance_projection)
-        largest = 0.0
-        for projection, windows in zip(projections, self.exemplar_windows, strict=True):
-            if projection.n_channels:
-                # The samples are consumed by the fit (weighted and centred in place).
-                projection.fit(
-                    windows(sample_index), params.pca_fraction, params.pca_max_components, rng
-                )
-                if params.quantize_features:
-                    largest = max(
-                        largest, float(np.abs(projection.project(windows, sample_index)).max())
-                    )
+        fits = [
+            (projection, windows)
+            for projection, windows in zip(projections, self.exemplar_windows, strict=True)
+            if projection.n_channels
+        ]
+        largest_seen = [0.0] * len(fits)
+
+        def fit(i: int, threads: bool = True) -> None:
+            projection, windows = fits[i]
+            # The samples are consumed by the fit (weighted and centred in place).
+            projection.fit(
+                windows(sample_index, threads=threads),
+                params.pca_fraction,
+                params.pca_max_components,
+                rng,
+            )
+            if params.quantize_features:
+                values = projection.project(windows, sample_index, threads=threads)
+                largest_seen[i] = float(np.abs(values).max())
+
+        # The guide's and the appearance's fits at once, each on a thread, unless one
+        # draws random numbers (a randomised range finder: the draws' order would follow
+        # the threads).
+        if len(fits) > 1 and not any(
+            _randomised(windows.width, _n_keep(windows.width, params)) for _, windows in fits
+        ):
+            _kernels.run_each(lambda i: fit(i, threads=False), list(range(len(fits))))
+        else:
+            for i in range(len(fits)):
+                fit(i)
+        largest = max(largest_seen, default=0.0)
         if params.quantize_features:
             position = np.float32(params.position_weight)
             for values in (self.cand_position, self.query_position):
@@ -573,10 +637,9 @@ class LevelSolver:
         self.candidate_features = self._features(
             self.exemplar_windows, index, self.cand_position, np.sqrt(self.cand_bias)
         )
-        query_view = sliding_window_view(self.query_active, (k, k), axis=(0, 1))
         self.query_windows = (
-            _Windows(query_view, slice(0, n_ga)),
-            _Windows(query_view, slice(n_ga, n_ga + n_aa)),
+            _Windows(self.query_active, k, slice(0, n_ga)),
+            _Windows(self.query_active, k, slice(n_ga, n_ga + n_aa)),
         )
         self.query_features = self._features(
             self.query_windows, (self.query_band_y, self.query_band_x), self.query_position, 0.0
@@ -664,19 +727,28 @@ class LevelSolver:
         n_dims = self.n_init_dims + self.appearance_projection.n_components
         dtype = np.float32 if self.inverse_unit is None else np.int16
         out = np.empty((len(position), n_dims), dtype=dtype)
-        block = np.empty((min(_CHUNK, len(position)), n_dims), dtype=np.float32)
+        scratch = _Scratch(lambda: np.empty((min(_CHUNK, len(position)), n_dims), np.float32))
         weight = np.float32(self.params.position_weight)
-        for start in range(0, len(position), _CHUNK):
-            stop = min(start + _CHUNK, len(position))
-            sub = tuple(i[start:stop] for i in index)
-            values = block[: stop - start]
-            if n_guide:
-                self.guide_projection.project(windows[0], sub, values[:, :n_guide])
-            values[:, n_guide : n_guide + 2] = position[start:stop] * weight
-            values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
-            if self.appearance_projection.n_components:
-                self.appearance_projection.project(windows[1], sub, values[:, self.n_init_dims :])
-            _store(out[start:stop], values, self.inverse_unit)
+
+        def block(start: int, stop: int, alone: bool) -> None:
+            # Blocks of _CHUNK windows at fixed edges, on the kernels' threads (a single
+            # block projects on them itself).
+            with scratch as values:
+                sub = tuple(i[start:stop] for i in index)
+                values = values[: stop - start]
+                if n_guide:
+                    self.guide_projection.project(
+                        windows[0], sub, values[:, :n_guide], threads=alone
+                    )
+                values[:, n_guide : n_guide + 2] = position[start:stop] * weight
+                values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
+                if self.appearance_projection.n_components:
+                    self.appearance_projection.project(
+                        windows[1], sub, values[:, self.n_init_dims :], threads=alone
+                    )
+                _store(out[start:stop], values, self.inverse_unit)
+
+        _kernels.run_blocks(block, len(position), _CHUNK)
         return out
 
     # -- the two steps ---------------------------------------------------------
