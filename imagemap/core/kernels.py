@@ -294,6 +294,7 @@ def _patchmatch_band(
     seed,
     position_dim,
     position_scales,
+    active,
 ):
     """PatchMatch of one band of query centres (see :func:`patchmatch`)."""
     n_candidates = candidate_features.shape[0]
@@ -310,6 +311,8 @@ def _patchmatch_band(
         step = stride if forward else -stride
         for t in range(m1 - m0):
             m = m0 + t if forward else m1 - 1 - t
+            if active.shape[0] > 0 and not active[m]:
+                continue
             y = query_y[m]
             x = query_x[m]
             best = matches[m]
@@ -400,6 +403,7 @@ def patchmatch(
     seed,
     position_dim=-2,
     position_scales=None,
+    active=None,
 ):
     """PatchMatch over the candidates of several exemplars, in place on matches/distances.
 
@@ -409,10 +413,12 @@ def patchmatch(
     uniformly random candidate (a jump to any exemplar). Bands are independent
     (propagation does not cross their borders): one thread each. ``position_scales``
     (one per query centre; default 1) multiply the position columns (``position_dim``
-    and the next) of the distances.
+    and the next) of the distances. ``active`` (M,) bool: only those centres search (the
+    others keep their matches and are still propagated from); None: all.
     """
     if position_scales is None:
         position_scales = np.ones(matches.shape[0], dtype=np.float32)
+    active = np.empty(0, dtype=np.bool_) if active is None else np.asarray(active, dtype=np.bool_)
 
     def band(b):
         _patchmatch_band(
@@ -437,6 +443,7 @@ def patchmatch(
             seed,
             position_dim,
             position_scales,
+            active,
         )
 
     _run_each(band, list(range(band_starts.shape[0] - 1)))

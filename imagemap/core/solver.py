@@ -830,12 +830,19 @@ class LevelSolver:
         return appearance_padded
 
     def search(
-        self, matches: np.ndarray | None, init: bool, seed: int, rng, free: bool = False
+        self,
+        matches: np.ndarray | None,
+        init: bool,
+        seed: int,
+        rng,
+        free: bool = False,
+        active: np.ndarray | None = None,
     ) -> np.ndarray:
         """E-step search: new candidate matches (PCA space) for every query centre.
 
         ``init``: on guide and position only (and the exemplar cost, unless ``free``: the
-        cost is the last of those dimensions)."""
+        cost is the last of those dimensions). ``active`` (bool per centre; PatchMatch
+        from ``matches`` only): only those centres search, the others keep their match."""
         ndims = self.n_init_dims if init else self.candidate_features.shape[1]
         if init and free:
             ndims -= 1
@@ -885,6 +892,7 @@ class LevelSolver:
                 seed,
                 self.position_dim,
                 self.query_position_scale2,
+                active,
             )
             self.timer.add("search", start)
             return new
@@ -940,17 +948,21 @@ class LevelSolver:
         that fits the ridge a little better. With ``free`` the exemplar costs do not
         count: the relief may take its match from any exemplar.
         """
-        guided = self.search(matches, init=True, seed=seed, rng=rng, free=free)
         n = self.n_init_dims - (1 if free else 0)
         matches = np.ascontiguousarray(matches, dtype=np.int64)
         scales = self.position_dim, self.query_position_scale2
         fit = _kernels.feature_distances(
             self.query_features, self.candidate_features, matches, n, *scales
         )
+        # Only the worst fits may be replaced: only they search (with PatchMatch; the
+        # others are still propagated from, with the matches they have).
+        poor = fit > np.quantile(fit, 1.0 - worst)
+        subset = poor if self.params.backend == "patchmatch" else None
+        guided = self.search(matches, init=True, seed=seed, rng=rng, free=free, active=subset)
         fit_guided = _kernels.feature_distances(
             self.query_features, self.candidate_features, guided, n, *scales
         )
-        take = (fit > np.quantile(fit, 1.0 - worst)) & (fit_guided < ratio * fit)
+        take = poor & (fit_guided < ratio * fit)
         if keep_detail:
             take &= self._appearance_energy(guided) >= self._appearance_energy(matches)
         log.info("reseed: %d of %d matches taken from the guide", int(take.sum()), len(take))
