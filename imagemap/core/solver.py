@@ -33,11 +33,14 @@ _CHUNK = 16384  # windows per block when extracting features: bounds memory
 #: Up to this many dimensions the PCA's directions come from the covariance (eigh).
 _COVARIANCE_DIMS = 1024
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
-# at least _BAND_ROWS rows, since propagation does not cross band borders.
+# _BAND_ROWS rows on average, since propagation does not cross band borders, at most
+# _MAX_BANDS, a multiple of _BAND_MULTIPLE of them (two threads get equal shares: 3
+# bands on 2 threads took as long as 4), each with as many window centres as the others.
 _MAX_BANDS = 8
+_BAND_ROWS = 16
+_BAND_MULTIPLE = 2
 # Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
 _EXACT_START_FLOPS = 2e9
-_BAND_ROWS = 32
 _SOURCE_ROWS = 256  # rows per block when the dense source map is made
 #: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
 #: margin of that largest magnitude over the largest value in the PCA samples.
@@ -647,10 +650,7 @@ class LevelSolver:
         ys = self.query_y
         # Bands over the rows the object's window centres span (not the frame's: an
         # object in a tight frame, as the pose stage crops it, still gets its threads).
-        top, bottom = (int(ys.min()), int(ys.max()) + 1) if len(ys) else (0, h)
-        n_bands = int(np.clip((bottom - top) // _BAND_ROWS, 1, _MAX_BANDS))
-        row_edges = np.linspace(top, bottom, n_bands + 1).astype(np.int64)
-        self.band_starts = np.searchsorted(ys, row_edges, side="left").astype(np.int64)
+        self.band_starts = _band_starts(ys, h)
         timer.add("features", start)
         self.indexes: dict[str, NearestNeighborIndex] = {}
 
@@ -1035,6 +1035,31 @@ class LevelSolver:
             out[y0:y1, :, 1] = np.clip(sy, 0, self.exemplar_shape[e, 0] - 1)
             out[y0:y1, :, 2] = np.clip(sx, 0, self.exemplar_shape[e, 1] - 1)
         return out
+
+
+def _band_starts(ys: np.ndarray, height: int) -> np.ndarray:
+    """The first centre of each PatchMatch band and the end (``band_starts``), from the
+    centres' rows ``ys`` (sorted): whole rows per band, about as many centres in each.
+
+    The bands span the rows the object's window centres span (not the frame's: an
+    object in a tight frame, as the pose stage crops it, still gets its threads).
+
+    Examples
+    --------
+    >>> _band_starts(np.repeat(np.arange(64), 10), 64).tolist()
+    [0, 160, 320, 480, 640]
+    >>> _band_starts(np.repeat(np.arange(40), 10), 40).tolist()  # 2.5 bands: 2
+    [0, 200, 400]
+    """
+    top, bottom = (int(ys.min()), int(ys.max()) + 1) if len(ys) else (0, height)
+    n_bands = int(np.clip((bottom - top) // _BAND_ROWS, 1, _MAX_BANDS))
+    if n_bands > _BAND_MULTIPLE:
+        n_bands -= n_bands % _BAND_MULTIPLE
+    # The row where each band's share of the centres begins (a band's last row may hold
+    # a little more or less than its share: bands hold whole rows).
+    shares = np.linspace(0, len(ys), n_bands + 1)[1:-1].astype(np.int64)
+    row_edges = np.unique(np.concatenate([[top], ys[shares] if len(ys) else [], [bottom]]))
+    return np.searchsorted(ys, row_edges.astype(np.int64), side="left").astype(np.int64)
 
 
 def _check_crop(ex: Mapping, reach: tuple[int, int, int, int], e: int) -> None:
