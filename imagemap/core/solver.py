@@ -644,8 +644,14 @@ class LevelSolver:
             _Windows(self.query_active, k, slice(0, n_ga)),
             _Windows(self.query_active, k, slice(n_ga, n_ga + n_aa)),
         )
+        # The query's appearance features wait for its first estimate (set_appearance):
+        # nothing reads them before (its bands are zeros until then).
         self.query_features = self._features(
-            self.query_windows, (self.query_band_y, self.query_band_x), self.query_position, 0.0
+            self.query_windows,
+            (self.query_band_y, self.query_band_x),
+            self.query_position,
+            0.0,
+            appearance=False,
         )
         ys = self.query_y
         # Bands over the rows the object's window centres span (not the frame's: an
@@ -719,10 +725,10 @@ class LevelSolver:
         whole[oy : oy + ex.shape[0], ox : ox + ex.shape[1]] = region
         return whole
 
-    def _features(self, windows, index, position, bias) -> np.ndarray:
+    def _features(self, windows, index, position, bias, appearance: bool = True) -> np.ndarray:
         """(N, D) features [guide PCA | weighted position | sqrt of the exemplar cost
         (candidates; 0 for the query) | appearance PCA], made in blocks of windows and
-        stored as float32 or quantized (int16)."""
+        stored as float32 or quantized (int16); without ``appearance`` its columns are 0."""
         n_guide = self.guide_projection.n_components
         n_dims = self.n_init_dims + self.appearance_projection.n_components
         dtype = np.float32 if self.inverse_unit is None else np.int16
@@ -742,10 +748,12 @@ class LevelSolver:
                     )
                 values[:, n_guide : n_guide + 2] = position[start:stop] * weight
                 values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
-                if self.appearance_projection.n_components:
+                if self.appearance_projection.n_components and appearance:
                     self.appearance_projection.project(
                         windows[1], sub, values[:, self.n_init_dims :], threads=alone
                     )
+                elif self.appearance_projection.n_components:
+                    values[:, self.n_init_dims :] = 0.0
                 _store(out[start:stop], values, self.inverse_unit)
 
         _kernels.run_blocks(block, len(position), _CHUNK)
