@@ -225,3 +225,32 @@ def test_the_level_plan_moves_the_final_reseed_and_the_free_levels(blob_database
         LevelPlan(5, exemplar_costs=(-1.0,))
     with pytest.raises(ValueError, match="level plans"):
         EngineParams(levels=(LevelPlan(5),)).level_plans(2)
+
+
+def test_a_search_with_active_centres_moves_only_those():
+    """PatchMatch's ``active`` (the reseed's worst fits): only those centres change their
+    match, each to one at least as close on the searched dimensions, and with every
+    centre active it is the plain search."""
+    from imagemap.core import kernels as _kernels
+    from imagemap.core.solver import LevelSolver, Timer
+
+    rng = np.random.default_rng(0)
+    guide = ndimage.gaussian_filter(rng.random((60, 60, 1)), 2).astype(np.float32)
+    exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
+    query = Mapping(guide=np.roll(guide, 5, axis=0))
+    params = EngineParams(
+        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=(1.0, 1.0)
+    )
+    solver = LevelSolver(query, [exemplar], 5, params, np.random.default_rng(0), Timer())
+    start = np.random.default_rng(1).integers(0, len(solver.cand_e), len(solver.query_y))
+    active = np.zeros(len(start), dtype=bool)
+    active[::3] = True
+    found = solver.search(start, init=True, seed=2, rng=None, active=active)
+    assert np.array_equal(found[~active], start[~active])
+    n = solver.n_init_dims
+    features = solver.query_features, solver.candidate_features
+    before = _kernels.feature_distances(*features, start, n)[active]
+    after = _kernels.feature_distances(*features, found, n)[active]
+    assert np.all(after <= before) and np.mean(after < before) > 0.5
+    everywhere = solver.search(start, init=True, seed=2, rng=None, active=~np.zeros_like(active))
+    assert np.array_equal(everywhere, solver.search(start, init=True, seed=2, rng=None))
