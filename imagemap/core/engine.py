@@ -247,6 +247,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             level_params = replace(level_params, position_weight=plan.position_weight)
         if plan.patchmatch_passes is not None:
             level_params = replace(level_params, patchmatch_passes=plan.patchmatch_passes)
+        if plan.search_radius is not None:
+            level_params = replace(level_params, search_radius=plan.search_radius)
         query = query_levels[level]
         context = None
         if plan.has_context and level < n_levels - 1:

@@ -295,6 +295,7 @@ def _patchmatch_band(
     position_dim,
     position_scales,
     active,
+    max_radius,
 ):
     """PatchMatch of one band of query centres (see :func:`patchmatch`)."""
     n_candidates = candidate_features.shape[0]
@@ -344,6 +345,8 @@ def _patchmatch_band(
             # Random search around the current best, radius halving.
             e = cand_e[best]
             radius = max(exemplar_shape[e, 0], exemplar_shape[e, 1])
+            if max_radius > 0:
+                radius = min(radius, max_radius)
             trial = 0
             while radius >= 1:
                 cy = cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
@@ -404,6 +407,7 @@ def patchmatch(
     position_dim=-2,
     position_scales=None,
     active=None,
+    max_radius=0,
 ):
     """PatchMatch over the candidates of several exemplars, in place on matches/distances.
 
@@ -414,7 +418,9 @@ def patchmatch(
     (propagation does not cross their borders): one thread each. ``position_scales``
     (one per query centre; default 1) multiply the position columns (``position_dim``
     and the next) of the distances. ``active`` (M,) bool: only those centres search (the
-    others keep their matches and are still propagated from); None: all.
+    others keep their matches and are still propagated from); None: all. ``max_radius``
+    (pixels; 0: none): the random search starts at this radius, not at the exemplar's
+    larger side.
     """
     if position_scales is None:
         position_scales = np.ones(matches.shape[0], dtype=np.float32)
@@ -444,6 +450,7 @@ def patchmatch(
             position_dim,
             position_scales,
             active,
+            max_radius,
         )
 
     _run_each(band, list(range(band_starts.shape[0] - 1)))

@@ -77,6 +77,9 @@ class LevelPlan:
     patchmatch_passes : int, optional
         PatchMatch passes per search at this level (None:
         ``EngineParams.patchmatch_passes``).
+    search_radius : int, optional
+        PatchMatch's random search around a match starts at this radius in pixels,
+        halving (None: ``EngineParams.search_radius``).
     """
 
     patch_size: int = setting(7, kind="odd_width")
@@ -88,6 +91,7 @@ class LevelPlan:
     position_weight: float | None = setting(None, minimum=0.0, optional=True)
     final_reseed_any_exemplar: bool = setting(False, kind="bool")
     patchmatch_passes: int | None = setting(None, kind="int", minimum=1, optional=True)
+    search_radius: int | None = setting(None, kind="int", minimum=1, optional=True)
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -129,6 +133,9 @@ class EngineParams:
         Stop a level when the target decreases by less than this fraction.
     patchmatch_passes : int
         PatchMatch passes per E-step (twice as many from a random start).
+    search_radius : int, optional
+        PatchMatch's random search around a match starts at this radius in pixels,
+        halving down to 1 (None: the exemplar's larger side, the paper's).
     normalize_bands : bool
         Divide each band by its standard deviation over the exemplars.
     guide_padding : {"constant", "reflect", "edge"}
@@ -197,6 +204,7 @@ class EngineParams:
     backend: str = setting("patchmatch", kind="choice", choices=BACKENDS)
     tolerance: float = setting(2e-3, minimum=0.0)
     patchmatch_passes: int = setting(4, kind="int", minimum=1)
+    search_radius: int | None = setting(None, kind="int", minimum=1, optional=True)
     normalize_bands: bool = setting(True, kind="bool")
     guide_padding: str = setting("constant", kind="choice", choices=("constant", "reflect", "edge"))
     stride: int = setting(1, kind="int", minimum=1)

@@ -901,6 +901,7 @@ class LevelSolver:
                 self.position_dim,
                 self.query_position_scale2,
                 active,
+                self.params.search_radius or 0,
             )
             self.timer.add("search", start)
             return new
