@@ -99,16 +99,15 @@ def run_each(function, items: list) -> None:
     _run_each(function, items)
 
 
-def run_blocks(function, n_items: int, size: int) -> None:
-    """``function(start, stop, alone)`` over [0, n_items) in blocks of ``size`` items at
-    fixed edges (0, size, 2 size...: the same blocks at any thread count), the blocks on
-    the thread pool. ``alone`` is True when there is a single block, run on the calling
-    thread: ``function`` may then use the pool itself (never from a pooled block: a block
+def run_blocks(function, blocks: list[tuple[int, int]]) -> None:
+    """``function(start, stop, alone)`` for every block of items ``(start, stop)`` (fixed
+    by the caller: the same blocks at any thread count), the blocks on the thread pool.
+    ``alone`` is True when there is a single block, run on the calling thread:
+    ``function`` may then use the pool itself (never from a pooled block: a block
     waiting for work queued behind it would wait forever)."""
-    edges = list(range(0, n_items, size)) + [n_items]
-    blocks = list(zip(edges[:-1], edges[1:], strict=True))
     if len(blocks) <= 1:
-        function(0, n_items, True)
+        for start, stop in blocks:
+            function(start, stop, True)
         return
     _run_each(lambda block: function(block[0], block[1], False), blocks)
 

@@ -30,6 +30,10 @@ __all__ = ["FINAL_RESEED_WORST", "RESEED_WORST", "LevelSolver", "Timer", "trim_h
 log = logging.getLogger("imagemap")
 
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
+#: A product of at most this many multiply-adds may take OpenBLAS's small-matrix kernels
+#: (SkylakeX's up to 100^3), which sum in another order than the large product's: a
+#: block of windows is halved for the threads only where both halves stay above it.
+_SMALL_PRODUCT = 100**3
 #: Up to this many dimensions the PCA's directions come from the covariance (eigh).
 _COVARIANCE_DIMS = 1024
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
@@ -268,12 +272,16 @@ class _Windows:
 
 class _Scratch:
     """Scratch buffers for blocks of work that may run at once on the kernels' threads:
-    ``with scratch as buffers`` lends a set no other block is using (made by ``make``
-    when none is free; at most one set per thread is ever made)."""
+    ``with scratch as buffers`` lends a set no other block is using. One set per
+    thread that may use them (``n_blocks`` blocks at most on the kernels' threads) is
+    made by ``make`` at once, on the calling thread: made on a pooled thread, the
+    buffers would come from that thread's own heap (glibc's arenas), which kept them
+    resident after they were freed (512^2: +39 MB of peak)."""
 
-    def __init__(self, make) -> None:
+    def __init__(self, make, n_blocks: int = 1) -> None:
         self.make = make
-        self.free: list[Any] = []
+        sets = max(1, min(n_blocks, _kernels.n_threads()))
+        self.free: list[Any] = [make() for _ in range(sets)]
         self.lock = threading.Lock()
         self.lent = threading.local()
 
@@ -325,24 +333,27 @@ class _Projection:
         threads: bool = True,
     ) -> np.ndarray:
         """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
-        which may be a column slice of a larger array), in blocks of ``_CHUNK`` windows
-        (at fixed edges: each block's product is the same BLAS call at any thread count),
-        the blocks on the kernels' threads unless ``threads`` is False; with
-        ``inverse_unit``, quantized (see :func:`_store`)."""
+        which may be a column slice of a larger array), in blocks of windows at fixed
+        edges (:func:`_feature_blocks`), the blocks on the kernels' threads unless
+        ``threads`` is False; with ``inverse_unit``, quantized (see :func:`_store`)."""
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
         matrix, offset = self.matrix, self.offset
         if matrix is None or offset is None:
             raise RuntimeError("the projection is projected before it is fitted")
+        blocks = _feature_blocks(n, [self.n_components * windows.width])
+        if not threads:
+            blocks = [(start, min(start + _CHUNK, n)) for start in range(0, n, _CHUNK)]
+        rows = max((stop - start for start, stop in blocks), default=0)
         # Buffers for the windows and their product, reused from block to block (not a
         # fresh large array per block: each would be mapped and faulted in anew).
-        rows = min(_CHUNK, n)
         scratch = _Scratch(
             lambda: (
                 np.empty((rows, windows.width), dtype=np.float32),
                 np.empty((rows, self.n_components), dtype=np.float32),
-            )
+            ),
+            len(blocks) if threads else 1,
         )
 
         def block(start: int, stop: int, alone: bool) -> None:
@@ -354,11 +365,38 @@ class _Projection:
                 _store(out[start:stop], values, inverse_unit)
 
         if threads:
-            _kernels.run_blocks(block, n, _CHUNK)
+            _kernels.run_blocks(block, blocks)
         else:
-            for start in range(0, n, _CHUNK):
-                block(start, min(start + _CHUNK, n), False)
+            for start, stop in blocks:
+                block(start, stop, False)
         return out
+
+
+def _feature_blocks(n: int, products: list[int]) -> list[tuple[int, int]]:
+    """Blocks of rows 0:n for the features' products on the kernels' threads: the
+    blocks of ``_CHUNK`` rows (fixed edges), each halved where both halves' products
+    (``products``: multiply-adds per row of each) stay above ``_SMALL_PRODUCT``. Two
+    threads then hold two half blocks' scratch, what one whole block held on one thread.
+    A row's product is the same in a half as in the whole block (OpenBLAS's products
+    sum each row alike at any number of rows above the small-matrix kernels').
+
+    Examples
+    --------
+    >>> _feature_blocks(20000, [196 * 39])
+    [(0, 8192), (8192, 16384), (16384, 18192), (18192, 20000)]
+    >>> _feature_blocks(16400, [196 * 39])  # 16 rows: not halved
+    [(0, 8192), (8192, 16384), (16384, 16400)]
+    """
+    blocks = []
+    per_row = min(products, default=0)
+    for start in range(0, n, _CHUNK):
+        stop = min(start + _CHUNK, n)
+        half = start + (stop - start + 1) // 2
+        if (stop - half) * per_row > _SMALL_PRODUCT:
+            blocks += [(start, half), (half, stop)]
+        else:
+            blocks.append((start, stop))
+    return blocks
 
 
 def _store(out: np.ndarray, values: np.ndarray, inverse_unit: float | None) -> None:
@@ -733,12 +771,21 @@ class LevelSolver:
         n_dims = self.n_init_dims + self.appearance_projection.n_components
         dtype = np.float32 if self.inverse_unit is None else np.int16
         out = np.empty((len(position), n_dims), dtype=dtype)
-        scratch = _Scratch(lambda: np.empty((min(_CHUNK, len(position)), n_dims), np.float32))
+        products = [
+            projection.n_components * part.width
+            for projection, part in zip(
+                (self.guide_projection, self.appearance_projection), windows, strict=True
+            )
+            if projection.n_components
+        ]
+        blocks = _feature_blocks(len(position), products)
+        rows = max((stop - start for start, stop in blocks), default=0)
+        scratch = _Scratch(lambda: np.empty((rows, n_dims), np.float32), len(blocks))
         weight = np.float32(self.params.position_weight)
 
         def block(start: int, stop: int, alone: bool) -> None:
-            # Blocks of _CHUNK windows at fixed edges, on the kernels' threads (a single
-            # block projects on them itself).
+            # Blocks of windows at fixed edges (_feature_blocks), on the kernels' threads
+            # (a single block projects on them itself).
             with scratch as values:
                 sub = tuple(i[start:stop] for i in index)
                 values = values[: stop - start]
@@ -756,7 +803,7 @@ class LevelSolver:
                     values[:, self.n_init_dims :] = 0.0
                 _store(out[start:stop], values, self.inverse_unit)
 
-        _kernels.run_blocks(block, len(position), _CHUNK)
+        _kernels.run_blocks(block, blocks)
         return out
 
     # -- the two steps ---------------------------------------------------------
