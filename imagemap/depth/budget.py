@@ -84,7 +84,12 @@ _MEMORY_FACTOR = 0.8
 # 48.1 / 218.2 s of CPU at 1024^2, 2048^2 and 4096^2; 7.5e-7 gives 13.7 / 48.7 / 186.6 s
 # (wall +20 %, +21 %, +5 %; CPU +5 %, +1 %, -14 %). The 1.4e-6 before it (2026-11-28, CPU at
 # load 4-5 of the code before the round) erred long by 2x on these runs.
-_SECONDS_PER_FEATURE = 7.5e-7
+# Refitted after the third round (2026-11-29: the engine on both cores, the search size),
+# quiet machine (load 0.8-1.0): 10.5 / 17.4 / 49.3 s of wall time and 12.5 / 19.4 / 50.2 s of
+# CPU at 1024^2, 2048^2 and 4096^2 (the last two above the search size). Both time constants
+# scaled by 0.85 from 7.5e-7 and 1.0e-6: 11.7 / 20.0 / 44.9 s (wall +11 %, +15 %, -9 %; CPU
+# -7 %, +3 %, -11 %).
+_SECONDS_PER_FEATURE = 6.4e-7
 _SECONDS_OVERHEAD = 0.3
 
 # Above the search size (pyramid.search_size), the full-size finish: bytes per query pixel
@@ -96,7 +101,7 @@ _SECONDS_OVERHEAD = 0.3
 # 1701 MB, 52.8 s (+0 %, -6 %; +1 %, -7 %). The peak is the full-size blend's.
 _FULL_PIXEL_BYTES = 80
 _FULL_EXAMPLE_PIXEL_BYTES = 16
-_SECONDS_PER_FULL_PIXEL = 1.0e-6
+_SECONDS_PER_FULL_PIXEL = 0.85e-6  # refitted with _SECONDS_PER_FEATURE above
 
 #: Runs estimated to take longer than this are announced with a warning (not refused).
 LONG_RUN_SECONDS = 300.0
