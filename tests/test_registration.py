@@ -92,6 +92,20 @@ def test_a_coarser_position_grid_interpolates_the_same_positions():
     assert np.max(np.abs(fine[0][0][inside] - coarse[0][0][inside])) < 0.01
 
 
+def test_each_example_gets_its_own_position_grid():
+    """With ``grid_points``, an example's grid step comes from its own size: a larger
+    example listed before it does not change its positions (known answer: the same
+    example alone)."""
+    query = ellipsoid((300, 400), (150, 200), (100, 160))
+    small = ellipsoid((150, 200), (75, 100), (50, 80))
+    large = ellipsoid((600, 800), (300, 400), (200, 320))
+    warps = [register(query, large), register(query, small)]
+    shapes = [large.shape, small.shape]
+    _, both = registered_positions(query > 0, shapes, warps, 1, grid_points=32)
+    _, alone = registered_positions(query > 0, shapes[1:], warps[1:], 1, grid_points=32)
+    np.testing.assert_array_equal(both[1][0], alone[0][0])
+
+
 def test_shifted_copies_of_one_striped_map_give_a_handful_of_fragments():
     """Two examples that are one striped map shifted (each on its own, slightly different
     object) and a query of a third shape: registered, the copy is a couple of whole

@@ -543,17 +543,19 @@ def registered_positions(
         query_levels.append(np.stack([grid_y.T, grid_x.T], axis=-1).astype(np.float32))
     example_levels = []
     for shape, warp in zip(example_shapes, warps, strict=True):
+        # Each example's own step (a larger example before it must not coarsen its grid).
+        step = grid_step
         if grid_points is not None:
-            grid_step = max(grid_step, -(-max(shape) // grid_points))
-        coarse_y = np.arange(0, shape[0] + grid_step, grid_step, dtype=np.float64)
-        coarse_x = np.arange(0, shape[1] + grid_step, grid_step, dtype=np.float64)
+            step = max(grid_step, -(-max(shape) // grid_points))
+        coarse_y = np.arange(0, shape[0] + step, step, dtype=np.float64)
+        coarse_x = np.arange(0, shape[1] + step, step, dtype=np.float64)
         cy, cx = np.meshgrid(coarse_y, coarse_x, indexing="ij")
         qy, qx = warp.inverse(cy, cx)
         positions = np.stack([(qy - frame[0]) / frame[2], (qx - frame[1]) / frame[2]])
         per_level = []
         for level in range(levels):
             ys, xs = _level_coordinates(shape, level)
-            gy, gx = np.meshgrid(ys / grid_step, xs / grid_step, indexing="ij")
+            gy, gx = np.meshgrid(ys / step, xs / step, indexing="ij")
             sampled = [
                 ndimage.map_coordinates(p, [gy, gx], order=1, mode="nearest") for p in positions
             ]
