@@ -148,15 +148,28 @@ def _feature_dims(k: int, pca_fraction: float, guide_bands: int = 2, appearance_
     return guide + appearance + 3
 
 
-def _working_factor(foreground: int, search_size: float, levels: int) -> int:
-    """The block-averaging factor of a query with ``foreground`` object pixels (as
-    :func:`imagemap.depth.pipeline.working_factor`, the object's size taken here in the
-    query's pixels, not the synthesis frame's)."""
-    size = float(np.sqrt(foreground))
+def averaging_factor(size: float, search_size: float, align: int) -> int:
+    """The power of two (at most ``align``) by which an object ``size`` pixels across (the
+    square root of its area) is block-averaged for the synthesis: the smallest that
+    brings it to ``search_size`` or less; 1 when it is no larger or ``search_size`` is 0
+    (:func:`imagemap.depth.pipeline.working_factor`; here, for the estimate, before any
+    work).
+
+    Examples
+    --------
+    >>> averaging_factor(1724.0, 640.0, 32), averaging_factor(431.0, 640.0, 32)
+    (4, 1)
+    """
     factor = 1
-    while search_size > 0 and size / factor > search_size and factor * 2 <= 2 ** (levels - 1):
+    while search_size > 0 and size / factor > search_size and factor * 2 <= align:
         factor *= 2
     return factor
+
+
+def _working_factor(foreground: int, search_size: float, levels: int) -> int:
+    """The block-averaging factor of a query with ``foreground`` object pixels (the
+    object's size taken here in the query's pixels, not the synthesis frame's)."""
+    return averaging_factor(float(np.sqrt(foreground)), search_size, 2 ** (levels - 1))
 
 
 def _boundary(mask: np.ndarray) -> int:

@@ -66,7 +66,7 @@ from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
-from imagemap.depth.budget import guard_colorize
+from imagemap.depth.budget import averaging_factor, guard_colorize
 from imagemap.depth.config import OPTIONS, PRESETS, DepthConfig, resolve_config
 from imagemap.depth.finish import (
     BLEND,
@@ -249,11 +249,7 @@ def working_factor(mask: np.ndarray, search_size: float, align: int) -> int:
     >>> working_factor(mask, 512, 32), working_factor(mask, 1024, 32), working_factor(mask, 0, 32)
     (2, 1, 1)
     """
-    size = float(np.sqrt(mask.sum()))
-    factor = 1
-    while search_size > 0 and size / factor > search_size and factor * 2 <= align:
-        factor *= 2
-    return factor
+    return averaging_factor(float(np.sqrt(mask.sum())), search_size, align)
 
 
 def _block_sums(array: np.ndarray, factor: int, pad: str = "constant") -> np.ndarray:
