@@ -152,8 +152,7 @@ def averaging_factor(size: float, search_size: float, align: int) -> int:
     """The power of two (at most ``align``) by which an object ``size`` pixels across (the
     square root of its area) is block-averaged for the synthesis: the smallest that
     brings it to ``search_size`` or less; 1 when it is no larger or ``search_size`` is 0
-    (:func:`imagemap.depth.pipeline.working_factor`; here, for the estimate, before any
-    work).
+    (the pipeline's ``working`` stage, and the estimate before any work).
 
     Examples
     --------

@@ -97,6 +97,7 @@ from imagemap.depth.pose import (
 )
 from imagemap.depth.register import (
     Warp,
+    block_average,
     position_scales,
     register_all,
     registered_positions,
@@ -224,7 +225,8 @@ def _pose(state: State, config: DepthConfig) -> State:
 
 @dataclass
 class WorkingExample:
-    """A posed example block-averaged to the search size (:func:`block_average`): what
+    """A posed example block-averaged to the search size
+    (:func:`~imagemap.depth.register.block_average`): what
     the synthesis reads of an example (name, depth, mask, image)."""
 
     name: str
@@ -238,46 +240,15 @@ class WorkingExample:
         return self.depth > 0
 
 
-def working_factor(mask: np.ndarray, search_size: float, align: int) -> int:
-    """The power of two (at most ``align``) by which a query whose object is ``mask`` is
-    block-averaged: the smallest that brings the object's size (square root of its area)
-    to ``search_size`` or less; 1 when it is no larger or ``search_size`` is 0.
-
-    Examples
-    --------
-    >>> mask = np.zeros((2048, 2048), bool); mask[200:1100, 300:1100] = True
-    >>> working_factor(mask, 512, 32), working_factor(mask, 1024, 32), working_factor(mask, 0, 32)
-    (2, 1, 1)
-    """
-    return averaging_factor(float(np.sqrt(mask.sum())), search_size, align)
-
-
-def _block_sums(array: np.ndarray, factor: int, pad: str = "constant") -> np.ndarray:
-    """Sums over ``factor`` x ``factor`` blocks (the last ones padded) in float32."""
-    height, width = array.shape[:2]
+def _block_means(image: np.ndarray, factor: int) -> np.ndarray:
+    """An image's means over ``factor`` x ``factor`` blocks in float32 (the last blocks
+    padded with their edge: an example's picture continues past its frame)."""
+    height, width = image.shape[:2]
     h, w = -(-height // factor), -(-width // factor)
-    widths = [(0, h * factor - height), (0, w * factor - width)] + [(0, 0)] * (array.ndim - 2)
-    padded = np.pad(np.asarray(array, dtype=np.float32), widths, mode=pad)  # type: ignore[call-overload]
-    blocks = padded.reshape(h, factor, w, factor, *array.shape[2:])
-    return blocks.sum(axis=(1, 3), dtype=np.float32)
-
-
-def block_average(depth: np.ndarray, factor: int) -> np.ndarray:
-    """A depth map averaged over ``factor`` x ``factor`` blocks: a block is object where at
-    least half its pixels are, with the mean depth of those (pixel ``i`` of the result is
-    pixels ``factor * i`` to ``factor * i + factor - 1`` of ``depth``).
-
-    Examples
-    --------
-    >>> depth = np.array([[0, 0, 2, 4], [0, 2, 2, 4]], np.float32)
-    >>> block_average(depth, 2).tolist()
-    [[0.0, 3.0]]
-    """
-    mask = depth > 0
-    counts = _block_sums(mask, factor)
-    sums = _block_sums(np.where(mask, depth, 0), factor)
-    kept = counts * 2 >= factor * factor
-    return np.where(kept, sums / np.maximum(counts, 1), 0).astype(np.float32)
+    widths = [(0, h * factor - height), (0, w * factor - width)] + [(0, 0)] * (image.ndim - 2)
+    padded = np.pad(np.asarray(image, dtype=np.float32), widths, mode="edge")
+    blocks = padded.reshape(h, factor, w, factor, *image.shape[2:])
+    return blocks.sum(axis=(1, 3), dtype=np.float32) / np.float32(factor * factor)
 
 
 def _working(state: State, config: DepthConfig) -> State:
@@ -287,19 +258,20 @@ def _working(state: State, config: DepthConfig) -> State:
     # pyramid's coarsest step (the pose stage), so the averaged examples' blocks and the
     # averaged query's share their corners.
     levels = sized_config(config, state.chosen[0].mask).pyramid.levels
-    factor = working_factor(state.mask, config.pyramid.search_size, 2 ** (levels - 1))
+    size = float(np.sqrt(state.mask.sum()))
+    factor = averaging_factor(size, config.pyramid.search_size, 2 ** (levels - 1))
     if factor == 1:
         state.changed = "none: the object is within the search size"
         return state
     state.full = (state.depth, state.mask, state.chosen)
     state.factor = factor
-    state.depth = block_average(state.depth, factor)
+    state.depth = block_average(state.depth, state.mask, factor, pad=True)[0]
     state.mask = state.searched = state.depth > 0
     state.chosen = [
         WorkingExample(
             name=e.name,
-            depth=block_average(e.depth, factor),
-            image=_block_sums(e.image, factor, pad="edge") / np.float32(factor * factor),
+            depth=block_average(e.depth, e.mask, factor, pad=True)[0],
+            image=_block_means(e.image, factor),
         )
         for e in state.chosen
     ]

@@ -43,6 +43,7 @@ from imagemap.depth.config import Registration
 
 __all__ = [
     "Warp",
+    "block_average",
     "position_scales",
     "register",
     "register_all",
@@ -358,7 +359,7 @@ def register_all(
 
     def working(depth, mask):
         if block > 1:
-            depth, mask = _block_average(depth, mask, block)
+            depth, mask = block_average(depth, mask, block)
         guide = registration_guide(
             depth,
             mask,
@@ -455,7 +456,7 @@ def _detail_grid(
     averages of larger maps), and the block's side."""
     block = max(1, int(round(np.sqrt(mask.sum()) / registration.detail_size)))
     if block > 1:
-        depth, mask = _block_average(depth, mask, block)
+        depth, mask = block_average(depth, mask, block)
     return relief_detail(depth, mask, registration.relief_detail_scale), block
 
 
@@ -483,9 +484,25 @@ def _with_relief_residual(
     return replace(warp, relief_residual=residual, relief_step=float(step))
 
 
-def _block_average(depth: np.ndarray, mask: np.ndarray, block: int) -> tuple:
+def block_average(
+    depth: np.ndarray, mask: np.ndarray, block: int, *, pad: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Depth and mask averaged over ``block`` x ``block`` pixels: the mask where at least
-    half a block is object, the depth as the mean of its object pixels."""
+    half a block is object, the depth as the mean of its object pixels (pixel ``i`` of
+    the result is pixels ``block * i`` to ``block * i + block - 1``). The last partial
+    blocks are dropped, or with ``pad`` kept (padded with background).
+
+    Examples
+    --------
+    >>> depth = np.array([[0, 0, 2, 4, 1], [0, 2, 2, 4, 1]], np.float32)
+    >>> block_average(depth, depth > 0, 2)[0].tolist()
+    [[0.0, 3.0]]
+    >>> block_average(depth, depth > 0, 2, pad=True)[0].tolist()
+    [[0.0, 3.0, 1.0]]
+    """
+    if pad:
+        widths = [(0, -depth.shape[0] % block), (0, -depth.shape[1] % block)]
+        depth, mask = np.pad(depth, widths), np.pad(mask, widths)
     h, w = (depth.shape[0] // block) * block, (depth.shape[1] // block) * block
 
     def mean(values: np.ndarray) -> np.ndarray:
