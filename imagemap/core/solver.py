@@ -192,10 +192,11 @@ def _randomised(dim: int, n_keep: int) -> bool:
     return dim > _COVARIANCE_DIMS and 4 * n_keep <= dim
 
 
-def _n_keep(dim: int, params: EngineParams) -> int:
-    """Principal directions kept of ``dim``-dimensional windows (see :meth:`_Projection.fit`)."""
-    n_keep = max(1, int(round(params.pca_fraction * dim)))
-    return n_keep if params.pca_max_components is None else min(n_keep, params.pca_max_components)
+def _n_keep(dim: int, fraction: float, cap: int | None) -> int:
+    """Principal directions kept of ``dim``-dimensional windows: ``fraction`` of them, at
+    least 1, at most ``cap``."""
+    n_keep = max(1, int(round(fraction * dim)))
+    return n_keep if cap is None else min(n_keep, cap)
 
 
 def _fit_pca(
@@ -317,9 +318,7 @@ class _Projection:
         """Learn the projection from window ``samples`` (float32, overwritten: weighted
         and centred in place, no copies of the samples)."""
         weighted = np.multiply(samples, self.sqrt_weights, out=samples)
-        n_keep = max(1, int(round(fraction * weighted.shape[1])))
-        if cap is not None:
-            n_keep = min(n_keep, cap)
+        n_keep = _n_keep(weighted.shape[1], fraction, cap)
         mean, basis = _fit_pca(weighted, n_keep, rng, overwrite=True)
         self.matrix = np.ascontiguousarray(self.sqrt_weights[:, None] * basis)
         self.offset = mean @ basis
@@ -651,7 +650,11 @@ class LevelSolver:
         # draws random numbers (a randomised range finder: the draws' order would follow
         # the threads).
         if len(fits) > 1 and not any(
-            _randomised(windows.width, _n_keep(windows.width, params)) for _, windows in fits
+            _randomised(
+                windows.width,
+                _n_keep(windows.width, params.pca_fraction, params.pca_max_components),
+            )
+            for _, windows in fits
         ):
             _kernels.run_each(lambda i: fit(i, threads=False), list(range(len(fits))))
         else:
@@ -691,10 +694,7 @@ class LevelSolver:
             0.0,
             appearance=False,
         )
-        ys = self.query_y
-        # Bands over the rows the object's window centres span (not the frame's: an
-        # object in a tight frame, as the pose stage crops it, still gets its threads).
-        self.band_starts = _band_starts(ys, h)
+        self.band_starts = _band_starts(self.query_y, h)
         timer.add("features", start)
         self.indexes: dict[str, NearestNeighborIndex] = {}
 
