@@ -605,13 +605,7 @@ def same_texel_source(source: np.ndarray, mask: np.ndarray, examples: int) -> np
     height, width = mask.shape
     label = source[..., 0].astype(np.int32)
     known = mask & (label >= 0) & (label < examples)
-    if known.any():
-        nearest = ndimage.distance_transform_edt(
-            ~known, return_distances=False, return_indices=True
-        )
-        label = label[tuple(nearest)]
-    else:
-        label = np.zeros_like(label)
+    label = fill_background(label, known) if known.any() else np.zeros_like(label)
     rows, cols = np.indices((height, width), dtype=np.int32)
     return np.stack([label, rows, cols], axis=-1).astype(np.int32)
 
@@ -637,10 +631,7 @@ def _charts_with_seams(source: np.ndarray, mask: np.ndarray) -> np.ndarray:
     step[1:] |= down
     step[:-1] |= down
     charts, count = ndimage.label(mask)
-    nearest = ndimage.distance_transform_edt(
-        charts == 0, return_distances=False, return_indices=True
-    )
-    charts = charts[tuple(nearest)]
+    charts = fill_background(charts, charts > 0)
     seamed = np.zeros(count + 1, dtype=bool)
     seamed[charts[step & mask]] = True
     return seamed[charts]
