@@ -141,7 +141,7 @@ def _render_mesh_examples(examples: ExampleSet, views, size, quiet: bool) -> Non
 def _with_atlas_maps(made: MeshResult, mesh):
     """``made.mesh`` with the examples' PBR maps carried beside its colour (uv-space and
     registered paths: each texel's from where its colour came, :func:`atlas_maps`)."""
-    if made.path == "views" or not made.examples:
+    if not made.examples:
         return made.mesh
     # The normal map in the frames of the mesh as written, as on the views path.
     maps = atlas_maps(made.results[0], made.examples, frame_mesh(made.mesh, mesh))
@@ -151,7 +151,7 @@ def _with_atlas_maps(made: MeshResult, mesh):
 def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
     """``made.mesh`` with the examples' PBR maps baked beside its colour (views path),
     and the maps glTF has no slot for (:data:`~imagemap.mesh.maps.SIDE_MAPS`), by kind."""
-    if made.path != "views" or not made.renders:
+    if not made.renders:
         return made.mesh, {}
     renders = made.renders
     width = made.mesh.visual.material.baseColorTexture.size[0]  # type: ignore[attr-defined]
@@ -252,8 +252,10 @@ def texture_mesh(
     if request.maps:
         if views:
             step("baking the examples' PBR maps")
-        coloured, side = _with_view_maps(made, mesh, examples, request.size)
-        coloured = _with_atlas_maps(made, mesh) if made.path != "views" else coloured
+        if made.path == "views":
+            coloured, side = _with_view_maps(made, mesh, examples, request.size)
+        else:
+            coloured = _with_atlas_maps(made, mesh)
     textured = keep_surface(coloured, mesh)
     return TexturedResult(made=made, textured=textured, views=views, side_maps=side)
 
