@@ -51,7 +51,6 @@ __all__ = [
 #: The maps a glTF material holds that the atlas paths carry (a mesh example's material
 #: has no height slot: :data:`SIDE_MAPS` are not read from mesh examples).
 ATLAS_KINDS = ("normal", "roughness", "metallic", "ao")
-MAP_CHANNELS = MAP_KINDS
 
 
 def _baked(out, what: str = "bake_maps: bake's result") -> np.ndarray:
@@ -265,6 +264,14 @@ def _query_texels(frames, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return texel, face, bary, normal
 
 
+def _point_uv(mesh, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """The UV (N, 2) of surface points (``face``, ``bary``) of ``mesh``, wrapped into
+    [0, 1) (textures repeat)."""
+    uv = np.asarray(mesh.visual.uv, dtype=np.float64)
+    point_uv = np.einsum("nk,nkc->nc", bary, uv[np.asarray(mesh.faces, dtype=np.int64)[face]])
+    return point_uv - np.floor(point_uv)
+
+
 def _registered_map(example, kind: str, found: np.ndarray | None, size: int, query_normal):
     """A registered example's map of ``kind`` in the query's atlas at ``size``
     ((T, T) grey, or (T, T, 3) world normals onto the query's surface), read at its
@@ -278,10 +285,7 @@ def _registered_map(example, kind: str, found: np.ndarray | None, size: int, que
     if kind != "normal":
         out = np.full((size, size), NEUTRAL[kind][0], dtype=np.float32)
         if found is not None:
-            uv = np.asarray(mesh.visual.uv, dtype=np.float64)
-            point_uv = np.einsum("nk,nkc->nc", bary, uv[np.asarray(mesh.faces)[face]])
-            point_uv -= np.floor(point_uv)  # textures repeat
-            out.flat[texel] = sample_image(found[..., None], point_uv)[:, 0]
+            out.flat[texel] = sample_image(found[..., None], _point_uv(mesh, face, bary))[:, 0]
         return fill_from_nearest(out, covered)
     here = query_normal.reshape(-1, 3)[texel]
     if found is None:
@@ -290,9 +294,7 @@ def _registered_map(example, kind: str, found: np.ndarray | None, size: int, que
         uv = np.asarray(mesh.visual.uv, dtype=np.float64)
         faces = np.asarray(mesh.faces, dtype=np.int64)
         normals = np.asarray(mesh.vertex_normals, dtype=np.float64)
-        point_uv = np.einsum("nk,nkc->nc", bary, uv[faces[face]])
-        point_uv -= np.floor(point_uv)
-        local = decode_normals(sample_image(found, point_uv)).astype(np.float64)
+        local = decode_normals(sample_image(found, _point_uv(mesh, face, bary))).astype(np.float64)
         t, b, n = tangent_frames(corner_tangents(mesh.vertices, faces, normals, uv), normals,
                                  faces, face, bary)  # fmt: skip
         vectors = local[:, :1] * t + local[:, 1:2] * b + local[:, 2:] * n
@@ -353,7 +355,7 @@ def atlas_maps(result, examples: list, frames) -> dict[str, np.ndarray]:
         query_normal = fill_from_nearest(query_normal, known)
     out: dict[str, np.ndarray] = {}
     for kind in kinds:
-        channels = MAP_CHANNELS[kind]
+        channels = MAP_KINDS[kind]
         carried = np.empty((size, size, channels), dtype=np.float32)
         for k, (example, maps) in enumerate(zip(examples, have, strict=True)):
             here = index == k
