@@ -97,7 +97,7 @@ def mesh_folder_hint(db) -> str | None:
     takes the views path from the depth examples, where ``--db OUT/meshes`` would register
     the meshes onto it (one palette on every side, docs/meshes.md).
     """
-    from imagemap.scene.files import TEXTURED_SUFFIXES
+    from imagemap.outputs import TEXTURED_SUFFIXES
 
     folder = Path(db)
     sub = folder / "meshes"
