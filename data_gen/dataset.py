@@ -142,7 +142,8 @@ def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_
     """
 
     from data_gen.core import part_roughness
-    from imagemap.scene import fill_from_nearest, rasterize_uv, textured_mesh, uv_atlas
+    from imagemap.core.blend import fill_background
+    from imagemap.scene import rasterize_uv, textured_mesh, uv_atlas
 
     params, _, assembly, pose, mesh = posed_instance(object_class, index, seed)
     if object_class.uv_layout is not None:
@@ -159,7 +160,7 @@ def instance_mesh(object_class: ObjectClass, index: int, seed: int = 0, texture_
     texture.reshape(-1, 4)[texel, 3] = part_roughness(object_class.parts, labels, luma)
     covered = np.zeros((texture_size, texture_size), dtype=bool)
     covered.flat[texel] = True
-    texture = fill_from_nearest(texture, covered)
+    texture = fill_background(texture, covered)
     return textured_mesh(vertices, faces, uv, texture[..., :3], maps={"roughness": texture[..., 3]})
 
 

@@ -26,13 +26,17 @@ def fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Extend the object's values into the background (nearest object pixel).
 
     A window at the silhouette then carries object-like colours beyond the edge,
-    so no background colour bleeds into a synthesised object.
+    so no background colour bleeds into a synthesised object. A new array always: where
+    ``mask`` is all or nothing there is nothing to extend from or into, and the result is
+    a copy of ``image``.
 
     Examples
     --------
     >>> image = np.array([[0.0, 5.0, 7.0]]); fill_background(image, image > 0)
     array([[5., 5., 7.]])
     """
+    if mask.all() or not mask.any():
+        return image.copy()
     ny, nx = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
     return image[ny, nx]
 

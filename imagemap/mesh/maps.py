@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from imagemap.core.blend import fill_background
 from imagemap.materials import (
     MAP_KINDS,
     MIN_NORMAL_Z,
@@ -36,7 +37,7 @@ from imagemap.scene.files import (
     material_of,
     textured_mesh,
 )
-from imagemap.scene.views import fill_from_nearest, sample_image
+from imagemap.scene.views import sample_image
 from imagemap.tangents import corner_tangents, tangent_frames
 
 __all__ = [
@@ -170,7 +171,7 @@ def _baked_normals(mesh, renders, view_maps, bake, textured, projection: bool) -
     texture.reshape(-1, 3)[texel] = local
     covered = np.zeros(baked.shape[:2], dtype=bool)
     covered.flat[texel] = True
-    return encode_normals(fill_from_nearest(texture, covered))
+    return encode_normals(fill_background(texture, covered))
 
 
 def mesh_maps(
@@ -286,7 +287,7 @@ def _registered_map(example, kind: str, found: np.ndarray | None, size: int, que
         out = np.full((size, size), NEUTRAL[kind][0], dtype=np.float32)
         if found is not None:
             out.flat[texel] = sample_image(found[..., None], _point_uv(mesh, face, bary))[:, 0]
-        return fill_from_nearest(out, covered)
+        return fill_background(out, covered)
     here = query_normal.reshape(-1, 3)[texel]
     if found is None:
         world = here
@@ -352,7 +353,7 @@ def atlas_maps(result, examples: list, frames) -> dict[str, np.ndarray]:
         query_normal.reshape(-1, 3)[query[0]] = query[3]
         known = np.zeros((size, size), dtype=bool)
         known.flat[query[0]] = True
-        query_normal = fill_from_nearest(query_normal, known)
+        query_normal = fill_background(query_normal, known)
     out: dict[str, np.ndarray] = {}
     for kind in kinds:
         channels = MAP_KINDS[kind]
@@ -388,6 +389,6 @@ def atlas_maps(result, examples: list, frames) -> dict[str, np.ndarray]:
             carried = encode_normals(flat)
         elif kind == "normal":
             carried = encode_normals(decode_normals(carried))
-        carried = fill_from_nearest(carried, mask) if mask.any() else carried
+        carried = fill_background(carried, mask) if mask.any() else carried
         out[kind] = carried if channels == 3 else carried[..., 0]
     return out

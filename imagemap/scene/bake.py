@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from imagemap.core.blend import fill_background
 from imagemap.io import InputError
 from imagemap.scene.files import textured_mesh
 from imagemap.scene.views import (
@@ -34,7 +35,6 @@ from imagemap.scene.views import (
     DEFAULT_SIZE,
     MeshRender,
     View,
-    fill_from_nearest,
     parse_view,
     sample_pixels,
     texture_image,
@@ -65,7 +65,7 @@ def project_texture(mesh, render: MeshRender, image: np.ndarray, *, texture_only
     image = np.asarray(image, dtype=np.float32)[..., :3]
     if image.shape[:2] != render.depth.shape:
         raise InputError(f"image {image.shape} does not match the render {render.depth.shape}")
-    texture = fill_from_nearest(image, render.mask)
+    texture = fill_background(image, render.mask)
     if texture_only:
         return texture
     uv = render.projection_uv(np.asarray(mesh.vertices))
@@ -552,7 +552,7 @@ def bake_views(
         if fine > 1:
             col, row = (col + 0.5) * fine - 0.5, (row + 0.5) * fine - 0.5
         mask = np.repeat(np.repeat(render.mask, fine, axis=0), fine, axis=1)
-        filled = fill_from_nearest(np.asarray(image, dtype=np.float32)[..., :3], mask)
+        filled = fill_background(np.asarray(image, dtype=np.float32)[..., :3], mask)
         colours[k] = sample_pixels(filled, col, row)
     texel_world = np.sqrt(world_per_uv(vertices, faces, uv)) / texture_size
     band = seam_band * pixel_size / texel_world
@@ -566,7 +566,7 @@ def bake_views(
     texture.reshape(-1, 3)[texel] = colours_out
     covered = np.zeros((texture_size, texture_size), dtype=bool)
     covered.flat[texel] = True
-    texture = fill_from_nearest(texture, covered)
+    texture = fill_background(texture, covered)
     if texture_only:
         return texture
     textured = textured_mesh(vertices, faces, uv, texture)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from imagemap.core.blend import fill_background
 from imagemap.scene.bake import rasterize_uv
 from imagemap.scene.files import (
     SurfaceMaterial,
@@ -21,7 +22,7 @@ from imagemap.scene.files import (
     texture_alpha,
     textured_mesh,
 )
-from imagemap.scene.views import fill_from_nearest, sample_image
+from imagemap.scene.views import sample_image
 
 __all__ = ["frame_mesh", "keep_surface", "kept_geometry"]
 
@@ -167,7 +168,7 @@ def _carried(textured, source, values: np.ndarray, shape: tuple[int, int]) -> np
     out.flat[texel] = sample_image(np.asarray(values, np.float32)[..., None], point_uv)[:, 0]
     covered = np.zeros((size, size), dtype=bool)
     covered.flat[texel] = True
-    out = fill_from_nearest(out, covered)
+    out = fill_background(out, covered)
     if (height, width) != (size, size):
         from skimage.transform import (
             resize,

@@ -31,7 +31,6 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from imagemap.io import InputError
 
@@ -40,7 +39,6 @@ __all__ = [
     "MeshRender",
     "NAMED_VIEWS",
     "View",
-    "fill_from_nearest",
     "parse_view",
     "parse_views",
     "render_colours",
@@ -293,14 +291,6 @@ def sample_pixels(image: np.ndarray, col: np.ndarray, row: np.ndarray) -> np.nda
     top = image[y0, x0] * (1 - fx) + image[y0, x1] * fx
     bottom = image[y1, x0] * (1 - fx) + image[y1, x1] * fx
     return (top * (1 - fy) + bottom * fy).astype(np.float32)
-
-
-def fill_from_nearest(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``image`` with every pixel outside ``mask`` set to the nearest pixel inside it."""
-    if mask.all() or not mask.any():
-        return image.copy()
-    _, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
-    return image[ny, nx]
 
 
 def texture_image(mesh) -> np.ndarray | None:
