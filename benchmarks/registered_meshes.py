@@ -120,6 +120,79 @@ def off_example_texels(image: np.ndarray, mask: np.ndarray, textures: list) -> i
     return int(off.sum())
 
 
+#: The seam step reads each side of a UV seam this far inside its chart (texels): the texel
+#: beside the seam on each side, not the padding the seam's edge runs along.
+SEAM_INSET = 1.0
+
+
+def seam_texel_pairs(
+    vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of used texels on the two sides of the mesh's UV seams at the same 3-D point.
+
+    A seam edge is an edge of the welded mesh whose two faces give it other UVs. Along
+    it, one sample per texel of its longer side; each side's texel is the one
+    :data:`SEAM_INSET` texels inside its own face from the sample (towards the face's
+    third corner). Pairs where either texel is unused are left out.
+
+    Returns
+    -------
+    (first (N,), second (N,)) flat texel indices of a ``size``^2 atlas.
+    """
+    import trimesh
+
+    from imagemap.mesh.uvspace import _weld
+    from imagemap.scene.bake import covered_texels
+
+    _, welded_faces, _ = _weld(np.asarray(vertices, float), np.asarray(faces))
+    pairs, edges = trimesh.graph.face_adjacency(welded_faces, return_edges=True)
+    ends = []  # per adjacent pair and side: the edge's two UVs and the third corner's
+    for side in (0, 1):
+        f = pairs[:, side]
+        corners = welded_faces[f]  # (P, 3) welded
+        a = np.argmax(corners == edges[:, :1], axis=1)
+        b = np.argmax(corners == edges[:, 1:], axis=1)
+        c = 3 - a - b
+        rows = np.arange(len(f))
+        own = np.asarray(faces)[f]
+        ends.append((uv[own[rows, a]], uv[own[rows, b]], uv[own[rows, c]]))
+    seam = np.any(np.abs(ends[0][0] - ends[1][0]) > 1e-6, axis=1) | np.any(
+        np.abs(ends[0][1] - ends[1][1]) > 1e-6, axis=1
+    )
+    length = np.maximum(
+        np.linalg.norm(ends[0][1] - ends[0][0], axis=1),
+        np.linalg.norm(ends[1][1] - ends[1][0], axis=1),
+    )[seam] * size
+    count = np.maximum(np.ceil(length).astype(np.int64), 1)
+    edge = np.repeat(np.flatnonzero(seam), count)
+    within = np.concatenate([(np.arange(n) + 0.5) / n for n in count])
+    mask = covered_texels(uv, faces, size).ravel()
+    texels = []
+    for a, b, c in ends:
+        point = a[edge] + within[:, None] * (b[edge] - a[edge])
+        inward = c[edge] - point
+        inward /= np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-12)
+        point = point + inward * SEAM_INSET / size
+        col = np.clip(np.floor(point[:, 0] * size), 0, size - 1).astype(np.int64)
+        row = np.clip(np.floor((1.0 - point[:, 1]) * size), 0, size - 1).astype(np.int64)
+        texels.append(row * size + col)
+    keep = mask[texels[0]] & mask[texels[1]]
+    return texels[0][keep], texels[1][keep]
+
+
+def seam_step(texture: np.ndarray, pairs: tuple[np.ndarray, np.ndarray]) -> dict:
+    """Mean ΔE00 and |RGB| (0-255) between the two sides' colours of :func:`seam_texel_pairs`."""
+    from imagemap.mesh.uvspace import _unit
+    from imagemap.metrics import ciede2000
+
+    flat = _unit(np.asarray(texture)[..., :3]).reshape(-1, 3)
+    first, second = flat[pairs[0]][:, None], flat[pairs[1]][:, None]
+    every = np.ones((len(pairs[0]), 1), bool)
+    return {"de00": ciede2000(first, second, every),
+            "rgb": float(np.abs(first - second).mean() * 255.0),
+            "pairs": len(pairs[0])}  # fmt: skip
+
+
 def transfer(query, example_mesh, size: int, mirror: bool, seed: int = 0):
     """The closest-point transfer of the rigidly registered example's texture into the
     query's atlas (the baseline): (texture, residual)."""
@@ -209,10 +282,15 @@ def run_fish(
     for name, mesh in made.items():
         if name != "0.2.0":  # the textured meshes, for other renderers (Blender)
             export_textured(mesh, out / f"{hold}_{name}.glb")
+    pairs = seam_texel_pairs(truth.vertices, truth.faces, np.asarray(truth.visual.uv), size)
+    steps = {name: seam_step(image, pairs)
+             for name, image in (("truth", texture_image(truth)), ("registered", texture.image),
+                                 ("copy", textures[0]), ("transfer", colour))}  # fmt: skip
     report: dict = {"seconds": seconds, "first_choice": first,
                     "examples": result.example_names, "angles": {},
-                    "off_example_texels": off_example,
+                    "off_example_texels": off_example, "seam_step": steps,
                     "used_texels": int(texture.mask.sum())}  # fmt: skip
+    print("seam step (ΔE00):", {k: round(v["de00"], 3) for k, v in steps.items()}, flush=True)
     print(f"off-example texels: {off_example} of {int(texture.mask.sum())} used",
           flush=True)  # fmt: skip
     renders = {"truth": {a: _render(truth, a) for a in FISH_ANGLES}}
@@ -353,6 +431,8 @@ def run_heads(
             paths[label] = out / f"{name}_{label}.glb"
             export_textured(textured_mesh(vertices, faces, uv, texture), paths[label])
         arrays = {label: TexturedArrays.load(p) for label, p in paths.items()}
+        pairs = seam_texel_pairs(vertices, faces, uv, size)
+        steps = {"registered": seam_step(made.image, pairs), "transfer": seam_step(colour, pairs)}
         centre, radius = truth.bounding_sphere()
         rows, new_rows, new_pictures = [], [], []
         for angles, into, picture in ((EVAL_VIEWS, rows, pictures),
@@ -373,6 +453,7 @@ def run_heads(
         imagemap.write_image(out / f"{name}_new_angles.png", np.concatenate(new_pictures))
         report["objects"][name] = {"seconds": seconds, "examples": made.example_names,
                                    "first_choice": first, "residuals": residuals,
+                                   "seam_step": steps,
                                    "views": rows, "new_views": new_rows}  # fmt: skip
         print(name, json.dumps(report["objects"][name], default=float), flush=True)
     import imagemap

@@ -70,6 +70,8 @@ from imagemap.depth.finish import (
 from imagemap.depth.guides import sized_config, to_ycbcr
 from imagemap.depth.pipeline import ColorizeResult, engine_params
 from imagemap.errors import InputError
+from imagemap.mesh.padding import SurfacePadding, engine_reach
+from imagemap.mesh.padding import surface_padding as place_padding
 from imagemap.scene.bake import covered_texels, rasterize_uv
 
 __all__ = [
@@ -649,6 +651,7 @@ def colorize_uv(
     working_size: int = WORKING_SIZE,
     weights: tuple[float, float, float] = (POSITION_WEIGHT, NORMAL_WEIGHT, CURVATURE_WEIGHT),
     same_texel: bool = False,
+    surface_padding: bool = True,
 ):
     """Synthesise a texture in the query's UV atlas from examples in the same layout.
 
@@ -677,6 +680,11 @@ def colorize_uv(
         (:func:`same_texel_source`; the seams are then placed and blended between
         examples only): for examples resampled into the query's atlas (the registered
         path), where an offset can only take another chart's colour.
+    surface_padding : bool
+        The padding texels the engine's windows reach take every band (guides and the
+        examples' appearance) at the surface point continuing their chart across its
+        border (:mod:`imagemap.mesh.padding`); False: continued from the nearest used
+        texel (as before #46's seams).
 
     Returns
     -------
@@ -728,24 +736,44 @@ def colorize_uv(
         state.changed = ", ".join(e.name for e in pictures)
         return state
 
+    paddings: dict[int, SurfacePadding] = {}
+
+    def padding_of(owner, reach: int) -> SurfacePadding:
+        """The surface padding of a mesh's atlas at the working size (once per mesh: the
+        registered examples all lie on the query's)."""
+        if id(owner) not in paddings:
+            paddings[id(owner)] = place_padding(*mesh_uv_arrays(owner), working, reach)
+        return paddings[id(owner)]
+
     def bands(state: SynthesisState, config) -> SynthesisState:
         levels, kind = config.pyramid.levels, config.matching.appearance_pyramid
+        # The padding the windows reach, read on the surface across the seams (0: none,
+        # every padding texel its nearest used texel's values).
+        reach = engine_reach(config.pyramid.patch_sizes) if surface_padding else 0
+        pad = padding_of(mesh, reach)
         state.query_levels = ReleasableLevels(
-            _uv_mappings(query.guides(*weights), query.mask, levels)
+            _uv_mappings(pad.apply(query.guides(*weights), query.mask), query.mask, levels)
         )
-        state.exemplar_levels = [
-            ReleasableLevels(
-                _uv_mappings(
-                    e.maps(working).guides(*weights),
-                    e.maps(working).mask,
-                    levels,
-                    to_ycbcr(fill_background(texture, e.maps(working).mask)),
-                    kind,
+        exemplar_levels = []
+        for e, texture in zip(chosen, textures, strict=True):
+            maps, pad = e.maps(working), padding_of(e.mesh, reach)
+            exemplar_levels.append(
+                ReleasableLevels(
+                    _uv_mappings(
+                        pad.apply(maps.guides(*weights), maps.mask),
+                        maps.mask,
+                        levels,
+                        to_ycbcr(pad.apply(texture, maps.mask)),
+                        kind,
+                    )
                 )
             )
-            for e, texture in zip(chosen, textures, strict=True)
-        ]
-        state.changed = f"{len(chosen)} examples' surface guides and textures"
+        state.exemplar_levels = exemplar_levels
+        placed = ", ".join(str(p.texel.size) for p in paddings.values())
+        state.changed = (
+            f"{len(chosen)} examples' surface guides and textures; padding within "
+            f"{reach} texels read on the surface ({placed} texels)"
+        )
         return state
 
     def engine(state: SynthesisState, config) -> SynthesisState:

@@ -1,0 +1,81 @@
+"""Padding by the surface itself (#46 item 1): the atlas' padding beside a chart seam
+continues onto the chart across the seam, for the guides and the examples' appearance."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imagemap.core.blend import fill_background
+from imagemap.mesh.padding import surface_padding, walk
+from imagemap.mesh.uvspace import surface_maps
+
+#: The atlas' side: 0.1 of it (the gap between the two charts in u) is 8 whole texels, so a
+#: padding texel's mate across the seam is a texel centre of the other chart.
+SIZE = 80
+#: Segments of the cylinder's circumference (16 per chart) and rows along its axis.
+SEGMENTS, ROWS = 32, 4
+#: Largest guide difference (position in RMS radii, unit normal) of a padding texel from
+#: its mate across the seam: both are the same surface point (the walk is exact on the
+#: facets; bilinear reads at a texel centre); measured 0.0.
+SAME_POINT = 0.02
+#: The nearest-texel padding repeats the border: it is off its mate by at least this
+#: (measured 0.10, 0.20, 0.29 at 1, 2, 3 texels past the seam).
+REPEATED = 0.05
+
+
+def _cylinder():
+    """An open cylinder (radius 1, height 2) in two charts: angles 0-180° at u 0.05-0.45,
+    180-360° at u 0.55-0.95 (seams at 0° and 180°), v 0.05 up, both at one scale."""
+    theta = np.linspace(0.0, 2.0 * np.pi, SEGMENTS + 1)
+    z = np.linspace(0.0, 2.0, ROWS + 1)
+    vertices, uv, faces = [], [], []
+    half = SEGMENTS // 2
+    for chart in (0, 1):
+        start = len(vertices)
+        columns = range(chart * half, chart * half + half + 1)
+        for k in columns:
+            for zz in z:
+                angle = theta[k % SEGMENTS]  # 360° is 0°, bit for bit (welded)
+                vertices.append((np.cos(angle), np.sin(angle), zz))
+                u = 0.05 + 0.5 * chart + 0.4 * (k - chart * half) / half
+                uv.append((u, 0.05 + zz * 0.4 / np.pi))
+        for i in range(half):
+            for j in range(ROWS):
+                a = start + i * (ROWS + 1) + j
+                b = a + ROWS + 1
+                faces += [(a, b, b + 1), (a, b + 1, a + 1)]
+    return np.array(vertices), np.array(faces), np.array(uv)
+
+
+def test_padding_beside_a_seam_takes_the_other_charts_guides():
+    vertices, faces, uv = _cylinder()
+    maps = surface_maps(vertices, faces, uv, SIZE)
+    guides = maps.guides()[..., :6]  # position and normal
+    pad = surface_padding(vertices, faces, uv, SIZE, reach=4)
+    padded = pad.apply(guides, maps.mask)
+    nearest = fill_background(guides, maps.mask)
+    rows = np.arange(58, 74)  # inside the charts' height (not beside the caps' boundary)
+    # Chart 0 spans columns 4-35, chart 1 columns 44-75: a padding texel right of chart 0
+    # (column 36 + k, past 180°) is the point of chart 1's column 44 + k; left of chart 0
+    # (column 3 - k, before 0°, i.e. below 360°) chart 1's column 75 - k.
+    assert maps.mask[rows][:, [4, 35, 44, 75]].all() and not maps.mask[rows][:, [3, 36]].any()
+    for pad_column, mate in [(36 + k, 44 + k) for k in range(3)] + [
+        (3 - k, 75 - k) for k in range(3)
+    ]:
+        error = np.abs(padded[rows, pad_column] - guides[rows, mate]).max()
+        repeated = np.abs(nearest[rows, pad_column] - guides[rows, mate]).max()
+        assert error < SAME_POINT, (pad_column, error)
+        assert repeated > REPEATED, (pad_column, repeated)
+    # Beyond the reach: the nearest placed texel's values (no padding texel left unset).
+    assert np.isfinite(padded).all()
+    assert np.array_equal(padded[maps.mask], guides[maps.mask])
+
+
+def test_a_walk_stops_at_the_surfaces_boundary():
+    # A single triangle: a step out of it ends on its edge, not past it.
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    face, bary = walk(v, np.array([[0, 1, 2]]), np.array([0]), np.array([[0.6, 0.2, 0.2]]),
+                      np.array([[5.0, 0.0, 0.0]]))  # fmt: skip
+    point = bary @ v
+    assert face.tolist() == [0]
+    assert np.allclose(point, [[0.8, 0.2, 0.0]])
