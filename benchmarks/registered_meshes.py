@@ -159,13 +159,17 @@ def seam_texel_pairs(
     seam = np.any(np.abs(ends[0][0] - ends[1][0]) > 1e-6, axis=1) | np.any(
         np.abs(ends[0][1] - ends[1][1]) > 1e-6, axis=1
     )
-    length = np.maximum(
-        np.linalg.norm(ends[0][1] - ends[0][0], axis=1),
-        np.linalg.norm(ends[1][1] - ends[1][0], axis=1),
-    )[seam] * size
+    length = (
+        np.maximum(
+            np.linalg.norm(ends[0][1] - ends[0][0], axis=1),
+            np.linalg.norm(ends[1][1] - ends[1][0], axis=1),
+        )[seam]
+        * size
+    )
     count = np.maximum(np.ceil(length).astype(np.int64), 1)
     edge = np.repeat(np.flatnonzero(seam), count)
-    within = np.concatenate([(np.arange(n) + 0.5) / n for n in count])
+    first = np.repeat(np.cumsum(count) - count, count)  # each edge's first sample
+    within = (np.arange(count.sum()) - first + 0.5) / np.repeat(count, count)
     mask = covered_texels(uv, faces, size).ravel()
     texels = []
     for a, b, c in ends:

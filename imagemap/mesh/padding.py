@@ -312,9 +312,9 @@ def surface_padding(
     faces = np.asarray(faces, dtype=np.int64)
     uv = np.asarray(uv, dtype=np.float64)
     texel, texel_face, texel_bary = rasterize_uv(uv, faces, size)
-    mask = np.zeros(size * size, dtype=bool)
-    mask[texel] = True
-    mask = mask.reshape(size, size)
+    used = np.zeros(size * size, dtype=bool)
+    used[texel] = True
+    mask = used.reshape(size, size)
     empty = SurfacePadding(size, np.zeros(0, np.int64), np.zeros(0, np.int64),
                            np.zeros((0, 3)), np.zeros((0, 2)))  # fmt: skip
     if reach <= 0 or texel.size == 0 or mask.all():

@@ -19,8 +19,13 @@ Guide bands (:func:`surface_maps`), per texel of the atlas' used texels:
   component over the squared edge length, times the RMS radius: scale-free, positive
   where convex).
 
-Outside the charts every band is continued from the nearest used texel (padding), so
-windows at a chart's border see surface-like values. The mask is the used texels.
+Outside the charts (the padding) every band is continued from the nearest used texel
+(:func:`surface_maps`). The synthesis (:func:`colorize_uv`) then reads the padding its
+windows reach on the surface itself (:mod:`imagemap.mesh.padding`): each such texel takes
+the guides, and each example's appearance, at the surface point that continues its
+nearest chart across the border, in the chart on the other side of the seam; so a
+window at a chart's border sees the surface beyond the seam, not the border repeated.
+The mask is the used texels.
 
 The engine (:func:`imagemap.core.engine.synthesize`) runs at a working size of at
 most :data:`WORKING_SIZE` texels; the depth front end's finish then copies each texel
@@ -130,7 +135,8 @@ class SurfaceMaps:
     mask : (T, T) bool
         The used texels (covered by some UV triangle).
     position : (T, T, 3) float32
-        The normalised surface point (see the module notes); padded outside ``mask``.
+        The normalised surface point (see the module notes); padded outside ``mask`` from
+        the nearest used texel (the synthesis pads on the surface, :mod:`~imagemap.mesh.padding`).
     normal : (T, T, 3) float32
         Unit normals; padded.
     curvature : (T, T) float32
