@@ -14,14 +14,16 @@ all, so pixels compare) from 8 angles: both flanks, back, belly, head-on, tail-o
 three-quarter views. Per angle: mean CIEDE2000 against the truth and crispness (fine-band
 energy over the truth's, :func:`imagemap.metrics.fine_energy`); per object: the flank
 difference, the mean CIEDE2000 between the front flank and the mirrored back flank (one
-palette on both sides: small, as the truth's).
+palette on both sides: small, as the truth's); per texture, the chart-seam step
+(:func:`seam_step`: mean ΔE00 between the texels on the two sides of the query's UV seams
+at one 3-D point; the truth's own texture gives what the surface varies over them).
 
 ``heads``: the FFHQ-UV heads (``benchmarks/real_meshes.py prepare``), each held out and
 given its own xatlas layout, textured from the others (in the HiFi3D++ layout) by the
 registered path and by the closest-point transfer; rendered by
 :mod:`benchmarks.real_meshes`' own perspective rasterizer from its four angles (none is a
 synthesis view: this path has none), and from :data:`NEW_HEAD_ANGLES` (``NAME_new_angles.png``:
-truth | registered | transfer).
+truth | registered | transfer); and the chart-seam step of both textures.
 
     python benchmarks/registered_meshes.py fish [--data DIR] [--out OUT] [--baseline GLB]
         [--hold NAME]
