@@ -229,6 +229,8 @@ class SurfacePadding:
     source : (N, 2) float
         That point's place in the atlas (row, column; texel centres at integers): in the
         chart of ``face``, across the seam where the walk crossed one.
+    mask : (T, T) bool
+        The atlas' used texels.
     """
 
     size: int
@@ -236,6 +238,7 @@ class SurfacePadding:
     face: np.ndarray
     bary: np.ndarray
     source: np.ndarray
+    mask: np.ndarray
 
     def apply(self, values: np.ndarray, mask: np.ndarray) -> np.ndarray:
         """``values`` (T, T) or (T, T, C) with the padding read on the surface.
@@ -249,9 +252,10 @@ class SurfacePadding:
         --------
         A 1 x 4 atlas: texels 0-1 used, texel 2 padding whose surface point is texel 0's:
 
+        >>> used = np.array([[1, 1, 0, 0]], bool)
         >>> pad = SurfacePadding(4, np.array([2]), np.array([0]), np.ones((1, 3)) / 3,
-        ...                      np.array([[0.0, 0.0]]))
-        >>> pad.apply(np.array([[1.0, 2.0, 0.0, 0.0]]), np.array([[1, 1, 0, 0]], bool)).tolist()
+        ...                      np.array([[0.0, 0.0]]), used)
+        >>> pad.apply(np.array([[1.0, 2.0, 0.0, 0.0]]), used).tolist()
         [[1.0, 2.0, 1.0, 1.0]]
         """
         mask = np.asarray(mask, dtype=bool)
@@ -316,7 +320,7 @@ def surface_padding(
     used[texel] = True
     mask = used.reshape(size, size)
     empty = SurfacePadding(size, np.zeros(0, np.int64), np.zeros(0, np.int64),
-                           np.zeros((0, 3)), np.zeros((0, 2)))  # fmt: skip
+                           np.zeros((0, 3)), np.zeros((0, 2)), mask)  # fmt: skip
     if reach <= 0 or texel.size == 0 or mask.all():
         return empty
     distance, (ny, nx) = ndimage.distance_transform_edt(~mask, return_indices=True)
@@ -340,4 +344,4 @@ def surface_padding(
     end_face, end_bary = walk(welded, welded_faces, face, start, step)
     point_uv = np.einsum("nk,nkc->nc", end_bary, uv[faces[end_face]])
     source = np.stack([(1.0 - point_uv[:, 1]) * size - 0.5, point_uv[:, 0] * size - 0.5], axis=1)
-    return SurfacePadding(size, pad, end_face, end_bary, source)
+    return SurfacePadding(size, pad, end_face, end_bary, source, mask)

@@ -574,6 +574,19 @@ def fine_texture(
     return image, fine
 
 
+def _surface_padded(example: UVExample, texture: np.ndarray, working: int) -> np.ndarray:
+    """An example's full-size texture (float32) with the padding within one working texel
+    of its charts read on its surface (:mod:`imagemap.mesh.padding`); a texture that is
+    not square is returned as it is."""
+    size = texture.shape[0]
+    if texture.shape[1] != size:
+        return texture
+    vertices, faces, uv = mesh_uv_arrays(example.mesh)
+    reach = int(np.ceil(size / working)) + 1
+    pad = place_padding(vertices, faces, uv, size, reach)
+    return pad.apply(_unit(texture), pad.mask)
+
+
 def same_texel_source(source: np.ndarray, mask: np.ndarray, examples: int) -> np.ndarray:
     """The source map with every texel copied from the same texel of its example.
 
@@ -864,6 +877,10 @@ def colorize_uv(
         # for the output texels at the charts' borders that fall there.
         correction = fill_background(working_image - plain, query.mask)
         del plain
+        if surface_padding and not same_texel:
+            # A working texel at a chart's border is used, but some of its full-size texels
+            # may not be (the example's padding): read on the surface there too.
+            full = [_surface_padded(e, t, working) for e, t in zip(chosen, full, strict=True)]
         image, fine_source = fine_texture(full, source, correction, size)
     texture = fill_background(np.where(final_mask[..., None], image, 0.0), final_mask)
     seconds = time.perf_counter() - start
