@@ -79,3 +79,23 @@ def test_a_walk_stops_at_the_surfaces_boundary():
     point = bary @ v
     assert face.tolist() == [0]
     assert np.allclose(point, [[0.8, 0.2, 0.0]])
+
+
+def test_an_examples_full_size_texture_is_padded_with_the_chart_across_the_seam():
+    # The uv-space path copies full-size texels at sub-positions of used working texels;
+    # one that falls in the example's padding reads the surface beyond the seam there.
+    import trimesh
+
+    from imagemap.mesh.uvspace import UVExample, _surface_padded
+
+    vertices, faces, uv = _cylinder()
+    mesh = trimesh.Trimesh(vertices, faces, process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv))  # fmt: skip
+    texture = np.zeros((SIZE, SIZE, 3), np.uint8)  # padding black
+    texture[:, :40] = (200, 0, 0)  # chart 0 red (columns 4-35)
+    texture[:, 40:] = (0, 0, 200)  # chart 1 blue (columns 44-75)
+    padded = _surface_padded(UVExample("cylinder", mesh, texture), texture, SIZE // 4)
+    rows = np.arange(58, 74)
+    # Right of chart 0 (past 180°) is chart 1's blue, left of chart 1 (before 180°) red.
+    assert np.allclose(padded[rows][:, 36:40], (0, 0, 200 / 255))
+    assert np.allclose(padded[rows][:, 40:44], (200 / 255, 0, 0))
