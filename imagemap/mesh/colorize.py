@@ -104,6 +104,10 @@ class MeshResult:
         The two atlas paths: the examples the texture was copied from, in the order of
         ``results[0].example_names`` (their PBR maps are carried the same way,
         :func:`imagemap.mesh.maps.atlas_maps`); empty on the views path.
+    fine : list of FineSource
+        Views path: each view's copy at the texels' resolution
+        (:func:`imagemap.mesh.fineviews.fine_source`), through which its PBR maps are
+        copied too; empty when the views were baked as synthesized.
     """
 
     mesh: object  # trimesh.Trimesh with UVs and texture
@@ -111,6 +115,7 @@ class MeshResult:
     results: list  # one ColorizeResult per view (uv-space: one, the atlas)
     path: str = "views"
     examples: list = field(default_factory=list)
+    fine: list = field(default_factory=list)
 
     @property
     def image(self) -> np.ndarray:
@@ -411,6 +416,7 @@ def colorize_mesh(
         ", ".join(names) if names else "chosen by the view",
     )
     results = []
+    fine_sources: list = []
     for render, examples_at_view in zip(renders, databases, strict=True):
         if step is not None:
             step(f"synthesizing view {render.view}")
@@ -431,10 +437,12 @@ def colorize_mesh(
         factor = fine_factor(mesh, views, size, texture_size) if fine and meshes else 1
         images = [r.image for r in results]
         if factor > 1:
-            images = fine_views(examples_set, renders, results, databases, factor)
+            images, fine_sources = fine_views(examples_set, renders, results, databases, factor)
             log.info("views copied at %dx their size for the bake", factor)
         textured = bake_views(mesh, renders, images, texture_size)
-    return MeshResult(mesh=textured, renders=renders, results=results, path="views")
+    return MeshResult(
+        mesh=textured, renders=renders, results=results, path="views", fine=fine_sources
+    )
 
 
 def _atlas_size(mesh, example_textures: list) -> int:

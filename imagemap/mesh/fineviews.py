@@ -24,13 +24,27 @@ pixels' grid.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from imagemap.core.blend import copy_through, fill_background
+from imagemap.materials import MAP_KINDS, NEUTRAL, decode_normals, encode_normals, example_maps
 from imagemap.scene.bake import view_size_for
 from imagemap.scene.views import sample_pixels
 
-__all__ = ["MAX_SOURCE_STEP", "fine_factor", "fine_view", "source_derivatives"]
+__all__ = [
+    "MAX_SOURCE_STEP",
+    "FineSource",
+    "copy_fine",
+    "fine_factor",
+    "fine_maps",
+    "fine_source",
+    "fine_view",
+    "fine_view_maps",
+    "fine_views",
+    "source_derivatives",
+]
 
 #: Two neighbouring pixels copy from one patch when their sources (same example) are at
 #: most this many example pixels apart along each axis: a pose's scale of up to 2, a turn.
@@ -107,7 +121,108 @@ def source_derivatives(source: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def fine_view(result, coarse: list[np.ndarray], fine: list[np.ndarray], factor: int) -> np.ndarray:
+@dataclass
+class FineSource:
+    """Where every pixel of a view copied at ``factor`` times its size reads its examples.
+
+    Attributes
+    ----------
+    index : (kH, kW) int array
+        The example (in ``result.example_names`` order) of each fine pixel.
+    y, x : (kH, kW) float64 arrays
+        The position read in that example's picture, in its pixels at the view's size
+        (scaled to a finer picture of the same example when it is read).
+    inside : (kH, kW) bool array
+        The fine pixels of the object (the synthesized mask's footprint).
+    factor : int
+    """
+
+    index: np.ndarray
+    y: np.ndarray
+    x: np.ndarray
+    inside: np.ndarray
+    factor: int
+
+
+def fine_source(result, factor: int) -> FineSource:
+    """The fine copy's source positions of a view's synthesis (:class:`FineSource`).
+
+    Every fine pixel lies in one synthesized pixel; it reads that pixel's example at the
+    source position moved by the fine pixel's offset within the pixel, through the source
+    map's local derivative (:func:`source_derivatives`). The colour and every PBR map are
+    read at these positions (:func:`copy_fine`): one copy for all of them.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> source = np.zeros((1, 2, 3), np.int32)
+    >>> source[0, :, 2] = [4, 5]
+    >>> fine = fine_source(SimpleNamespace(source=source, mask=np.ones((1, 2), bool)), 2)
+    >>> fine.x[0].tolist(), fine.y[:, 0].tolist()
+    ([3.75, 4.25, 4.75, 5.25], [-0.25, 0.25])
+    """
+    source = np.asarray(result.source)
+    mask = np.asarray(result.mask, dtype=bool)
+    height, width = mask.shape
+    k = int(factor)
+    inside = np.repeat(np.repeat(mask, k, axis=0), k, axis=1)
+    if not mask.any():
+        empty = np.zeros(inside.shape)
+        return FineSource(np.full(inside.shape, -1), empty, empty.copy(), inside, k)
+    # Where the synthesis left no source, the nearest pixel's (the fine mask is the coarse
+    # one's footprint).
+    source = fill_background(source, mask & (source[..., 0] >= 0))
+    derivative = source_derivatives(source, mask)
+    offsets = (np.arange(k) + 0.5) / k - 0.5  # a fine pixel's offset within its pixel
+    rows = np.repeat(np.arange(height), k)
+    cols = np.repeat(np.arange(width), k)
+    dy = np.tile(offsets, height)[:, None]
+    dx = np.tile(offsets, width)[None, :]
+    cell = source[rows][:, cols]  # (kH, kW, 3)
+    d = derivative[rows][:, cols]  # (kH, kW, 2, 2)
+    sy = cell[..., 1] + d[..., 0, 0] * dy + d[..., 0, 1] * dx
+    sx = cell[..., 2] + d[..., 1, 0] * dy + d[..., 1, 1] * dx
+    return FineSource(np.where(inside, cell[..., 0], -1), sy, sx, inside, k)
+
+
+def copy_fine(fine: FineSource, shapes: list[tuple[int, ...]], pictures: list) -> np.ndarray:
+    """Each example's picture read at the fine copy's positions (:func:`fine_source`).
+
+    Parameters
+    ----------
+    fine : FineSource
+    shapes : list of tuple
+        Each example's picture's shape at the view's size (what the source map indexes).
+    pictures : list of (H_k, W_k, C) arrays
+        The pictures read, the same ``C`` for all: the example at the fine size (or at
+        the view's, then sampled between its pixels); positions are scaled by
+        ``H_k / shapes[k][0]`` and ``W_k / shapes[k][1]``.
+
+    Returns
+    -------
+    (kH, kW, C) float32: 0 outside ``fine.inside``.
+    """
+    channels = int(np.shape(pictures[0])[2]) if pictures else 0
+    out = np.zeros(fine.inside.shape + (channels,), dtype=np.float32)
+    for index, (shape, large) in enumerate(zip(shapes, pictures, strict=True)):
+        here = fine.index == index
+        if not here.any():
+            continue
+        scale_y = large.shape[0] / shape[0]
+        scale_x = large.shape[1] / shape[1]
+        picture = np.asarray(large, dtype=np.float32)
+        out[here] = sample_pixels(picture, (fine.x[here] + 0.5) * scale_x - 0.5,
+                                  (fine.y[here] + 0.5) * scale_y - 0.5)  # fmt: skip
+    return out
+
+
+def fine_view(
+    result,
+    coarse: list[np.ndarray],
+    fine: list[np.ndarray],
+    factor: int,
+    source: FineSource | None = None,
+) -> np.ndarray:
     """A view's synthesized map copied again at ``factor`` times its size.
 
     Parameters
@@ -122,6 +237,8 @@ def fine_view(result, coarse: list[np.ndarray], fine: list[np.ndarray], factor: 
         The same pictures at the fine size: a mesh example rendered at ``factor`` times,
         a picture example its own (then ``H_k = h_k``).
     factor : int
+    source : FineSource, optional
+        :func:`fine_source` of ``result`` at ``factor`` (made here when not given).
 
     Returns
     -------
@@ -142,38 +259,19 @@ def fine_view(result, coarse: list[np.ndarray], fine: list[np.ndarray], factor: 
     >>> bool(np.array_equal(out[..., 0] > 0.5, example[..., 0] > 0.5))
     True
     """
-    source = np.asarray(result.source)
     mask = np.asarray(result.mask, dtype=bool)
     height, width = mask.shape
     k = int(factor)
-    image = np.zeros((height * k, width * k, 3), dtype=np.float32)
+    if source is None:
+        source = fine_source(result, k)
+    inside = source.inside
     if not mask.any():
-        return image
-    # Where the synthesis left no source, the nearest pixel's (the fine mask is the coarse
-    # one's footprint).
-    plain = copy_through([np.asarray(c, dtype=np.float32)[..., :3] for c in coarse], source)
+        return np.zeros((height * k, width * k, 3), dtype=np.float32)
+    plain = copy_through([np.asarray(c, dtype=np.float32)[..., :3] for c in coarse],
+                         np.asarray(result.source))  # fmt: skip
     correction = fill_background(np.asarray(result.image, np.float32)[..., :3] - plain, mask)
-    source = fill_background(source, mask & (source[..., 0] >= 0))
-    derivative = source_derivatives(source, mask)
-    offsets = (np.arange(k) + 0.5) / k - 0.5  # a fine pixel's offset within its pixel
-    rows = np.repeat(np.arange(height), k)
-    cols = np.repeat(np.arange(width), k)
-    dy = np.tile(offsets, height)[:, None]
-    dx = np.tile(offsets, width)[None, :]
-    inside = np.repeat(np.repeat(mask, k, axis=0), k, axis=1)
-    cell = source[rows][:, cols]  # (kH, kW, 3)
-    d = derivative[rows][:, cols]  # (kH, kW, 2, 2)
-    sy = cell[..., 1] + d[..., 0, 0] * dy + d[..., 0, 1] * dx
-    sx = cell[..., 2] + d[..., 1, 0] * dy + d[..., 1, 1] * dx
-    for index, (small, large) in enumerate(zip(coarse, fine, strict=True)):
-        here = inside & (cell[..., 0] == index)
-        if not here.any():
-            continue
-        scale_y = large.shape[0] / small.shape[0]
-        scale_x = large.shape[1] / small.shape[1]
-        picture = np.asarray(large, dtype=np.float32)[..., :3]
-        image[here] = sample_pixels(picture, (sx[here] + 0.5) * scale_x - 0.5,
-                                    (sy[here] + 0.5) * scale_y - 0.5)  # fmt: skip
+    image = copy_fine(source, [np.shape(c) for c in coarse],
+                      [np.asarray(f, dtype=np.float32)[..., :3] for f in fine])  # fmt: skip
     # The finish's smooth correction, between the synthesized pixels' centres.
     fy = (np.arange(height * k) + 0.5) / k - 0.5
     fx = (np.arange(width * k) + 0.5) / k - 0.5
@@ -183,9 +281,65 @@ def fine_view(result, coarse: list[np.ndarray], fine: list[np.ndarray], factor: 
     return image
 
 
-def fine_views(examples, renders: list, results: list, databases: list, factor: int) -> list:
+def fine_maps(
+    source: FineSource, shapes: list[tuple[int, ...]], maps: list[dict]
+) -> dict[str, np.ndarray]:
+    """The examples' PBR maps copied at the fine size through the colour's fine copy.
+
+    Every fine pixel reads every map of the example its colour came from, at the same
+    position (:func:`copy_fine`, one read of all maps stacked), as
+    :func:`imagemap.materials.transfer_maps` does at the view's size.
+
+    Parameters
+    ----------
+    source : FineSource
+    shapes : list of tuple
+        Each example's picture's shape at the view's size.
+    maps : list of dict
+        Each example's maps (``{kind: (H_k, W_k) or (H_k, W_k, 3)}``, the picture
+        frame's normals), at the fine size or its own.
+
+    Returns
+    -------
+    dict
+        ``{kind: (kH, kW) or (kH, kW, 3) float32}`` for every kind an example has (an
+        example without it: its neutral value); outside the object the neutral value;
+        normals unit, encoded.
+    """
+    kinds = [k for k in MAP_KINDS if any(k in m for m in maps)]
+    if not kinds:
+        return {}
+    stacks = []
+    for shape, have in zip(shapes, maps, strict=True):
+        size = next((np.shape(have[k])[:2] for k in kinds if k in have), tuple(shape[:2]))
+        layers = []
+        for kind in kinds:
+            layer = have.get(kind)
+            if layer is None:
+                layer = np.broadcast_to(
+                    np.asarray(NEUTRAL[kind], np.float32), size + (MAP_KINDS[kind],)
+                )
+            layers.append(np.asarray(layer, np.float32).reshape(size + (MAP_KINDS[kind],)))
+        stacks.append(np.concatenate(layers, axis=2))
+    stacked = copy_fine(source, shapes, stacks)
+    out, start = {}, 0
+    for kind in kinds:
+        channels = MAP_KINDS[kind]
+        layer = stacked[..., start : start + channels]
+        start += channels
+        if kind == "normal":
+            layer = encode_normals(decode_normals(layer))
+        layer[~source.inside] = NEUTRAL[kind]
+        out[kind] = layer if channels == 3 else layer[..., 0]
+    return out
+
+
+def fine_views(
+    examples, renders: list, results: list, databases: list, factor: int
+) -> tuple[list[np.ndarray], list[FineSource]]:
     """Every view's map copied at ``factor`` times its size (:func:`fine_view`), each mesh
-    example seen at that size, each picture example as it is.
+    example seen at that size, each picture example as it is; and each view's
+    :class:`FineSource`, through which its PBR maps are copied (:func:`fine_view_maps`).
 
     Parameters
     ----------
@@ -197,10 +351,9 @@ def fine_views(examples, renders: list, results: list, databases: list, factor: 
     factor : int
         :func:`fine_factor`.
     """
-    out = []
+    images, sources = [], []
     for render, result, database in zip(renders, results, databases, strict=True):
-        width, height = render.size
-        fine_size = (int(width) * factor, int(height) * factor)
+        fine_size = _fine_size(render, factor)
         coarse, fine = [], []
         for name in result.example_names:
             picture = np.asarray(database[name].image, dtype=np.float32)
@@ -209,5 +362,34 @@ def fine_views(examples, renders: list, results: list, databases: list, factor: 
                 fine.append(examples.picture(name, render.view, fine_size))
             else:
                 fine.append(picture)
-        out.append(fine_view(result, coarse, fine, factor))
+        source = fine_source(result, factor)
+        images.append(fine_view(result, coarse, fine, factor, source))
+        sources.append(source)
+    return images, sources
+
+
+def fine_view_maps(
+    examples, renders: list, results: list, databases: list, sources: list[FineSource]
+) -> list[dict[str, np.ndarray]]:
+    """Every view's PBR maps copied at the fine size through its colour's fine copy
+    (:func:`fine_maps`): a mesh example's maps seen at the fine size
+    (:meth:`~imagemap.mesh.library.ExampleSet.maps`), a picture example's its own."""
+    out = []
+    for render, result, database, source in zip(renders, results, databases, sources,
+                                                strict=True):  # fmt: skip
+        fine_size = _fine_size(render, source.factor)
+        shapes, maps = [], []
+        for name in result.example_names:
+            shapes.append(np.shape(database[name].image))
+            if name in examples.mesh_names:
+                maps.append(examples.maps(name, render.view, fine_size))
+            else:
+                maps.append(example_maps(database[name]))
+        out.append(fine_maps(source, shapes, maps))
     return out
+
+
+def _fine_size(render, factor: int) -> tuple[int, int]:
+    """A view's (width, height) at ``factor`` times its size."""
+    width, height = render.size
+    return (int(width) * int(factor), int(height) * int(factor))

@@ -18,7 +18,8 @@ import numpy as np
 from imagemap.database import Database, database_at_view, prepare_database
 from imagemap.example import Example
 from imagemap.io import InputError
-from imagemap.scene.examples import MeshExample
+from imagemap.materials import example_maps
+from imagemap.scene.examples import MeshExample, _maps_seen
 from imagemap.scene.files import load_mesh
 from imagemap.scene.views import (
     DEFAULT_MARGIN,
@@ -58,6 +59,8 @@ class ExampleSet:
     pictures : dict
         Mesh examples' colours rendered on demand at a view and size the set was not
         prepared for (:meth:`picture`), the latest :data:`KEPT_PICTURES`.
+    picture_maps : dict
+        Their PBR maps from the same renders (:meth:`maps`), by the same keys.
     """
 
     source: Database | None
@@ -66,6 +69,7 @@ class ExampleSet:
     mesh_names: tuple[str, ...] = ()
     names: list[str] = field(default_factory=list)
     pictures: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    picture_maps: dict[str, dict] = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, database: Database | dict[str, Database] | ExampleSet) -> ExampleSet:
@@ -107,11 +111,28 @@ class ExampleSet:
         if self.source is not None or view_key(view, size) in self.views:
             return self.at_view(view, size)[name].image
         mesh = self.mesh(name)
-        picture = render_colours(mesh, render_mesh(mesh, view, size, DEFAULT_MARGIN))
+        render = render_mesh(mesh, view, size, DEFAULT_MARGIN)
+        picture = render_colours(mesh, render)
         while len(self.pictures) >= KEPT_PICTURES:
-            self.pictures.pop(next(iter(self.pictures)))
+            dropped = next(iter(self.pictures))
+            self.pictures.pop(dropped)
+            self.picture_maps.pop(dropped, None)
         self.pictures[key] = picture
+        # Its PBR maps from the same render, as the database's render caches them.
+        self.picture_maps[key] = _maps_seen(mesh, render)
         return picture
+
+    def maps(self, name: str, view: View, size: tuple[int, int]) -> dict[str, np.ndarray]:
+        """Mesh example ``name``'s PBR maps seen from ``view`` at ``size`` (by kind, the
+        normals in the picture's frame), as :meth:`picture` sees its colours: the
+        database's cached render, else rendered with the picture from the loaded mesh."""
+        key = f"{name}|{view_key(view, size)}"
+        if key not in self.pictures and (
+            self.source is not None or view_key(view, size) in self.views
+        ):
+            return example_maps(self.at_view(view, size)[name])
+        self.picture(name, view, size)
+        return self.picture_maps[key]
 
     def mesh(self, name: str):
         """The loaded mesh of the mesh example ``name`` (loaded once)."""

@@ -63,7 +63,13 @@ def _baked(out, what: str = "bake_maps: bake's result") -> np.ndarray:
 
 
 def bake_maps(
-    mesh, renders: list, view_maps: list[dict], bake, textured, projection: bool = False
+    mesh,
+    renders: list,
+    view_maps: list[dict],
+    bake,
+    textured,
+    projection: bool = False,
+    bake_normals=None,
 ) -> dict:
     """The mesh route's maps: each view's maps baked into the colour's atlas.
 
@@ -84,6 +90,11 @@ def bake_maps(
         mesh as written, :func:`imagemap.scene.surface.kept_geometry`: same UVs).
     projection : bool
         ``bake`` projects one view (projection UVs, the texture is the view's picture).
+    bake_normals : callable, optional
+        The same bake of the views' picture-frame normals into world normals at each
+        texel's own surface normal (``bake_views(..., picture_normals=True)``); the maps
+        may then be finer than their views (the fine copy). Without it, each view's
+        normals are turned into world directions at its pixels' surface points first.
 
     Returns
     -------
@@ -97,7 +108,9 @@ def bake_maps(
         group = kinds[start : start + 3]
         images = []
         for maps, render in zip(view_maps, renders, strict=True):
-            packed = np.zeros(render.depth.shape + (3,), dtype=np.float32)
+            # A view's maps at its size, or copied at a whole factor of it (fineviews).
+            shape = np.shape(next(iter(maps.values())))[:2] if maps else render.depth.shape
+            packed = np.zeros(shape + (3,), dtype=np.float32)
             for channel, kind in enumerate(group):
                 packed[..., channel] = maps.get(kind, NEUTRAL[kind][0])
             images.append(packed)
@@ -105,7 +118,9 @@ def bake_maps(
         for channel, kind in enumerate(group):
             out[kind] = baked[..., channel]
     if any("normal" in m for m in view_maps):
-        out["normal"] = _baked_normals(mesh, renders, view_maps, bake, textured, projection)
+        out["normal"] = _baked_normals(
+            mesh, renders, view_maps, bake, textured, projection, bake_normals
+        )
     return out
 
 
@@ -142,19 +157,32 @@ def _to_tangent_space(world: np.ndarray, textured, face: np.ndarray, bary: np.nd
     return local
 
 
-def _baked_normals(mesh, renders, view_maps, bake, textured, projection: bool) -> np.ndarray:
+def _baked_normals(
+    mesh, renders, view_maps, bake, textured, projection: bool, bake_normals=None
+) -> np.ndarray:
     """The views' normal maps as one tangent-space normal texture of ``textured``'s UVs,
     in the frames of its MikkTSpace tangents (:func:`imagemap.tangents.mikk_tangents`,
     what :func:`~imagemap.scene.files.export_textured` writes as ``TANGENT``).
 
-    Each view's normals go to world directions, through the colour's ``bake``, and
-    into the tangent frame at each texel's surface point. With ``projection`` (one
+    Each view's normals go to world directions (at its pixels' surface points, or with
+    ``bake_normals`` at each texel's own), through the colour's bake, and into the
+    tangent frame at each texel's surface point. With ``projection`` (one
     view, its projection UVs) texels are the view's pixels: each takes the frame at
     the surface point the view sees there.
     """
-    pairs = zip(renders, view_maps, strict=True)
-    images = [encode_normals(_world_normals(mesh, render, maps)) for render, maps in pairs]
-    baked = _baked(bake(images))
+    if bake_normals is not None and not projection:
+        flat = np.asarray(NEUTRAL["normal"], dtype=np.float32)
+        images = []
+        for maps in view_maps:  # a view without a normal map: flat, its surface's own
+            shape = np.shape(next(iter(maps.values())))[:2]
+            images.append(
+                maps["normal"] if "normal" in maps else np.broadcast_to(flat, shape + (3,))
+            )
+        baked = _baked(bake_normals(images))
+    else:
+        pairs = zip(renders, view_maps, strict=True)
+        images = [encode_normals(_world_normals(mesh, render, maps)) for render, maps in pairs]
+        baked = _baked(bake(images))
     if projection:
         render = renders[0]
         texel = np.flatnonzero(render.mask)

@@ -19,15 +19,16 @@ from pathlib import Path
 from typing import Any
 
 from imagemap.io import InputError, image_writer
-from imagemap.materials import SIDE_MAPS
+from imagemap.materials import SIDE_MAPS, transfer_maps
 from imagemap.mesh.colorize import (
     MeshResult,
     colorize_mesh,
     registrable_examples,
     uv_layout_examples,
 )
+from imagemap.mesh.fineviews import fine_view_maps
 from imagemap.mesh.library import ExampleSet
-from imagemap.mesh.maps import atlas_maps, mesh_maps, with_surface_maps
+from imagemap.mesh.maps import atlas_maps, bake_maps, with_surface_maps
 from imagemap.outputs import exported
 from imagemap.progress import progress, step_line
 from imagemap.scene.bake import bake_views, project_texture
@@ -164,15 +165,30 @@ def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
 
     else:
 
-        def bake(images):
-            return bake_views(mesh, renders, images, width, texture_only=True)
+        def bake(images, picture_normals=False):
+            return bake_views(mesh, renders, images, width, texture_only=True,
+                              picture_normals=picture_normals)  # fmt: skip
 
     databases = [examples.at_view(r.view, size) for r in renders]
     # The normal map in the frames of the mesh as written (keep_surface's normals), the
     # frames of the TANGENTs export_textured writes beside them.
     frames = frame_mesh(made.mesh, mesh)
-    maps = mesh_maps(
-        frames, mesh, renders, made.results, databases, bake, projection=len(renders) == 1
+    if made.fine:
+        # Copied at the texels' resolution through the colour's own fine copy (#46
+        # item 2); the normals turned into world directions at each texel's surface.
+        view_maps = fine_view_maps(examples, renders, made.results, databases, made.fine)
+    else:
+        view_maps = [transfer_maps(r, db) for r, db in zip(made.results, databases, strict=True)]
+    if not any(view_maps):
+        return made.mesh, {}
+    maps = bake_maps(
+        mesh,
+        renders,
+        view_maps,
+        bake,
+        frames,
+        projection=len(renders) == 1,
+        bake_normals=(lambda images: bake(images, picture_normals=True)) if made.fine else None,
     )
     side = {kind: maps.pop(kind) for kind in SIDE_MAPS if kind in maps}
     return with_surface_maps(made.mesh, maps), side

@@ -486,6 +486,17 @@ def blend_chosen_views(
     return colour, chosen
 
 
+def _picture_to_world(encoded: np.ndarray, view: View, normal: np.ndarray) -> np.ndarray:
+    """Encoded tangent-space normals (N, 3) in ``view``'s picture frame at surface points
+    of unit ``normal`` (N, 3) -> encoded world directions."""
+    from imagemap.materials import _picture_frame, decode_normals, encode_normals
+
+    local = decode_normals(encoded).astype(np.float64)
+    tangent, bitangent = _picture_frame(view.rotation(), normal)
+    world = local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * normal
+    return encode_normals(world)
+
+
 def bake_views(
     mesh,
     renders: list[MeshRender],
@@ -495,6 +506,7 @@ def bake_views(
     seam_band: float = SEAM_BAND_PIXELS,
     return_views: bool = False,
     texture_only: bool = False,
+    picture_normals: bool = False,
 ):
     """Bake several views' maps into one UV atlas (see the module notes).
 
@@ -519,6 +531,12 @@ def bake_views(
         Return the texture alone ((T, T, 3) float32, not rounded to a texture's 8 bits;
         the atlas is the one the same call makes without it): for maps written at more
         bits, such as a 16-bit height map.
+    picture_normals : bool
+        ``images`` are tangent-space normals (encoded) in each view's picture frame (the
+        picture's x and y laid on the surface, :func:`imagemap.materials.view_normals_to_atlas`):
+        each texel's sample is turned into a world direction in the frame at the texel's
+        own surface normal before the views are blended; the texture holds world normals
+        (encoded).
 
     Returns
     -------
@@ -554,6 +572,8 @@ def bake_views(
         mask = np.repeat(np.repeat(render.mask, fine, axis=0), fine, axis=1)
         filled = fill_background(np.asarray(image, dtype=np.float32)[..., :3], mask)
         colours[k] = sample_pixels(filled, col, row)
+        if picture_normals:
+            colours[k] = _picture_to_world(colours[k], render.view, normal)
     texel_world = np.sqrt(world_per_uv(vertices, faces, uv)) / texture_size
     band = seam_band * pixel_size / texel_world
     colours_out, chosen = blend_chosen_views(colours, scores, texel, texture_size, band)
