@@ -22,6 +22,16 @@ MAGNIFIED_MIN_WRONG = 30
 #: difference below this and their correlation above the next (random pixels; see the test).
 SAME_POINTS_DIFFERENCE = 0.12
 SAME_POINTS_CORRELATION = 0.85
+#: The known normal pattern's test: the fine copy's factor and the atlas' side (3.2
+#: texels a view pixel, 0.8 a fine pixel).
+FACTOR_MAPS = 4
+TEXELS = 64
+#: Texels (of 2704 inner ones) on the wrong side of the pattern's edge: the fine copy's
+#: bake at most this many (texels whose centre lies within a fine pixel of the edge,
+#: where the bilinear reads mix both sides: measured 8 of the edge's ~52 rows), the
+#: coarse bake at least the next (the view's pixels' steps, 3.2 texels: measured 34).
+FINE_MAX_WRONG = 12
+COARSE_MIN_WRONG = 24
 
 
 def _edge(size: int, slope: float) -> np.ndarray:
@@ -112,3 +122,73 @@ def test_a_prepared_set_renders_the_pictures_the_database_caches(
     assert made.shape == (72, 96, 3)
     assert np.array_equal(made, database.picture("head_00", FRONT, fine))
     assert prepared.picture("head_00", FRONT, fine) is made
+    # Its PBR maps from the same render, as the database's cached render holds them.
+    maps = prepared.maps("head_00", FRONT, fine)
+    cached = database.maps("head_00", FRONT, fine)
+    assert sorted(maps) == sorted(cached)
+    assert all(np.array_equal(maps[k], cached[k]) for k in maps)
+
+
+def _tilted(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The known normal pattern on the sheet: tilted towards +x (0.6, 0, 0.8) right of
+    the slanted line x = 0.3 y + 0.1, flat left of it; encoded (H, W, 3)."""
+    tilted = (x > 0.3 * y + 0.1)[..., None]
+    return np.where(tilted, [0.8, 0.5, 0.9], [0.5, 0.5, 1.0]).astype(np.float32)
+
+
+def _pixel_centres(render, factor: int) -> tuple[np.ndarray, np.ndarray]:
+    """World x, y of a front view's pixel centres at ``factor`` times its size."""
+    width, height = render.size
+    step = render.pixel_size / factor
+    cols = (np.arange(width * factor) + 0.5) * step - width * render.pixel_size / 2
+    rows = (np.arange(height * factor) + 0.5) * step - height * render.pixel_size / 2
+    return np.meshgrid(render.center[0] + cols, render.center[1] - rows)
+
+
+def test_the_fine_copy_bakes_an_examples_normal_pattern_at_the_texels_resolution():
+    """A flat sheet seen from the front at 32x24 (3.2 texels of its 64^2 atlas a pixel)
+    copies an example whose normal map (and roughness, the same pattern) has a slanted
+    edge. Copied through the colour's fine copy at 4x and baked, every map is the pattern
+    at the texels' resolution: the edge within a texel of the truth; baked from the
+    view's own maps (the coarse bake), the edge is stepped by the view's pixels."""
+    from imagemap.mesh.fineviews import fine_maps, fine_source
+    from imagemap.mesh.maps import bake_maps
+
+    sheet = trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]],
+                            [[0, 1, 2], [0, 2, 3]], process=False)  # fmt: skip
+    sheet.visual = trimesh.visual.TextureVisuals(uv=sheet.vertices[:, :2] / 2 + 0.5)
+    render = render_mesh(sheet, "front", (32, 24))
+    source = np.zeros((24, 32, 3), np.int32)
+    source[..., 1], source[..., 2] = np.mgrid[:24, :32]
+    result = SimpleNamespace(mask=render.mask, source=source, example_names=["a"])
+    coarse = _tilted(*_pixel_centres(render, 1))
+    fine = _tilted(*_pixel_centres(render, FACTOR_MAPS))
+    maps = {"normal": fine, "roughness": fine[..., 0]}
+    copied = fine_maps(fine_source(result, FACTOR_MAPS), [coarse.shape], [maps])
+    assert copied["normal"].shape == (24 * FACTOR_MAPS, 32 * FACTOR_MAPS, 3)
+
+    def bake(images, picture_normals=False):
+        return bake_views(sheet, [render], images, TEXELS, texture_only=True,
+                          picture_normals=picture_normals)  # fmt: skip
+
+    baked_fine = bake_maps(sheet, [render], [copied], bake, sheet,
+                           bake_normals=lambda images: bake(images, True))  # fmt: skip
+    baked_coarse = bake_maps(sheet, [render], [{"normal": coarse, "roughness": coarse[..., 0]}],
+                             bake, sheet)  # fmt: skip
+    centre = (np.arange(TEXELS) + 0.5) / TEXELS * 2 - 1
+    u, v = np.meshgrid(centre, -centre)  # row 0 is v = 1
+    truth = _tilted(u, v)[..., 0] > 0.65
+    # Away from the sheet's border (the views' silhouette margin).
+    inner = (np.abs(u) < 0.8) & (np.abs(v) < 0.8)
+    for name, baked in (("fine", baked_fine), ("coarse", baked_coarse)):
+        for kind in ("normal", "roughness"):
+            values = baked[kind][..., 0] if kind == "normal" else baked[kind]
+            wrong = np.count_nonzero(((values > 0.65) != truth) & inner)
+            if name == "fine":
+                assert wrong <= FINE_MAX_WRONG, (kind, wrong)
+            else:
+                assert wrong >= COARSE_MIN_WRONG, (kind, wrong)
+    # The tilt is the example's, in the frames of the sheet's tangents (u along x).
+    tilted = truth & inner & (np.abs(u - (0.3 * v + 0.1)) > 0.1)
+    decoded = baked_fine["normal"][tilted] * 2 - 1
+    assert np.allclose(decoded, [0.6, 0.0, 0.8], atol=0.02)
