@@ -7,6 +7,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 import trimesh
 
 from imagemap.mesh.fineviews import fine_factor, fine_view, source_derivatives
@@ -192,3 +193,28 @@ def test_the_fine_copy_bakes_an_examples_normal_pattern_at_the_texels_resolution
     tilted = truth & inner & (np.abs(u - (0.3 * v + 0.1)) > 0.1)
     decoded = baked_fine["normal"][tilted] * 2 - 1
     assert np.allclose(decoded, [0.6, 0.0, 0.8], atol=0.02)
+
+
+def test_one_view_projects_a_picture_copied_finer_over_the_same_picture():
+    """One view (projection UVs): a map a whole factor finer than its render is the
+    texture itself, over the same picture (the UVs equal the coarse projection's), so a
+    face samples the fine map where it sampled the coarse one; a map of another size is
+    refused."""
+    from imagemap.io import InputError
+    from imagemap.scene.bake import project_texture
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    render = render_mesh(box, "front", (24, 18))
+    rng = np.random.default_rng(1)
+    coarse = rng.random((18, 24, 3)).astype(np.float32)
+    fine = np.repeat(np.repeat(coarse, FACTOR, 0), FACTOR, 1)
+    a = project_texture(box, render, coarse)
+    b = project_texture(box, render, fine)
+    assert np.array_equal(a.visual.uv, b.visual.uv)
+    texture = project_texture(box, render, fine, texture_only=True)
+    assert texture.shape == (18 * FACTOR, 24 * FACTOR, 3)
+    # Inside the object the texture is the fine map itself.
+    inside = np.repeat(np.repeat(render.mask, FACTOR, 0), FACTOR, 1)
+    assert np.array_equal(texture[inside], fine[inside])
+    with pytest.raises(InputError, match="does not match the render"):
+        project_texture(box, render, fine[:-1])

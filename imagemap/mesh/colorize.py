@@ -335,7 +335,7 @@ def colorize_mesh(
         (uv-space), or each view's synthesis and then the bake (views): one call per view
         plus one (the mesh command's progress lines, :func:`imagemap.progress.step_line`).
     fine : bool
-        Views path, several views, mesh examples among those used: each view's map is
+        Views path, mesh examples among those used: each view's map is
         copied again at the texels' resolution before the bake
         (:mod:`imagemap.mesh.fineviews`; #46 item 2, no stair steps); False bakes the
         synthesized maps as they are.
@@ -428,17 +428,19 @@ def colorize_mesh(
             names = _by_use(results, names)
     if step is not None:
         step("projecting the view" if len(views) == 1 else f"baking {len(views)} views")
+    # Each view copied again at the texels' resolution (#46 item 2), when an example can
+    # be seen that finely (a mesh example; a picture has its pixels), then baked (or,
+    # one view, projected: the texture is the fine picture).
+    meshes = any(n in examples_set.mesh_names for r in results for n in r.example_names)
+    factor = fine_factor(mesh, views, size, texture_size) if fine and meshes else 1
+    images = [r.image for r in results]
+    if factor > 1:
+        images, fine_sources = fine_views(examples_set, renders, results, databases, factor)
+        log.info("views copied at %dx their size for the %s", factor,
+                 "projection" if len(views) == 1 else "bake")  # fmt: skip
     if len(views) == 1:
-        textured = project_texture(mesh, renders[0], results[0].image)
+        textured = project_texture(mesh, renders[0], images[0])
     else:
-        # Baked from each view copied again at the texels' resolution (#46 item 2), when
-        # an example can be seen that finely (a mesh example; a picture has its pixels).
-        meshes = any(n in examples_set.mesh_names for r in results for n in r.example_names)
-        factor = fine_factor(mesh, views, size, texture_size) if fine and meshes else 1
-        images = [r.image for r in results]
-        if factor > 1:
-            images, fine_sources = fine_views(examples_set, renders, results, databases, factor)
-            log.info("views copied at %dx their size for the bake", factor)
         textured = bake_views(mesh, renders, images, texture_size)
     return MeshResult(
         mesh=textured, renders=renders, results=results, path="views", fine=fine_sources

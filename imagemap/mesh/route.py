@@ -36,7 +36,7 @@ from imagemap.scene.coverage import choose_views
 from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import export_textured
 from imagemap.scene.surface import frame_mesh, keep_surface
-from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
+from imagemap.scene.views import DEFAULT_SIZE, FRONT, View, render_mesh
 
 __all__ = [
     "MeshRequest",
@@ -156,18 +156,14 @@ def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
         return made.mesh, {}
     renders = made.renders
     width = made.mesh.visual.material.baseColorTexture.size[0]  # type: ignore[attr-defined]
+
     # The bakes give the texture itself, not rounded to 8 bits: the 16-bit height map
     # keeps the examples' precision (the same atlas as the colour's bake).
-    if len(renders) == 1:
-
-        def bake(images):
-            return project_texture(mesh, renders[0], images[0], texture_only=True)
-
-    else:
-
-        def bake(images, picture_normals=False):
-            return bake_views(mesh, renders, images, width, texture_only=True,
-                              picture_normals=picture_normals)  # fmt: skip
+    def bake(images, picture_normals=False):
+        if len(made.renders) == 1:
+            return project_texture(mesh, made.renders[0], images[0], texture_only=True)
+        return bake_views(mesh, made.renders, images, width, texture_only=True,
+                          picture_normals=picture_normals)  # fmt: skip
 
     databases = [examples.at_view(r.view, size) for r in renders]
     # The normal map in the frames of the mesh as written (keep_surface's normals), the
@@ -181,14 +177,25 @@ def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
         view_maps = [transfer_maps(r, db) for r, db in zip(made.results, databases, strict=True)]
     if not any(view_maps):
         return made.mesh, {}
+    projection = len(renders) == 1
+    if made.fine and projection and any("normal" in m for m in view_maps):
+        # One view copied finer: its normals are turned at the surface points the view
+        # sees at the fine size (the texels of the projection are the fine pixels).
+        render = renders[0]
+        fine_size = (render.size[0] * made.fine[0].factor, render.size[1] * made.fine[0].factor)
+        renders = [render_mesh(mesh, render.view, fine_size)]
     maps = bake_maps(
         mesh,
         renders,
         view_maps,
         bake,
         frames,
-        projection=len(renders) == 1,
-        bake_normals=(lambda images: bake(images, picture_normals=True)) if made.fine else None,
+        projection=projection,
+        bake_normals=(
+            (lambda images: bake(images, picture_normals=True))
+            if made.fine and not projection
+            else None
+        ),
     )
     side = {kind: maps.pop(kind) for kind in SIDE_MAPS if kind in maps}
     return with_surface_maps(made.mesh, maps), side

@@ -60,12 +60,18 @@ def project_texture(mesh, render: MeshRender, image: np.ndarray, *, texture_only
 
     See the module notes for what hidden faces get. With ``texture_only``, the texture
     alone (float32, not rounded to the 8 bits of a mesh's texture): for maps written
-    at more bits than a texture holds, such as a 16-bit height map.
+    at more bits than a texture holds, such as a 16-bit height map. ``image`` may be a
+    whole factor finer than the render (the view copied at the texels' resolution,
+    :mod:`imagemap.mesh.fineviews`): the texture is then that image, over the same
+    picture (the projection UVs are in the picture's fractions).
     """
     image = np.asarray(image, dtype=np.float32)[..., :3]
-    if image.shape[:2] != render.depth.shape:
+    height, width = render.depth.shape
+    fine = image.shape[0] // height if height else 0
+    if fine < 1 or image.shape[:2] != (height * fine, width * fine):
         raise InputError(f"image {image.shape} does not match the render {render.depth.shape}")
-    texture = fill_background(image, render.mask)
+    mask = np.repeat(np.repeat(render.mask, fine, axis=0), fine, axis=1)
+    texture = fill_background(image, mask)
     if texture_only:
         return texture
     uv = render.projection_uv(np.asarray(mesh.vertices))
