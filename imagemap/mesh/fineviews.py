@@ -39,6 +39,7 @@ __all__ = [
     "copy_fine",
     "fine_factor",
     "fine_maps",
+    "fine_render",
     "fine_source",
     "fine_view",
     "fine_view_maps",
@@ -393,3 +394,63 @@ def _fine_size(render, factor: int) -> tuple[int, int]:
     """A view's (width, height) at ``factor`` times its size."""
     width, height = render.size
     return (int(width) * int(factor), int(height) * int(factor))
+
+
+def fine_render(mesh, render, factor: int):
+    """``render`` at ``factor`` times its size without casting again: every fine pixel of
+    a pixel that sees the mesh takes that pixel's face, at the barycentrics of the fine
+    pixel's centre in the face's projection (clamped into the face where the centre falls
+    outside it: the nearest point of the face, whose normal is its neighbour's at their
+    shared edge). What the projection's normals need (its texels are the fine pixels),
+    at a fraction of a render's memory at the fine size (fish_008 at 951x714: 638 MB).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> from imagemap.scene.views import render_mesh
+    >>> sheet = trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]],
+    ...                         [[0, 1, 2], [0, 2, 3]], process=False)
+    >>> coarse = render_mesh(sheet, "front", (8, 8))
+    >>> fine = fine_render(sheet, coarse, 2)
+    >>> exact = render_mesh(sheet, "front", (16, 16))  # cast at the fine size
+    >>> same = exact.mask & fine.mask & (fine.face == exact.face)  # all but the diagonal's
+    >>> int((exact.mask & fine.mask & ~same).sum())
+    6
+    >>> bool(np.allclose(fine.barycentric[same], exact.barycentric[same], atol=1e-6))
+    True
+    """
+    from dataclasses import replace
+
+    k = int(factor)
+    height, width = render.depth.shape
+    face = np.repeat(np.repeat(render.face, k, axis=0), k, axis=1)
+    mask = face >= 0
+    col, row, _ = render.to_pixels(np.asarray(mesh.vertices, dtype=np.float64))
+    corners = np.asarray(mesh.faces, dtype=np.int64)[face[mask]]  # (N, 3)
+    px = (col[corners] + 0.5) * k - 0.5
+    py = (row[corners] + 0.5) * k - 0.5
+    rows, cols = np.nonzero(mask)
+    v0x, v0y = px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]
+    v1x, v1y = px[:, 2] - px[:, 0], py[:, 2] - py[:, 0]
+    qx, qy = cols - px[:, 0], rows - py[:, 0]
+    det = v0x * v1y - v1x * v0y
+    safe = np.where(np.abs(det) > 1e-12, det, 1.0)
+    b1 = (qx * v1y - v1x * qy) / safe
+    b2 = (v0x * qy - qx * v0y) / safe
+    bary = np.clip(np.stack([1.0 - b1 - b2, b1, b2], axis=1), 0.0, None)
+    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-12)
+    coarse = np.repeat(np.repeat(render.barycentric, k, axis=0), k, axis=1)[mask]
+    flat = np.abs(det) <= 1e-12  # a face seen edge-on: the pixel's own hit
+    bary[flat] = coarse[flat]
+    barycentric = np.zeros((height * k, width * k, 3), dtype=np.float32)
+    barycentric[mask] = bary
+    return replace(
+        render,
+        depth=np.repeat(np.repeat(render.depth, k, axis=0), k, axis=1),
+        mask=mask,
+        face=face,
+        barycentric=barycentric,
+        z=np.repeat(np.repeat(render.z, k, axis=0), k, axis=1),
+        pixel_size=render.pixel_size / k,
+        size=(width * k, height * k),
+    )

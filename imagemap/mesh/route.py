@@ -26,7 +26,7 @@ from imagemap.mesh.colorize import (
     registrable_examples,
     uv_layout_examples,
 )
-from imagemap.mesh.fineviews import fine_view_maps
+from imagemap.mesh.fineviews import fine_render, fine_view_maps
 from imagemap.mesh.library import ExampleSet
 from imagemap.mesh.maps import atlas_maps, bake_maps, with_surface_maps
 from imagemap.outputs import exported
@@ -36,7 +36,7 @@ from imagemap.scene.coverage import choose_views
 from imagemap.scene.examples import MeshExample
 from imagemap.scene.files import export_textured
 from imagemap.scene.surface import frame_mesh, keep_surface
-from imagemap.scene.views import DEFAULT_SIZE, FRONT, View, render_mesh
+from imagemap.scene.views import DEFAULT_SIZE, FRONT, View
 
 __all__ = [
     "MeshRequest",
@@ -181,9 +181,7 @@ def _with_view_maps(made: MeshResult, mesh, examples: ExampleSet, size):
     if made.fine and projection and any("normal" in m for m in view_maps):
         # One view copied finer: its normals are turned at the surface points the view
         # sees at the fine size (the texels of the projection are the fine pixels).
-        render = renders[0]
-        fine_size = (render.size[0] * made.fine[0].factor, render.size[1] * made.fine[0].factor)
-        renders = [render_mesh(mesh, render.view, fine_size)]
+        renders = [fine_render(mesh, renders[0], made.fine[0].factor)]
     maps = bake_maps(
         mesh,
         renders,
