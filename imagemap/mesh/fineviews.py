@@ -18,8 +18,11 @@ texture at the output size:
 - plus the finish's smooth correction (blend minus plain copy) of the synthesized map,
   interpolated.
 
-Seams between two examples, or two patches, stay where the synthesis put them, on its
-pixels' grid.
+The PBR maps go through the same copy (:func:`fine_maps`: the same :class:`FineSource`,
+every map of the example stacked and read at once), and one view's projection too
+(:func:`fine_render` gives its normals the surface points of the fine pixels). Seams
+between two examples, or two patches, stay where the synthesis put them, on its pixels'
+grid.
 """
 
 from __future__ import annotations
