@@ -265,8 +265,9 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
         shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
         options = ["--preset", "busts", "--texture-size", "64", "-q"]
     elif path == "views of mesh examples":  # copied again at 2x (#46 item 2): the batch
-        # renders the example at the fine size from the mesh it ships
-        shutil.copy(shared_heads / "head_00.glb", db)
+        # renders the example, and its normal and roughness maps, at the fine size from
+        # the mesh it ships
+        _with_maps(shared_heads / "head_00.glb", db / "head_00.glb")
         shutil.copy(routes / "queries" / "fin.glb", queries / "query.glb")
         options = ["--preset", "busts", "--size", "40x30", "--texture-size", "64", "-q"]
         options += ["--views", "front,back", "--no-register"]
@@ -290,6 +291,11 @@ def test_the_other_mesh_paths_give_the_same_bytes(path, routes, shared_heads, tm
     report = json.loads((tmp_path / "report.json").read_text())
     if path == "uv-space":
         assert report["path"] == "uv-space" and report["views"] == []
+    elif path == "views of mesh examples":
+        from tests.test_glb import glb_json
+
+        material = glb_json(batch / "query.glb")["materials"][0]
+        assert "normalTexture" in material
     elif path == "registered":
         from tests.test_glb import glb_json
 
