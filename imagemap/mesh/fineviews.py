@@ -27,7 +27,7 @@ grid.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -422,8 +422,6 @@ def fine_render(mesh, render, factor: int):
     >>> bool(np.allclose(fine.barycentric[same], exact.barycentric[same], atol=1e-6))
     True
     """
-    from dataclasses import replace
-
     k = int(factor)
     height, width = render.depth.shape
     face = np.repeat(np.repeat(render.face, k, axis=0), k, axis=1)

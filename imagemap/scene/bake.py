@@ -29,6 +29,7 @@ from scipy import ndimage
 
 from imagemap.core.blend import fill_background
 from imagemap.io import InputError
+from imagemap.materials import _picture_frame, decode_normals, encode_normals
 from imagemap.scene.files import textured_mesh
 from imagemap.scene.views import (
     DEFAULT_MARGIN,
@@ -495,8 +496,6 @@ def blend_chosen_views(
 def _picture_to_world(encoded: np.ndarray, view: View, normal: np.ndarray) -> np.ndarray:
     """Encoded tangent-space normals (N, 3) in ``view``'s picture frame at surface points
     of unit ``normal`` (N, 3) -> encoded world directions."""
-    from imagemap.materials import _picture_frame, decode_normals, encode_normals
-
     local = decode_normals(encoded).astype(np.float64)
     tangent, bitangent = _picture_frame(view.rotation(), normal)
     world = local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * normal
