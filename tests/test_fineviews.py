@@ -123,11 +123,8 @@ def test_a_prepared_set_renders_the_pictures_the_database_caches(
     assert made.shape == (72, 96, 3)
     assert np.array_equal(made, database.picture("head_00", FRONT, fine))
     assert prepared.picture("head_00", FRONT, fine) is made
-    # Its PBR maps from the same render, as the database's cached render holds them.
-    maps = prepared.maps("head_00", FRONT, fine)
-    cached = database.maps("head_00", FRONT, fine)
-    assert sorted(maps) == sorted(cached)
-    assert all(np.array_equal(maps[k], cached[k]) for k in maps)
+    # (Its PBR maps: these heads carry none; the slow batch-equals-single test's
+    # normal- and roughness-mapped example compares them byte for byte.)
 
 
 def _tilted(x: np.ndarray, y: np.ndarray) -> np.ndarray:

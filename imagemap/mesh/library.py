@@ -19,7 +19,7 @@ from imagemap.database import Database, database_at_view, prepare_database
 from imagemap.example import Example
 from imagemap.io import InputError
 from imagemap.materials import example_maps
-from imagemap.scene.examples import MeshExample, _maps_seen
+from imagemap.scene.examples import MeshExample, maps_seen
 from imagemap.scene.files import load_mesh
 from imagemap.scene.views import (
     DEFAULT_MARGIN,
@@ -119,7 +119,7 @@ class ExampleSet:
             self.picture_maps.pop(dropped, None)
         self.pictures[key] = picture
         # Its PBR maps from the same render, as the database's render caches them.
-        self.picture_maps[key] = _maps_seen(mesh, render)
+        self.picture_maps[key] = maps_seen(mesh, render)
         return picture
 
     def maps(self, name: str, view: View, size: tuple[int, int]) -> dict[str, np.ndarray]:

@@ -23,7 +23,7 @@ from imagemap.scene.views import (
     sample_image,
 )
 
-__all__ = ["RENDER_VERSION", "MeshExample", "mesh_examples"]
+__all__ = ["RENDER_VERSION", "MeshExample", "maps_seen", "mesh_examples"]
 
 #: Bumped whenever rendering changes, so cached renders of examples are redone.
 RENDER_VERSION = 3  # 2: the material's PBR maps rendered and cached too; 3: normal maps read
@@ -92,7 +92,7 @@ class MeshExample(Example):
         except InputError as exc:
             raise InputError(f"{self.mesh_path}: {exc} (an example needs colours)") from exc
         arrays = {"depth": render.depth, "image": image}
-        arrays.update({f"map_{k}": v for k, v in _maps_seen(mesh, render).items()})
+        arrays.update({f"map_{k}": v for k, v in maps_seen(mesh, render).items()})
         try:
             write_npz(cached, **arrays)
         except OSError:
@@ -122,7 +122,7 @@ class MeshExample(Example):
 
     def rendered_maps(self) -> dict[str, np.ndarray]:
         """The material's maps seen from this example's view, like its image-map
-        (rendered and cached with it; see :func:`_maps_seen`)."""
+        (rendered and cached with it; see :func:`maps_seen`)."""
         arrays = self._render()
         return {k[4:]: v for k, v in arrays.items() if k.startswith("map_")}
 
@@ -134,7 +134,7 @@ class MeshExample(Example):
         return f"MeshExample({self.name!r}, {self.mesh_path.name!r}, view={self.view})"
 
 
-def _maps_seen(mesh, render) -> dict[str, np.ndarray]:
+def maps_seen(mesh, render) -> dict[str, np.ndarray]:
     """A mesh material's PBR maps as ``render`` sees them: grey maps sampled at each
     pixel's UVs; the normal map turned from the mesh's UV tangent frame into the
     picture's (:func:`imagemap.materials.atlas_normals_to_view`)."""
