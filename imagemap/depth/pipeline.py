@@ -282,6 +282,14 @@ def _working(state: State, config: DepthConfig) -> State:
     return state
 
 
+#: A block's neighbour whose offset (source minus position, in averaged pixels) differs
+#: from the block's by at most this much, in the same example, continues the block's copy
+#: (the fragments' definition of one copy, :data:`imagemap.metrics.coherence.
+#: FRAGMENT_DRIFT`): the full-size offset is interpolated between them, so a copy that
+#: drifts by one averaged pixel steps by one full-size pixel, not by ``factor``.
+FINE_DRIFT = 1
+
+
 def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
                 example_shapes: list[tuple[int, int]]) -> np.ndarray:  # fmt: skip
     """A source map of block-averaged pictures at full size: pixel ``(y, x)`` copies the
@@ -289,28 +297,73 @@ def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
     factor * sx + x % factor)`` where ``(e, sy, sx)`` is the source of block ``(y //
     factor, x // factor)``; clipped to its example, -1 kept where there is no source.
 
+    Where a neighbouring block continues the copy (the same example, its offset within
+    :data:`FINE_DRIFT` averaged pixels of the block's), the pixel's offset is the
+    bilinear interpolation of the blocks' offsets between their centres, rounded to a
+    full-size pixel: a copy that drifts by one averaged pixel steps by one full-size
+    pixel at a time, as a full-size synthesis's slowly warping copy does, instead of
+    jumping ``factor`` pixels at a block's edge. Seams (another example, a larger jump)
+    are kept where the blocks put them.
+
     Examples
     --------
     >>> source = np.array([[[0, 3, 5], [1, 0, 0]]], np.int32)
     >>> fine = fine_source(source, 2, (2, 3), [(8, 12), (8, 12)])
     >>> fine[..., 1].tolist(), fine[..., 2].tolist()
     ([[6, 6, 0], [7, 7, 1]], [[10, 11, 0], [10, 11, 0]])
+
+    A copy drifting by one averaged pixel between two blocks steps by one pixel:
+
+    >>> drift = np.array([[[0, 0, 4], [0, 0, 6]]], np.int32)  # offsets 4 and 5
+    >>> fine = fine_source(drift, 2, (2, 4), [(8, 16)])
+    >>> (fine[0, :, 2] - np.arange(4)).tolist()  # by blocks alone: 8, 8, 10, 10
+    [8, 9, 10, 10]
     """
     height, width = shape
-    heights = np.array([s[0] for s in example_shapes], dtype=np.int32)
-    widths = np.array([s[1] for s in example_shapes], dtype=np.int32)
-    cols = np.arange(width) // factor
-    dx = (np.arange(width) % factor).astype(np.int32)
+    rows, cols = source.shape[:2]
+    heights = np.array([s[0] for s in example_shapes], dtype=np.int64)
+    widths = np.array([s[1] for s in example_shapes], dtype=np.int64)
+    # Offsets of the blocks (source minus block position, averaged pixels).
+    index = source[..., 0]
+    offset = source[..., 1:].astype(np.int64) - np.stack(
+        np.indices((rows, cols)), axis=-1
+    )  # (rows, cols, 2)
+
+    def axis(n: int, blocks: int):
+        # Each full-size pixel's block, its lower and upper neighbouring block centres
+        # and its weight on the upper one.
+        u = (np.arange(n) + 0.5) / factor - 0.5
+        low = np.floor(u)
+        return (
+            np.arange(n) // factor,
+            np.clip(low, 0, blocks - 1).astype(np.int64),
+            np.clip(low + 1, 0, blocks - 1).astype(np.int64),
+            u - low,
+        )
+
+    bx, x0, x1, wx = axis(width, cols)
     fine = np.empty((height, width, 3), dtype=np.int32)
     for y0 in range(0, height, _ROWS):
         ys = np.arange(y0, min(y0 + _ROWS, height))
-        cell = source[ys // factor][:, cols]
-        index = cell[..., 0]
-        known = np.clip(index, 0, len(example_shapes) - 1)
-        dy = (ys % factor).astype(np.int32)[:, None]
-        fine[y0 : y0 + len(ys), :, 0] = index
-        fine[y0 : y0 + len(ys), :, 1] = np.clip(cell[..., 1] * factor + dy, 0, heights[known] - 1)
-        fine[y0 : y0 + len(ys), :, 2] = np.clip(cell[..., 2] * factor + dx, 0, widths[known] - 1)
+        by, ya, yb, wy = (part[ys] for part in axis(height, rows))
+        own_index = index[by][:, bx]
+        own = offset[by][:, bx]  # (rows, width, 2)
+        blended = np.zeros(own.shape, dtype=np.float64)
+        for cy, weight_y in ((ya, 1 - wy), (yb, wy)):
+            for cx, weight_x in ((x0, 1 - wx), (x1, wx)):
+                other = offset[cy][:, cx]
+                continues = (index[cy][:, cx] == own_index) & (
+                    np.abs(other - own).max(axis=-1) <= FINE_DRIFT
+                )
+                used = np.where(continues[..., None], other, own)
+                blended += (weight_y[:, None] * weight_x[None, :])[..., None] * used
+        step = np.floor(factor * blended + 0.5).astype(np.int64)
+        known = np.clip(own_index, 0, len(example_shapes) - 1)
+        fine[y0 : y0 + len(ys), :, 0] = own_index
+        fine[y0 : y0 + len(ys), :, 1] = np.clip(ys[:, None] + step[..., 0], 0, heights[known] - 1)
+        fine[y0 : y0 + len(ys), :, 2] = np.clip(
+            np.arange(width)[None, :] + step[..., 1], 0, widths[known] - 1
+        )
     return fine
 
 
