@@ -325,8 +325,8 @@ def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
     widths = np.array([s[1] for s in example_shapes], dtype=np.int64)
     # Offsets of the blocks (source minus block position, averaged pixels).
     index = source[..., 0]
-    offset = source[..., 1:].astype(np.int64) - np.stack(
-        np.indices((rows, cols)), axis=-1
+    offset = source[..., 1:].astype(np.int64) - np.moveaxis(
+        np.indices((rows, cols)), 0, -1
     )  # (rows, cols, 2)
 
     def axis(n: int, blocks: int):
