@@ -75,8 +75,7 @@ from imagemap.depth.finish import (
 from imagemap.depth.guides import sized_config, to_ycbcr
 from imagemap.depth.pipeline import ColorizeResult, engine_params
 from imagemap.errors import InputError
-from imagemap.mesh.padding import SurfacePadding, engine_reach
-from imagemap.mesh.padding import surface_padding as place_padding
+from imagemap.mesh.padding import SurfacePadding, engine_reach, surface_padding
 from imagemap.scene.bake import covered_texels, rasterize_uv
 
 __all__ = [
@@ -583,7 +582,7 @@ def _surface_padded(example: UVExample, texture: np.ndarray, working: int) -> np
         return texture
     vertices, faces, uv = mesh_uv_arrays(example.mesh)
     reach = int(np.ceil(size / working)) + 1
-    pad = place_padding(vertices, faces, uv, size, reach)
+    pad = surface_padding(vertices, faces, uv, size, reach)
     return pad.apply(_unit(texture), pad.mask)
 
 
@@ -670,7 +669,6 @@ def colorize_uv(
     working_size: int = WORKING_SIZE,
     weights: tuple[float, float, float] = (POSITION_WEIGHT, NORMAL_WEIGHT, CURVATURE_WEIGHT),
     same_texel: bool = False,
-    surface_padding: bool = True,
 ):
     """Synthesise a texture in the query's UV atlas from examples in the same layout.
 
@@ -699,11 +697,6 @@ def colorize_uv(
         (:func:`same_texel_source`; the seams are then placed and blended between
         examples only): for examples resampled into the query's atlas (the registered
         path), where an offset can only take another chart's colour.
-    surface_padding : bool
-        The padding texels the engine's windows reach take every band (guides and the
-        examples' appearance) at the surface point continuing their chart across its
-        border (:mod:`imagemap.mesh.padding`); False: continued from the nearest used
-        texel (as before #46's seams).
 
     Returns
     -------
@@ -761,14 +754,13 @@ def colorize_uv(
         """The surface padding of a mesh's atlas at the working size (once per mesh: the
         registered examples all lie on the query's)."""
         if id(owner) not in paddings:
-            paddings[id(owner)] = place_padding(*mesh_uv_arrays(owner), working, reach)
+            paddings[id(owner)] = surface_padding(*mesh_uv_arrays(owner), working, reach)
         return paddings[id(owner)]
 
     def bands(state: SynthesisState, config) -> SynthesisState:
         levels, kind = config.pyramid.levels, config.matching.appearance_pyramid
-        # The padding the windows reach, read on the surface across the seams (0: none,
-        # every padding texel its nearest used texel's values).
-        reach = engine_reach(config.pyramid.patch_sizes) if surface_padding else 0
+        # The padding the windows reach, read on the surface across the seams.
+        reach = engine_reach(config.pyramid.patch_sizes)
         pad = padding_of(mesh, reach)
         state.query_levels = ReleasableLevels(
             _uv_mappings(pad.apply(query.guides(*weights), query.mask), query.mask, levels)
@@ -877,7 +869,7 @@ def colorize_uv(
         # for the output texels at the charts' borders that fall there.
         correction = fill_background(working_image - plain, query.mask)
         del plain
-        if surface_padding and not same_texel:
+        if not same_texel:
             # A working texel at a chart's border is used, but some of its full-size texels
             # may not be (the example's padding): read on the surface there too.
             full = [_surface_padded(e, t, working) for e, t in zip(chosen, full, strict=True)]
