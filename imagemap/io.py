@@ -281,18 +281,24 @@ def _grey(rgb: np.ndarray) -> bool:
     )
 
 
-def validate_depth(depth: np.ndarray, name: str = "depth") -> np.ndarray:
+def validate_depth(depth: np.ndarray, name: str = "depth", *, copy: bool = True) -> np.ndarray:
     """Check a depth array and return it as float32 with background 0.
 
     NaN becomes background (0). Raises :class:`InputError` naming ``name`` on a
-    wrong shape, infinite or negative values, or an empty foreground.
+    wrong shape, infinite or negative values, or an empty foreground. With ``copy``
+    False a float32 depth without NaN is not copied: a read-only view of it is
+    returned (a caller that only reads it holds no second copy of the query).
     """
     depth = np.asarray(depth)
     if depth.ndim != 2:
         raise InputError(f"{name}: a depth map must be 2-D (H, W), got shape {depth.shape}")
     if depth.shape[0] < 8 or depth.shape[1] < 8:
         raise InputError(f"{name}: depth map of {depth.shape} is too small (at least 8x8)")
-    depth = np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=np.inf, neginf=-np.inf)
+    if copy or depth.dtype != np.float32 or np.isnan(depth).any():
+        depth = np.nan_to_num(depth.astype(np.float32), nan=0.0, posinf=np.inf, neginf=-np.inf)
+    else:
+        depth = depth.view()
+        depth.flags.writeable = False
     if not np.all(np.isfinite(depth)):
         raise InputError(f"{name}: depth has infinite values")
     if np.any(depth < 0):

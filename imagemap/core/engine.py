@@ -317,6 +317,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         appearance = solver.vote(matches, appearance)
         previous = np.inf
         for iteration in range(plan.max_iterations):
+            trim_heap()  # the previous E-step's and M-step's freed temporaries
             solver.set_appearance(appearance)
             candidates = solver.search(
                 matches, init=False, seed=level_seed + 1 + iteration, rng=rng
@@ -329,6 +330,11 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             better = new_cost < old_cost
             matches = np.where(better, candidates, matches)
             value = float(np.where(better, new_cost, old_cost).mean(dtype=np.float64))
+            changed = int(better.sum())
+            # The E-step's temporaries (a few MB of int64 and float32 per window centre)
+            # freed before the M-step and the next E-step, where the level's peak is.
+            del candidates, old_cost, new_cost, differ, better
+            trim_heap()  # given back (glibc keeps freed blocks below 4 MB resident)
             objective[level].append(value)
             if params.vote == "mode":
                 # Generalised EM: a copying M-step is kept only if it does not raise the
@@ -349,9 +355,9 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
                 level,
                 iteration,
                 value,
-                int(better.sum()),
+                changed,
             )
-            if not better.any() or previous - value < params.tolerance * abs(previous):
+            if not changed or previous - value < params.tolerance * abs(previous):
                 break
             previous = value
         if plan.final_reseed > 0:

@@ -127,10 +127,9 @@ def place_seams(
                 )
                 for crop, corner, planes in zip(exemplars, corners, exemplar_channels, strict=True)
             ]
-        source = _shifted(source, -corners)
         placed = _coarse_to_fine(
             exemplars,
-            source,
+            _shifted(source, -corners),  # handed over: freed there once the band is known
             reference,
             smoothness=smoothness,
             spread=spread,
@@ -280,6 +279,7 @@ def _solve(
     label_e = source[..., 0].astype(np.int32)
     label_y = (source[..., 1] - yy).astype(np.int32)
     label_x = (source[..., 2] - xx).astype(np.int32)
+    del source  # the labels are all it was needed for (freed where it was handed over)
     movable = _movable(label_e, mask)
     # The labels that may move: with a band, only those of its pixels (a label outside
     # it has nowhere to go), and their areas there set each move's reach.
@@ -465,6 +465,7 @@ def _coarse_to_fine(
     own = (fine == source).all(axis=-1)
     lost = taken & ~own & ~_reads_inside(exemplars, exemplar_masks, fine)
     fine[lost] = source[lost]
+    del source  # (H, W, 3) int32: not held through the fine solve (place_seams hands it over)
     taken &= ~lost
     # The band: every pixel within ``band`` (Chebyshev) of a seam between movable
     # pixels or of a movable pixel the coarse grid left out.
@@ -479,9 +480,11 @@ def _coarse_to_fine(
     del keys, across
     free = ndimage.maximum_filter(seeds, size=2 * band + 1) & movable
     del seeds, own, lost, taken, covered, movable
+    handed = [fine]  # the fine labels' only reference goes to _solve (it frees them)
+    del fine
     return _solve(
         exemplars,
-        fine,
+        handed.pop(),
         reference,
         smoothness,
         spread,

@@ -32,8 +32,11 @@ log = logging.getLogger("imagemap")
 _CHUNK = 16384  # windows per block when extracting features: bounds memory
 #: A product of at most this many multiply-adds may take OpenBLAS's small-matrix kernels
 #: (SkylakeX's up to 100^3), which sum in another order than the large product's: a
-#: block of windows is halved for the threads only where both halves stay above it.
+#: block of windows is split for the threads only where every part stays above it.
 _SMALL_PRODUCT = 100**3
+#: Windows per part of a block on the kernels' threads (a part's gathered windows and
+#: products are each thread's scratch: 2048 windows of 7 x 7 x 4 are 1.6 MB).
+_PART_ROWS = 2048
 #: Up to this many dimensions the PCA's directions come from the covariance (eigh).
 _COVARIANCE_DIMS = 1024
 # Fixed PatchMatch work split (results do not depend on the thread count): bands of
@@ -46,6 +49,7 @@ _BAND_MULTIPLE = 2
 # Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
 _EXACT_START_FLOPS = 2e9
 _SOURCE_ROWS = 256  # rows per block when the dense source map is made
+_COST_PIECE = 32768  # window centres per piece of a subset's exact costs (bounded gathers)
 #: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
 #: margin of that largest magnitude over the largest value in the PCA samples.
 _FEATURE_RANGE = 32767
@@ -330,11 +334,15 @@ class _Projection:
         out: np.ndarray | None = None,
         inverse_unit: float | None = None,
         threads: bool = True,
+        buffers: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> np.ndarray:
         """PCA coordinates of the windows at ``index`` (into ``out``, (N, n_components),
         which may be a column slice of a larger array), in blocks of windows at fixed
         edges (:func:`_feature_blocks`), the blocks on the kernels' threads unless
-        ``threads`` is False; with ``inverse_unit``, quantized (see :func:`_store`)."""
+        ``threads`` is False; with ``inverse_unit``, quantized (see :func:`_store`).
+        ``buffers``: (windows, product) scratch of at least N * width and N *
+        n_components floats (1-D), for a single block (``threads`` False) that runs on a
+        pooled thread: made by the caller, not in that thread's own heap."""
         n = index[0].shape[0]
         if out is None:
             out = np.empty((n, self.n_components), dtype=np.float32)
@@ -347,10 +355,13 @@ class _Projection:
         rows = max((stop - start for start, stop in blocks), default=0)
         # Buffers for the windows and their product, reused from block to block (not a
         # fresh large array per block: each would be mapped and faulted in anew).
+        shapes = ((rows, windows.width), (rows, self.n_components))
         scratch = _Scratch(
-            lambda: (
-                np.empty((rows, windows.width), dtype=np.float32),
-                np.empty((rows, self.n_components), dtype=np.float32),
+            lambda: tuple(
+                np.empty(shape, dtype=np.float32)
+                if buffers is None
+                else buffer[: shape[0] * shape[1]].reshape(shape)
+                for shape, buffer in zip(shapes, buffers or shapes, strict=True)
             ),
             len(blocks) if threads else 1,
         )
@@ -373,28 +384,34 @@ class _Projection:
 
 def _feature_blocks(n: int, products: list[int]) -> list[tuple[int, int]]:
     """Blocks of rows 0:n for the features' products on the kernels' threads: the
-    blocks of ``_CHUNK`` rows (fixed edges), each halved where both halves' products
-    (``products``: multiply-adds per row of each) stay above ``_SMALL_PRODUCT``. Two
-    threads then hold two half blocks' scratch, what one whole block held on one thread.
-    A row's product is the same in a half as in the whole block (OpenBLAS's products
-    sum each row alike at any number of rows above the small-matrix kernels').
+    blocks of ``_CHUNK`` rows (fixed edges), each split into parts of about
+    ``_PART_ROWS`` rows where every part's products (``products``: multiply-adds per
+    row of each) stay above ``_SMALL_PRODUCT`` (into fewer parts where they would not;
+    a block whose halves would not stays whole). The threads then hold a part's
+    scratch each, not a whole block's. A row's product is the same in a part as in the
+    whole block (OpenBLAS's products sum each row alike at any number of rows above the
+    small-matrix kernels'), and a row takes the small-matrix kernels only where its
+    whole block does: the same bytes as whole blocks.
 
     Examples
     --------
-    >>> _feature_blocks(20000, [196 * 39])
-    [(0, 8192), (8192, 16384), (16384, 18192), (18192, 20000)]
-    >>> _feature_blocks(16400, [196 * 39])  # 16 rows: not halved
-    [(0, 8192), (8192, 16384), (16384, 16400)]
+    >>> _feature_blocks(20000, [196 * 39])[6:]  # 8 parts, then 2 of 1808 rows
+    [(12288, 14336), (14336, 16384), (16384, 18192), (18192, 20000)]
+    >>> _feature_blocks(16400, [196 * 39])[-1]  # 16 rows: not split
+    (16384, 16400)
+    >>> _feature_blocks(20000, [200])  # parts of 5001 rows at least: 3 in the first block
+    [(0, 5461), (5461, 10922), (10922, 16384), (16384, 20000)]
     """
     blocks = []
     per_row = min(products, default=0)
     for start in range(0, n, _CHUNK):
         stop = min(start + _CHUNK, n)
-        half = start + (stop - start + 1) // 2
-        if (stop - half) * per_row > _SMALL_PRODUCT:
-            blocks += [(start, half), (half, stop)]
-        else:
-            blocks.append((start, stop))
+        size = stop - start
+        parts = -(-size // _PART_ROWS)
+        while parts > 1 and (size // parts) * per_row <= _SMALL_PRODUCT:
+            parts -= 1
+        edges = start + (size * np.arange(parts + 1)) // parts
+        blocks += [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
     return blocks
 
 
@@ -780,24 +797,42 @@ class LevelSolver:
         ]
         blocks = _feature_blocks(len(position), products)
         rows = max((stop - start for start, stop in blocks), default=0)
-        scratch = _Scratch(lambda: np.empty((rows, n_dims), np.float32), len(blocks))
+        width = max(part.width for part in windows)
+        n_components = max(
+            self.guide_projection.n_components, self.appearance_projection.n_components
+        )
+        # Each block's values, and the windows and products its projections use, made
+        # here on the calling thread (one set per thread), not by each projection.
+        scratch = _Scratch(
+            lambda: (
+                np.empty((rows, n_dims), np.float32),
+                np.empty(rows * width, np.float32),
+                np.empty(rows * n_components, np.float32),
+            ),
+            len(blocks),
+        )
         weight = np.float32(self.params.position_weight)
 
         def block(start: int, stop: int, alone: bool) -> None:
             # Blocks of windows at fixed edges (_feature_blocks), on the kernels' threads
             # (a single block projects on them itself).
-            with scratch as values:
+            with scratch as (values, *buffers):
                 sub = tuple(i[start:stop] for i in index)
                 values = values[: stop - start]
+                lent = None if alone else tuple(buffers)
                 if n_guide:
                     self.guide_projection.project(
-                        windows[0], sub, values[:, :n_guide], threads=alone
+                        windows[0], sub, values[:, :n_guide], threads=alone, buffers=lent
                     )
                 values[:, n_guide : n_guide + 2] = position[start:stop] * weight
                 values[:, n_guide + 2] = bias if np.ndim(bias) == 0 else bias[start:stop]
                 if self.appearance_projection.n_components and appearance:
                     self.appearance_projection.project(
-                        windows[1], sub, values[:, self.n_init_dims :], threads=alone
+                        windows[1],
+                        sub,
+                        values[:, self.n_init_dims :],
+                        threads=alone,
+                        buffers=lent,
                     )
                 elif self.appearance_projection.n_components:
                     values[:, self.n_init_dims :] = 0.0
@@ -832,14 +867,33 @@ class LevelSolver:
         """Exact window distances of query centres (all, or ``subset``) to ``matches``."""
         start = time.perf_counter()
         if subset is None:
-            centres_y, centres_x = self.query_band_y, self.query_band_x
-            positions, scales = self.query_position, self.query_position_scale2
+            out = self._costs(
+                matches,
+                self.query_band_y,
+                self.query_band_x,
+                self.query_position,
+                self.query_position_scale2,
+            )
         else:
-            matches = matches[subset]
-            centres_y, centres_x = self.query_band_y[subset], self.query_band_x[subset]
-            positions = self.query_position[subset]
-            scales = self.query_position_scale2[subset]
-        out = _kernels.window_costs(
+            # In pieces: the subset's gathered centres, positions and matches (about 30
+            # bytes a centre) stay small beside the level's arrays.
+            out = np.empty(len(subset), dtype=np.float32)
+            for first in range(0, len(subset), _COST_PIECE):
+                piece = subset[first : first + _COST_PIECE]
+                out[first : first + len(piece)] = self._costs(
+                    matches[piece],
+                    self.query_band_y[piece],
+                    self.query_band_x[piece],
+                    self.query_position[piece],
+                    self.query_position_scale2[piece],
+                )
+        self.timer.add("costs", start)
+        return out
+
+    def _costs(self, matches, centres_y, centres_x, positions, scales) -> np.ndarray:
+        """The exact costs' kernel (:func:`~imagemap.core.kernels.window_costs`) for the
+        centres given, each with its match."""
+        return _kernels.window_costs(
             self.query_active,
             self.exemplar_guide,
             self.exemplar_appearance,
@@ -858,8 +912,6 @@ class LevelSolver:
             self.cand_bias,
             scales,
         )
-        self.timer.add("costs", start)
-        return out
 
     def vote(
         self, matches: np.ndarray, appearance_padded: np.ndarray, kind: str | None = None

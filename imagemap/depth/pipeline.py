@@ -831,7 +831,7 @@ def colorize(
     names = _check_arguments(depth, database, examples, seed)
     config = resolve_config(preset, **options)
     guard_colorize(depth, database, config, examples=names)
-    depth = validate_depth(depth)
+    depth = validate_depth(depth, copy=False)  # only read: the caller's array, not a copy
     if len(database) == 0:
         raise InputError("the database has no examples")
     return _run(depth, database, config, STAGES, names, seed, quiet)

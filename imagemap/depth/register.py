@@ -64,6 +64,9 @@ FIT_PIXELS = 3000
 #: image: the outline and the band within a few percent of it lead the fit (swept in #43:
 #: 0.02, 0.04 and 0.08 within the seed spread).
 OUTLINE_REACH = 0.04
+#: Rows of a full-size map interpolated from a coarse grid at a time (their coordinates
+#: are 16 bytes a pixel: bounded at 4096^2).
+_ROWS = 256
 
 
 def registration_guide(
@@ -416,10 +419,20 @@ def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarr
     """
     size = max(float(np.sqrt(mask.sum())), 1.0)
     relative = np.where(mask, depth / float(np.median(depth[mask])), 0.0)
-    detail = np.where(mask, relative - _smooth_inside(relative, mask, scale * size), 0.0)
+    # In place on the smoothed map (float64, as the difference is): no full-size
+    # temporaries beside it (the relief stage's peak at 1024^2).
+    smooth = _smooth_inside(relative, mask, scale * size)
+    detail = np.subtract(relative, smooth, out=smooth)
+    del relative
+    outside = ~mask
+    detail[outside] = 0.0
     values = detail[mask]
     spread = 1.4826 * float(np.median(np.abs(values - np.median(values)))) + 1e-12
-    return np.where(mask, np.tanh(detail / (3.0 * spread)), 0.0).astype(np.float32)
+    del values
+    np.divide(detail, 3.0 * spread, out=detail)
+    np.tanh(detail, out=detail)
+    detail[outside] = 0.0
+    return detail.astype(np.float32)
 
 
 def _smooth_inside(values: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
@@ -433,20 +446,36 @@ def _smooth_inside(values: np.ndarray, mask: np.ndarray, sigma: float) -> np.nda
         return smooth_inside(values, mask, sigma)
     height, width = mask.shape
     h, w = -(-height // block) * block, -(-width // block) * block
-    padded = np.zeros((h, w)), np.zeros((h, w))
-    padded[0][:height, :width] = np.where(mask, values, 0.0)
-    padded[1][:height, :width] = mask
-    total, cover = (
-        a.reshape(h // block, block, w // block, block).mean(axis=(1, 3)) for a in padded
-    )
+
+    def block_means(inside: np.ndarray) -> np.ndarray:
+        padded = np.zeros((h, w))  # one full-size float64 map at a time
+        padded[:height, :width] = inside
+        return padded.reshape(h // block, block, w // block, block).mean(axis=(1, 3))
+
+    total = block_means(np.where(mask, values, 0.0))
+    cover = block_means(mask)
     weight = ndimage.gaussian_filter(cover, sigma / block)
     smooth = ndimage.gaussian_filter(total, sigma / block) / np.maximum(weight, 1e-12)
-    # Block pixel j is full-resolution coordinate (j + 0.5) * block - 0.5.
-    ys = (np.arange(height) + 0.5) / block - 0.5
-    xs = (np.arange(width) + 0.5) / block - 0.5
-    gy, gx = np.meshgrid(ys, xs, indexing="ij")
-    full = ndimage.map_coordinates(smooth, [gy, gx], order=1, mode="nearest")
-    return np.where(mask, full, 0.0)
+    full = _upsampled(smooth, block, mask.shape)
+    full[~mask] = 0.0
+    return full
+
+
+def _upsampled(grid: np.ndarray, step: float, shape: tuple[int, int]) -> np.ndarray:
+    """A coarse ``grid`` of ``step`` x ``step`` blocks brought to ``shape`` by bilinear
+    interpolation (of the grid's dtype), ``_ROWS`` rows at a time (each point's value is
+    its own: the same as of the whole map's coordinates at once)."""
+    height, width = shape
+    # Block pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
+    ys = (np.arange(height) + 0.5) / step - 0.5
+    xs = (np.arange(width) + 0.5) / step - 0.5
+    full = np.empty(shape, dtype=grid.dtype)
+    for y0 in range(0, height, _ROWS):
+        gy, gx = np.meshgrid(ys[y0 : y0 + _ROWS], xs, indexing="ij")
+        ndimage.map_coordinates(
+            grid, [gy, gx], output=full[y0 : y0 + _ROWS], order=1, mode="nearest"
+        )
+    return full
 
 
 def _detail_grid(
@@ -595,19 +624,20 @@ def relief_agreement(
     if not residuals or disagreement <= 0:
         return None
     size = float(np.sqrt(mask.sum()))
-    height, width = mask.shape
     smallest = None
     for warp in residuals:
         step = warp.relief_step
         assert warp.relief_residual is not None
         smooth = ndimage.gaussian_filter(warp.relief_residual, reach * size / step)
-        ys = (np.arange(height) + 0.5) / step - 0.5
-        xs = (np.arange(width) + 0.5) / step - 0.5
-        gy, gx = np.meshgrid(ys, xs, indexing="ij")
-        full = ndimage.map_coordinates(smooth, [gy, gx], order=1, mode="nearest")
-        smallest = full if smallest is None else np.minimum(smallest, full)
+        full = _upsampled(smooth, step, mask.shape)
+        smallest = full if smallest is None else np.minimum(smallest, full, out=smallest)
+        del full
     assert smallest is not None
-    return (1.0 / (1.0 + smallest / disagreement)).astype(np.float32)
+    # 1 / (1 + D / disagreement), in place (in the residuals' dtype, as before).
+    np.divide(smallest, disagreement, out=smallest)
+    np.add(1.0, smallest, out=smallest)
+    np.divide(1.0, smallest, out=smallest)
+    return smallest.astype(np.float32)
 
 
 def position_scales(
