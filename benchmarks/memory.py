@@ -100,7 +100,6 @@ def _child(class_dir: str, save: str | None, library: bool) -> dict:
     from imagemap.core.stages import Stage
     from imagemap.depth.budget import colorize_estimate
     from imagemap.depth.config import resolve_config
-    from imagemap.metrics.coherence import fragments
 
     if not library:
         from imagemap.cli import _map_large_blocks
@@ -160,6 +159,10 @@ def _child(class_dir: str, save: str | None, library: bool) -> dict:
     cpu_seconds = (cpu_end.user - cpu_start.user) + (cpu_end.system - cpu_start.system)
     marks.mark()
     call_peak_mb = max(marks.taken_mb[first_mark:])
+
+    # Imported after the call: the measure's own modules (SciPy's sparse graphs, 11 MB
+    # resident) are no part of what a synthesis holds (`imagemap synthesize` imports none).
+    from imagemap.metrics.coherence import fragments
 
     image = np.ascontiguousarray(result.image)
     digest = hashlib.sha256(image.tobytes()).hexdigest()

@@ -377,6 +377,10 @@ def image_writer(image: np.ndarray, bits: int = 8, extension: str = ".png"):
     return write
 
 
+#: Rows of a float image converted to integers at a time when it is written.
+_WRITE_ROWS = 256
+
+
 def _image_array(path: Path, image: np.ndarray, bits: int) -> np.ndarray:
     array = np.asarray(image)
     if not (array.ndim == 2 or (array.ndim == 3 and array.shape[2] in (1, 3, 4))):
@@ -395,7 +399,16 @@ def _image_array(path: Path, image: np.ndarray, bits: int) -> np.ndarray:
             )
         scale = 255 if bits == 8 else 65535
         dtype = np.uint8 if bits == 8 else np.uint16
-        array = np.round(np.clip(np.nan_to_num(array), 0.0, 1.0) * scale).astype(dtype)
+        # round(clip(x, 0, 1) * scale) a block of rows at a time, in place on the block's
+        # copy: the same values as of the whole image, without its four float copies.
+        out = np.empty(array.shape, dtype)
+        for y0 in range(0, array.shape[0], _WRITE_ROWS):
+            block = np.nan_to_num(array[y0 : y0 + _WRITE_ROWS])
+            np.clip(block, 0.0, 1.0, out=block)
+            np.multiply(block, scale, out=block)
+            np.round(block, out=block)
+            out[y0 : y0 + _WRITE_ROWS] = block
+        array = out
     return array
 
 

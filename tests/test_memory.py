@@ -486,3 +486,133 @@ def test_exemplar_lookup_covers_the_box_of_the_candidates_not_the_frame():
         solver.cand_x - solver.band_origin[solver.cand_e, 1],
     ]
     assert np.array_equal(found, np.arange(len(solver.cand_e)))
+
+
+@pytest.mark.parametrize(
+    "n, width, components, split",
+    [
+        (engine._CHUNK + 3000, 196, 39, True),
+        (engine._CHUNK + 30, 147, 29, True),
+        (30000, 20, 5, False),  # halves of a block would take the small kernels: whole
+    ],
+)
+def test_features_in_parts_are_the_bytes_of_whole_blocks(n, width, components, split):
+    """The features' blocks split into parts for the threads (_feature_blocks): every row's
+    product has the bytes it had in its whole block of _CHUNK rows (OpenBLAS sums a row
+    alike at any row count above its small-matrix kernels, which a part takes only where
+    its whole block did: the short last block of 30 rows, the narrow products)."""
+    rng = np.random.default_rng(n)
+    windows = rng.random((n, width)).astype(np.float32)
+    matrix = rng.random((width, components)).astype(np.float32)
+    whole = [windows[a : a + engine._CHUNK] @ matrix for a in range(0, n, engine._CHUNK)]
+    blocks = engine._feature_blocks(n, [width * components])
+    assert [b[0] for b in blocks[1:]] == [b[1] for b in blocks[:-1]]  # 0:n in order
+    assert blocks[0][0] == 0 and blocks[-1][1] == n
+    assert (len(blocks) > len(whole)) == split  # split for the threads where it may be
+    parts = [windows[a:b] @ matrix for a, b in blocks]
+    assert np.array_equal(np.concatenate(parts), np.concatenate(whole))
+
+
+def test_upsampled_in_row_blocks_equals_the_whole_maps_interpolation():
+    from scipy import ndimage
+
+    from imagemap.depth import register
+
+    rng = np.random.default_rng(0)
+    shape = (2 * register._ROWS + 37, 91)
+    for step, dtype in [(5.0, np.float64), (7.3, np.float32)]:
+        grid = rng.random((int(shape[0] / step) + 2, int(shape[1] / step) + 2)).astype(dtype)
+        ys = (np.arange(shape[0]) + 0.5) / step - 0.5
+        xs = (np.arange(shape[1]) + 0.5) / step - 0.5
+        gy, gx = np.meshgrid(ys, xs, indexing="ij")
+        whole = ndimage.map_coordinates(grid, [gy, gx], order=1, mode="nearest")
+        blocks = register._upsampled(grid, step, shape)
+        assert blocks.dtype == whole.dtype and np.array_equal(blocks, whole)
+
+
+@pytest.mark.parametrize("shape, scale", [((300, 517), 0.1), ((64, 48), 0.02)])
+def test_relief_detail_in_place_equals_its_formula(shape, scale):
+    """relief_detail works in place on one float64 map: the bytes of the formula written
+    out with its temporaries (blocks of the smoothing at 300 x 517, none at 64 x 48)."""
+    from imagemap.depth import register
+
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    mask = (yy - shape[0] / 2) ** 2 / (0.4 * shape[0]) ** 2 + (xx - shape[1] / 2) ** 2 / (
+        0.35 * shape[1]
+    ) ** 2 < 1
+    rng = np.random.default_rng(1)
+    depth = np.where(mask, 1.0 + 0.2 * rng.random(shape) + 0.001 * yy, 0.0).astype(np.float32)
+    size = float(np.sqrt(mask.sum()))
+    relative = np.where(mask, depth / float(np.median(depth[mask])), 0.0)
+    detail = np.where(mask, relative - register._smooth_inside(relative, mask, scale * size), 0.0)
+    values = detail[mask]
+    spread = 1.4826 * float(np.median(np.abs(values - np.median(values)))) + 1e-12
+    expected = np.where(mask, np.tanh(detail / (3.0 * spread)), 0.0).astype(np.float32)
+    assert np.array_equal(register.relief_detail(depth, mask, scale), expected)
+
+
+def test_relief_agreement_in_place_equals_its_formula():
+    from types import SimpleNamespace
+
+    from scipy import ndimage
+
+    from imagemap.depth import register
+
+    rng = np.random.default_rng(2)
+    mask = np.zeros((300, 200), bool)
+    mask[40:260, 30:170] = True
+    warps = [
+        SimpleNamespace(relief_residual=rng.random((40, 30)).astype(np.float32), relief_step=s)
+        for s in (8.0, 7.5)
+    ]
+    size = float(np.sqrt(mask.sum()))
+    smallest = None
+    for warp in warps:
+        smooth = ndimage.gaussian_filter(warp.relief_residual, 0.05 * size / warp.relief_step)
+        ys = (np.arange(300) + 0.5) / warp.relief_step - 0.5
+        xs = (np.arange(200) + 0.5) / warp.relief_step - 0.5
+        gy, gx = np.meshgrid(ys, xs, indexing="ij")
+        full = ndimage.map_coordinates(smooth, [gy, gx], order=1, mode="nearest")
+        smallest = full if smallest is None else np.minimum(smallest, full)
+    expected = (1.0 / (1.0 + smallest / 0.3)).astype(np.float32)
+    found = register.relief_agreement(mask, warps, 0.3, 0.05)  # type: ignore[arg-type]
+    assert found is not None and np.array_equal(found, expected)
+
+
+def test_images_are_converted_for_writing_in_row_blocks_with_the_same_values():
+    from pathlib import Path
+
+    from imagemap import io
+
+    rng = np.random.default_rng(3)
+    for shape, dtype, bits in [
+        ((2 * io._WRITE_ROWS + 5, 33, 4), np.float32, 8),
+        ((io._WRITE_ROWS + 1, 20), np.float64, 16),
+        ((40, 7, 3), np.float16, 8),
+    ]:
+        image = (rng.random(shape) * 1.4 - 0.2).astype(dtype)
+        image.flat[::97] = np.inf  # clipped to 1, as before
+        image.flat[::7] = np.round(image.flat[::7] * 510) / 510  # halves: rounding ties
+        scale = 255 if bits == 8 else 65535
+        expected = np.round(np.clip(np.nan_to_num(image), 0.0, 1.0) * scale)
+        found = io._image_array(Path("map.png"), image, bits)
+        assert found.dtype == (np.uint8 if bits == 8 else np.uint16)
+        assert np.array_equal(found, expected.astype(found.dtype))
+
+
+def test_validate_depth_without_copy_returns_a_read_only_view_of_a_valid_query():
+    from imagemap.io import validate_depth
+
+    depth = np.zeros((16, 16), np.float32)
+    depth[4:12, 4:12] = 0.5
+    view = validate_depth(depth, copy=False)
+    assert np.shares_memory(view, depth) and not view.flags.writeable
+    assert depth.flags.writeable  # the caller's array is as it was
+    assert not np.shares_memory(validate_depth(depth), depth)  # copied by default
+    with_nan = depth.copy()
+    with_nan[0, 0] = np.nan
+    cleaned = validate_depth(with_nan, copy=False)  # NaN made background: in a copy
+    assert not np.shares_memory(cleaned, with_nan) and cleaned[0, 0] == 0.0
+    assert np.isnan(with_nan[0, 0])
+    wide = validate_depth(depth.astype(np.float64), copy=False)
+    assert wide.dtype == np.float32 and np.array_equal(wide, depth)
