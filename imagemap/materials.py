@@ -83,6 +83,8 @@ NEUTRAL: dict[str, tuple[float, ...]] = {
 #: are taken as flat: on the fish, such texels were those filled from another surface
 #: (a fin's hidden side from its visible one), not relief.
 MIN_NORMAL_Z = 0.3
+#: Rows of a copied normal map re-encoded at a time (bounded float temporaries).
+_ROWS = 256
 
 
 def encode_normals(normals: np.ndarray) -> np.ndarray:
@@ -266,9 +268,16 @@ def transfer_maps(
                     neutral.reshape((-1,) if len(neutral) == 3 else ()), shape
                 )
             exemplars.append(np.asarray(exemplar, dtype=np.float32))
-        copied = copy_through(exemplars, np.asarray(result.source)).astype(np.float32)
-        if kind == "normal":
-            copied = encode_normals(decode_normals(copied))
+        # float32 maps copied as float32 (the values float64 held), a block of rows at a
+        # time, normals re-encoded so too (per pixel: the same bytes as the whole map's,
+        # without its full-size float64 copy and gathers).
+        source = np.asarray(result.source)
+        copied = np.empty(source.shape[:2] + exemplars[0].shape[2:], dtype=np.float32)
+        for y0 in range(0, copied.shape[0], _ROWS):
+            rows = copied[y0 : y0 + _ROWS]
+            rows[...] = copy_through(exemplars, source[y0 : y0 + _ROWS], dtype=np.float32)
+            if kind == "normal":
+                rows[...] = encode_normals(decode_normals(rows))
         copied[~mask] = neutral if MAP_KINDS[kind] == 3 else neutral[0]
         out[kind] = copied
     return out

@@ -616,3 +616,39 @@ def test_validate_depth_without_copy_returns_a_read_only_view_of_a_valid_query()
     assert np.isnan(with_nan[0, 0])
     wide = validate_depth(depth.astype(np.float64), copy=False)
     assert wide.dtype == np.float32 and np.array_equal(wide, depth)
+
+
+def test_maps_copied_in_row_blocks_equal_the_whole_maps_copy():
+    """transfer_maps copies float32 and a block of rows at a time: the bytes of the whole
+    map copied in float64 and the normals re-encoded at once."""
+    from types import SimpleNamespace
+
+    from imagemap import materials
+    from imagemap.core.blend import copy_through
+    from imagemap.example import Example
+
+    rng = np.random.default_rng(4)
+    h, w = materials._ROWS + 40, 30
+    depth = np.pad(np.full((h - 2, w - 2), 0.5, np.float32), 1)
+    examples = [
+        materials.with_maps(
+            Example.from_arrays(f"e{i}", depth, rng.random((h, w, 3))),
+            normal=rng.random((h, w, 3)),
+            roughness=rng.random((h, w)),
+        )
+        for i in range(2)
+    ]
+    source = np.stack(
+        [rng.integers(-1, 2, (h, w)), rng.integers(-2, h + 2, (h, w)), rng.integers(0, w, (h, w))],
+        axis=-1,
+    ).astype(np.int32)
+    result = SimpleNamespace(source=source, example_names=["e0", "e1"], mask=source[..., 0] >= 0)
+    found = materials.transfer_maps(result, examples)
+    maps = [materials.example_maps(e) for e in examples]
+    for kind in ("normal", "roughness"):
+        expected = copy_through([m[kind] for m in maps], source).astype(np.float32)
+        if kind == "normal":
+            expected = materials.encode_normals(materials.decode_normals(expected))
+        neutral = np.asarray(materials.NEUTRAL[kind], np.float32)
+        expected[~result.mask] = neutral if kind == "normal" else neutral[0]
+        assert np.array_equal(found[kind], expected), kind

@@ -89,11 +89,14 @@ def coherent_edges(source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return horizontal, vertical
 
 
-def copy_through(exemplars: list[np.ndarray], source: np.ndarray, dy: int = 0, dx: int = 0):
+def copy_through(
+    exemplars: list[np.ndarray], source: np.ndarray, dy: int = 0, dx: int = 0, dtype=np.float64
+):
     """Each pixel the exemplar value at its source pixel shifted by (dy, dx) (clipped);
-    0 where it has no source."""
+    0 where it has no source. ``dtype``: of the copy (float32 exemplars copied as float32
+    hold the same values as float64 does, in half the memory)."""
     e, sy, sx = source[..., 0], source[..., 1] + dy, source[..., 2] + dx
-    out = np.zeros(source.shape[:2] + exemplars[0].shape[2:], dtype=np.float64)
+    out = np.zeros(source.shape[:2] + exemplars[0].shape[2:], dtype=dtype)
     for k, exemplar in enumerate(exemplars):
         here = e == k
         h, w = exemplar.shape[:2]
