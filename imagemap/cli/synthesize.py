@@ -414,6 +414,7 @@ def _synthesize_one(args, job, depth, database, config, examples, background, ba
     # a failure leaves none of them.
     picture = result.rgba if background is None else result.on_background(background)
     writers = {job["output"]: image_writer(picture)}
+    del picture  # converted for writing: the float copy is not held through the maps below
     if job["provenance"]:
         writers[job["provenance"]] = image_writer(result.provenance)
     if job["preview"]:
