@@ -272,7 +272,7 @@ def transfer_maps(
         # time, normals re-encoded so too (per pixel: the same bytes as the whole map's,
         # without its full-size float64 copy and gathers).
         source = np.asarray(result.source)
-        copied = np.empty(source.shape[:2] + exemplars[0].shape[2:], dtype=np.float32)
+        copied = np.empty((*source.shape[:2], *exemplars[0].shape[2:]), dtype=np.float32)
         for y0 in range(0, copied.shape[0], _ROWS):
             rows = copied[y0 : y0 + _ROWS]
             rows[...] = copy_through(exemplars, source[y0 : y0 + _ROWS], dtype=np.float32)

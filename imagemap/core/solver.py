@@ -356,15 +356,14 @@ class _Projection:
         # Buffers for the windows and their product, reused from block to block (not a
         # fresh large array per block: each would be mapped and faulted in anew).
         shapes = ((rows, windows.width), (rows, self.n_components))
-        scratch = _Scratch(
-            lambda: tuple(
-                np.empty(shape, dtype=np.float32)
-                if buffers is None
-                else buffer[: shape[0] * shape[1]].reshape(shape)
-                for shape, buffer in zip(shapes, buffers or shapes, strict=True)
-            ),
-            len(blocks) if threads else 1,
-        )
+
+        def make() -> tuple[np.ndarray, ...]:
+            if buffers is not None:  # the caller's flat buffers, seen in these shapes
+                pairs = zip(buffers, shapes, strict=True)
+                return tuple(flat[: r * c].reshape(r, c) for flat, (r, c) in pairs)
+            return tuple(np.empty(shape, dtype=np.float32) for shape in shapes)
+
+        scratch = _Scratch(make, len(blocks) if threads else 1)
 
         def block(start: int, stop: int, alone: bool) -> None:
             with scratch as (gathered, product):
