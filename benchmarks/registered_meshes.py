@@ -143,10 +143,10 @@ def seam_texel_pairs(
     """
     import trimesh
 
-    from imagemap.mesh.uvspace import _weld
+    from imagemap.mesh.padding import weld
     from imagemap.scene.bake import covered_texels
 
-    _, welded_faces, _ = _weld(np.asarray(vertices, float), np.asarray(faces))
+    _, welded_faces, _ = weld(np.asarray(vertices, float), np.asarray(faces))
     pairs, edges = trimesh.graph.face_adjacency(welded_faces, return_edges=True)
     ends = []  # per adjacent pair and side: the edge's two UVs and the third corner's
     for side in (0, 1):

@@ -52,7 +52,7 @@ from scipy import ndimage
 from imagemap.core.blend import fill_background
 from imagemap.scene.bake import rasterize_uv
 
-__all__ = ["MAX_STEPS", "SurfacePadding", "engine_reach", "surface_padding", "walk"]
+__all__ = ["MAX_STEPS", "SurfacePadding", "engine_reach", "surface_padding", "walk", "weld"]
 
 #: Faces a walk crosses at most (:func:`walk`). A step of the engine's reach (about 20-36
 #: working texels) crosses about that many faces where faces are a texel wide (generated
@@ -62,6 +62,23 @@ MAX_STEPS = 64
 #: A barycentric coordinate this far below 0 still counts as inside a face (rounding of a
 #: point on an edge).
 _INSIDE = 1e-9
+
+
+def weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(welded vertices, welded faces, index of each input vertex's welded vertex).
+
+    A mesh split along its UV seams (one vertex per position and UV) is joined again,
+    so that normals and curvature do not see the seams as borders.
+    """
+    # Rows sorted by their coordinates (np.unique(axis=0) sorts structured rows: 1 s for
+    # a 20k-vertex head); equal neighbours after sorting are one vertex.
+    order = np.lexsort(vertices.T[::-1])
+    ordered = vertices[order]
+    first = np.r_[True, np.any(ordered[1:] != ordered[:-1], axis=1)]
+    group = np.cumsum(first) - 1
+    inverse = np.empty(len(vertices), dtype=np.int64)
+    inverse[order] = group
+    return ordered[first], inverse[faces], inverse
 
 
 def engine_reach(patch_sizes) -> int:
@@ -310,8 +327,6 @@ def surface_padding(
     -------
     SurfacePadding
     """
-    from imagemap.mesh.uvspace import _weld  # deferred: uvspace imports this module
-
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     uv = np.asarray(uv, dtype=np.float64)
@@ -332,7 +347,7 @@ def surface_padding(
     # The UV offset (texel centres) from the nearest used texel, as a 3-D step in its face's
     # plane through the face's affine UV -> 3-D map.
     offset = np.stack([(col - nx.ravel()[pad]) / size, (ny.ravel()[pad] - row) / size], axis=1)
-    welded, welded_faces, _ = _weld(vertices, faces)
+    welded, welded_faces, _ = weld(vertices, faces)
     q = uv[faces[face]]
     p = welded[welded_faces[face]]
     jacobian = np.stack([q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]], axis=2)  # (N, 2, 2)

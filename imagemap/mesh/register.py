@@ -55,11 +55,11 @@ from scipy.spatial import cKDTree
 
 from imagemap.core.blend import fill_background
 from imagemap.errors import InputError
+from imagemap.mesh.padding import weld
 from imagemap.mesh.uvspace import (
     SurfaceMaps,
     UVExample,
     _vertex_normals,
-    _weld,
     vertex_curvature,
 )
 from imagemap.scene.bake import rasterize_uv
@@ -413,7 +413,7 @@ class Parts:
 
 def _part_labels(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Each face's connected part (faces sharing an edge of the welded mesh)."""
-    _, welded_faces, _ = _weld(vertices, faces)
+    _, welded_faces, _ = weld(vertices, faces)
     adjacency = trimesh.graph.face_adjacency(welded_faces)
     return trimesh.graph.connected_component_labels(adjacency, node_count=len(faces))
 
@@ -482,7 +482,7 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
     target_part = parts.query[target_face]
     _, q_radius = _frame(targets)
     pull = PULL_DISTANCE * q_radius
-    welded, welded_faces, index = _weld(registration.vertices, registration.faces)
+    welded, welded_faces, index = weld(registration.vertices, registration.faces)
     count = len(welded)
     vertex_part = np.full(count, -1, dtype=np.int64)
     for k in range(3):
@@ -657,7 +657,7 @@ def _query_frame(vertices, faces, uv, size) -> tuple[np.ndarray, float, tuple]:
     texel, face, bary = rasterize_uv(uv, faces, size)
     if texel.size == 0:
         raise InputError("the mesh's UV layout covers no texel")
-    welded, welded_faces, _ = _weld(vertices, faces)
+    welded, welded_faces, _ = weld(vertices, faces)
     points = np.einsum("nk,nkc->nc", bary, welded[welded_faces[face]])
     centre, radius = _frame(points)
     return centre, radius, (texel, face, points)
@@ -704,7 +704,7 @@ def resample(example, registration: Registration, query, size: int, seed: int = 
     own_bary = bary[:, ::-1] if registration.mirrored else bary
     colour = surface_colours(example, face, own_bary)
     # The guides: the same surface point on the rigidly registered example.
-    welded, welded_faces, index = _weld(registration.vertices, faces)
+    welded, welded_faces, index = weld(registration.vertices, faces)
     normals = _vertex_normals(welded, welded_faces)
     curvature = vertex_curvature(welded, welded_faces, normals)
     corners = index[faces[face]]

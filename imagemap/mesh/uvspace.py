@@ -75,7 +75,7 @@ from imagemap.depth.finish import (
 from imagemap.depth.guides import sized_config, to_ycbcr
 from imagemap.depth.pipeline import ColorizeResult, engine_params
 from imagemap.errors import InputError
-from imagemap.mesh.padding import SurfacePadding, engine_reach, surface_padding
+from imagemap.mesh.padding import SurfacePadding, engine_reach, surface_padding, weld
 from imagemap.scene.bake import covered_texels, rasterize_uv
 
 __all__ = [
@@ -189,23 +189,6 @@ def guide_weights(
     )
 
 
-def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(welded vertices, welded faces, index of each input vertex's welded vertex).
-
-    A mesh split along its UV seams (one vertex per position and UV) is joined again,
-    so that normals and curvature do not see the seams as borders.
-    """
-    # Rows sorted by their coordinates (np.unique(axis=0) sorts structured rows: 1 s for
-    # a 20k-vertex head); equal neighbours after sorting are one vertex.
-    order = np.lexsort(vertices.T[::-1])
-    ordered = vertices[order]
-    first = np.r_[True, np.any(ordered[1:] != ordered[:-1], axis=1)]
-    group = np.cumsum(first) - 1
-    inverse = np.empty(len(vertices), dtype=np.int64)
-    inverse[order] = group
-    return ordered[first], inverse[faces], inverse
-
-
 def vertex_curvature(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Mean curvature per vertex (1 / length): the umbrella operator along the normal.
 
@@ -277,7 +260,7 @@ def surface_maps(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: 
     texel, face, bary = rasterize_uv(np.asarray(uv, dtype=np.float64), faces, size)
     if texel.size == 0:
         raise InputError("the mesh's UV layout covers no texel")
-    welded, welded_faces, _ = _weld(vertices, faces)
+    welded, welded_faces, _ = weld(vertices, faces)
     normals = _vertex_normals(welded, welded_faces)
     curvature = vertex_curvature(welded, welded_faces, normals)
     corners = welded_faces[face]
