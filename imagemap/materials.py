@@ -55,6 +55,7 @@ __all__ = [
     "example_maps",
     "map_kinds",
     "map_paths",
+    "picture_normals_to_world",
     "transfer_maps",
     "uv_frames",
     "view_normals_to_atlas",
@@ -323,6 +324,24 @@ def _picture_frame(view_rotation: np.ndarray, normals: np.ndarray) -> tuple:
     tangent = np.where(length > 1e-6, tangent, np.cross(fallback, normals))
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     return tangent, np.cross(normals, tangent)
+
+
+def picture_normals_to_world(
+    encoded: np.ndarray, view_rotation: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """Encoded tangent-space normals (N, 3) in a picture's frame, at surface points of
+    unit ``normals`` (N, 3), as world directions (float64; unit where the picture's are).
+
+    Examples
+    --------
+    >>> flat = encode_normals(np.array([[0.0, 0.0, 1.0]]))
+    >>> up = np.array([[0.0, 1.0, 0.0]])
+    >>> np.round(picture_normals_to_world(flat, np.eye(3), up), 3).tolist()
+    [[0.0, 1.0, 0.0]]
+    """
+    local = decode_normals(encoded).astype(np.float64)
+    tangent, bitangent = _picture_frame(view_rotation, normals)
+    return local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * normals
 
 
 def view_normals_to_atlas(

@@ -24,10 +24,10 @@ from imagemap.materials import (
     MIN_NORMAL_Z,
     NEUTRAL,
     SIDE_MAPS,
-    _picture_frame,
     _surface_normals,
     decode_normals,
     encode_normals,
+    picture_normals_to_world,
     transfer_maps,
 )
 from imagemap.scene.bake import rasterize_uv
@@ -134,10 +134,10 @@ def _world_normals(mesh, render, maps: dict) -> np.ndarray:
         faces = render.face.flat[pixels]
         bary = render.barycentric.reshape(-1, 3)[pixels].astype(np.float64)
         normals = _surface_normals(mesh, faces, bary)
-        local = decode_normals(maps["normal"].reshape(-1, 3)[pixels]).astype(np.float64)
-        p_t, p_b = _picture_frame(render.view.rotation(), normals)
-        vectors = local[:, :1] * p_t + local[:, 1:2] * p_b + local[:, 2:] * normals
-        world.reshape(-1, 3)[pixels] = vectors
+        encoded = maps["normal"].reshape(-1, 3)[pixels]
+        world.reshape(-1, 3)[pixels] = picture_normals_to_world(
+            encoded, render.view.rotation(), normals
+        )
     return world
 
 

@@ -29,7 +29,7 @@ from scipy import ndimage
 
 from imagemap.core.blend import fill_background
 from imagemap.io import InputError
-from imagemap.materials import _picture_frame, decode_normals, encode_normals
+from imagemap.materials import encode_normals, picture_normals_to_world
 from imagemap.scene.files import textured_mesh
 from imagemap.scene.views import (
     DEFAULT_MARGIN,
@@ -493,15 +493,6 @@ def blend_chosen_views(
     return colour, chosen
 
 
-def _picture_to_world(encoded: np.ndarray, view: View, normal: np.ndarray) -> np.ndarray:
-    """Encoded tangent-space normals (N, 3) in ``view``'s picture frame at surface points
-    of unit ``normal`` (N, 3) -> encoded world directions."""
-    local = decode_normals(encoded).astype(np.float64)
-    tangent, bitangent = _picture_frame(view.rotation(), normal)
-    world = local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * normal
-    return encode_normals(world)
-
-
 def bake_views(
     mesh,
     renders: list[MeshRender],
@@ -578,7 +569,8 @@ def bake_views(
         filled = fill_background(np.asarray(image, dtype=np.float32)[..., :3], mask)
         colours[k] = sample_pixels(filled, col, row)
         if picture_normals:
-            colours[k] = _picture_to_world(colours[k], render.view, normal)
+            world = picture_normals_to_world(colours[k], render.view.rotation(), normal)
+            colours[k] = encode_normals(world)
     texel_world = np.sqrt(world_per_uv(vertices, faces, uv)) / texture_size
     band = seam_band * pixel_size / texel_world
     colours_out, chosen = blend_chosen_views(colours, scores, texel, texture_size, band)
