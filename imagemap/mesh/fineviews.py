@@ -33,7 +33,7 @@ import numpy as np
 
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.materials import MAP_KINDS, NEUTRAL, decode_normals, encode_normals, example_maps
-from imagemap.scene.bake import view_size_for
+from imagemap.scene.bake import planar_barycentric, view_size_for
 from imagemap.scene.views import sample_pixels
 
 __all__ = [
@@ -431,17 +431,11 @@ def fine_render(mesh, render, factor: int):
     px = (col[corners] + 0.5) * k - 0.5
     py = (row[corners] + 0.5) * k - 0.5
     rows, cols = np.nonzero(mask)
-    v0x, v0y = px[:, 1] - px[:, 0], py[:, 1] - py[:, 0]
-    v1x, v1y = px[:, 2] - px[:, 0], py[:, 2] - py[:, 0]
-    qx, qy = cols - px[:, 0], rows - py[:, 0]
-    det = v0x * v1y - v1x * v0y
-    safe = np.where(np.abs(det) > 1e-12, det, 1.0)
-    b1 = (qx * v1y - v1x * qy) / safe
-    b2 = (v0x * qy - qx * v0y) / safe
-    bary = np.clip(np.stack([1.0 - b1 - b2, b1, b2], axis=1), 0.0, None)
+    bary, ok = planar_barycentric(px, py, cols, rows)
+    bary = np.clip(bary, 0.0, None)
     bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-12)
     coarse = np.repeat(np.repeat(render.barycentric, k, axis=0), k, axis=1)[mask]
-    flat = np.abs(det) <= 1e-12  # a face seen edge-on: the pixel's own hit
+    flat = ~ok  # a face seen edge-on: the pixel's own hit
     bary[flat] = coarse[flat]
     barycentric = np.zeros((height * k, width * k, 3), dtype=np.float32)
     barycentric[mask] = bary

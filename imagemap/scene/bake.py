@@ -46,6 +46,7 @@ __all__ = [
     "bake_views",
     "blend_chosen_views",
     "covered_texels",
+    "planar_barycentric",
     "project_texture",
     "rasterize_uv",
     "texture_size_for",
@@ -113,6 +114,32 @@ def uv_atlas(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 RASTER_CHUNK = 1 << 17
 
 
+def planar_barycentric(
+    px: np.ndarray, py: np.ndarray, x: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentrics (N, 3) of points ``(x, y)`` (N,) in triangles of corners ``(px, py)``
+    (N, 3) in a plane (UVs, pixels), unclipped; and where the triangle is not degenerate
+    (elsewhere the barycentrics are meaningless).
+
+    Examples
+    --------
+    >>> bary, ok = planar_barycentric(np.array([[0.0, 2, 0]]), np.array([[0.0, 0, 2]]),
+    ...                               np.array([0.5]), np.array([1.0]))
+    >>> bary.tolist(), ok.tolist()
+    ([[0.25, 0.25, 0.5]], [True])
+    """
+    ax, ay = px[:, 0], py[:, 0]
+    v0x, v0y = px[:, 1] - ax, py[:, 1] - ay
+    v1x, v1y = px[:, 2] - ax, py[:, 2] - ay
+    qx, qy = x - ax, y - ay
+    det = v0x * v1y - v1x * v0y
+    ok = np.abs(det) > 1e-12
+    safe = np.where(ok, det, 1.0)
+    b1 = (qx * v1y - v1x * qy) / safe
+    b2 = (v0x * qy - qx * v0y) / safe
+    return np.stack([1.0 - b1 - b2, b1, b2], axis=1), ok
+
+
 def _raster_chunks(uv: np.ndarray, faces: np.ndarray, size: int):
     """(texel, face, barycentrics) of the texel centres inside UV triangles, chunk by chunk.
 
@@ -142,20 +169,11 @@ def _raster_chunks(uv: np.ndarray, faces: np.ndarray, size: int):
         rows = row_lo[face] + within // np.maximum(n_cols[face], 1)
         cols = col_lo[face] + within % np.maximum(n_cols[face], 1)
         # Barycentrics of the texel centre in the face's UV triangle.
-        ax, ay = px[face, 0], py[face, 0]
-        v0x, v0y = px[face, 1] - ax, py[face, 1] - ay
-        v1x, v1y = px[face, 2] - ax, py[face, 2] - ay
-        qx, qy = cols - ax, rows - ay
-        det = v0x * v1y - v1x * v0y
-        ok = np.abs(det) > 1e-12
-        safe = np.where(ok, det, 1.0)
-        b1 = (qx * v1y - v1x * qy) / safe
-        b2 = (v0x * qy - qx * v0y) / safe
-        b0 = 1.0 - b1 - b2
+        bary, ok = planar_barycentric(px[face], py[face], cols, rows)
         eps = 1e-9
-        inside = ok & (b0 >= -eps) & (b1 >= -eps) & (b2 >= -eps)
+        inside = ok & np.all(bary >= -eps, axis=1)
         texel = rows[inside] * size + cols[inside]
-        face, bary = face[inside], np.stack([b0, b1, b2], axis=1)[inside]
+        face, bary = face[inside], bary[inside]
         order = np.lexsort((face, texel))
         keep = order[np.r_[True, np.diff(texel[order]) != 0]] if order.size else order
         yield texel[keep], face[keep], bary[keep]
