@@ -99,6 +99,12 @@ class ExampleSet:
             )
         return database_at_view(self.source, view, size)
 
+    def _holds(self, view: View, size: tuple[int, int]) -> bool:
+        """Whether :meth:`at_view` gives the examples seen from ``view`` at ``size`` (a
+        database's renders, or a prepared view of that size; a set keyed by ``str(view)``
+        alone holds another size, which :meth:`picture` renders instead)."""
+        return self.source is not None or view_key(view, size) in self.views
+
     def picture(self, name: str, view: View, size: tuple[int, int]) -> np.ndarray:
         """Mesh example ``name``'s colours seen from ``view`` at ``size`` (H, W, 3): its
         render (cached on disk) when the set reads a database, else rendered from its
@@ -107,8 +113,7 @@ class ExampleSet:
         key = f"{name}|{view_key(view, size)}"
         if key in self.pictures:
             return self.pictures[key]
-        # A set keyed by ``str(view)`` alone holds another size: rendered here instead.
-        if self.source is not None or view_key(view, size) in self.views:
+        if self._holds(view, size):
             return self.at_view(view, size)[name].image
         mesh = self.mesh(name)
         render = render_mesh(mesh, view, size, DEFAULT_MARGIN)
@@ -127,9 +132,7 @@ class ExampleSet:
         normals in the picture's frame), as :meth:`picture` sees its colours: the
         database's cached render, else rendered with the picture from the loaded mesh."""
         key = f"{name}|{view_key(view, size)}"
-        if key not in self.pictures and (
-            self.source is not None or view_key(view, size) in self.views
-        ):
+        if key not in self.pictures and self._holds(view, size):
             return example_maps(self.at_view(view, size)[name])
         self.picture(name, view, size)
         return self.picture_maps[key]
