@@ -23,9 +23,11 @@ SAME_POINT = 0.02
 REPEATED = 0.05
 
 
-def _cylinder():
+def _cylinder(mirrored: bool = False):
     """An open cylinder (radius 1, height 2) in two charts: angles 0-180° at u 0.05-0.45,
-    180-360° at u 0.55-0.95 (seams at 0° and 180°), v 0.05 up, both at one scale."""
+    180-360° at u 0.55-0.95 (seams at 0° and 180°), v 0.05 up, both at one scale.
+    ``mirrored``: the second chart laid out mirrored (180° at u 0.95, 360° at 0.55), as
+    an atlas packer may lay a chart (a quarter of the generated fish's faces)."""
     theta = np.linspace(0.0, 2.0 * np.pi, SEGMENTS + 1)
     z = np.linspace(0.0, 2.0, ROWS + 1)
     vertices, uv, faces = [], [], []
@@ -38,6 +40,8 @@ def _cylinder():
                 angle = theta[k % SEGMENTS]  # 360° is 0°, bit for bit (welded)
                 vertices.append((np.cos(angle), np.sin(angle), zz))
                 u = 0.05 + 0.5 * chart + 0.4 * (k - chart * half) / half
+                if mirrored and chart:
+                    u = 1.5 - u  # 0.55 <-> 0.95
                 uv.append((u, 0.05 + zz * 0.4 / np.pi))
         for i in range(half):
             for j in range(ROWS):
@@ -69,6 +73,31 @@ def test_padding_beside_a_seam_takes_the_other_charts_guides():
     # Beyond the reach: the nearest placed texel's values (no padding texel left unset).
     assert np.isfinite(padded).all()
     assert np.array_equal(padded[maps.mask], guides[maps.mask])
+
+
+def test_padding_beside_a_mirrored_chart_takes_its_guides_at_the_same_point():
+    # #46: identity.py's generated fish changed where the padding of thin charts was
+    # placed; a quarter of their faces lie in charts the packer mirrored. The UV offset
+    # turned into a step through the start face's own UV -> 3-D map, and the walk on the
+    # welded surface, must land on the same surface point whichever way the chart across
+    # the seam is laid: here chart 1 mirrored, so the mates run the other way.
+    vertices, faces, uv = _cylinder(mirrored=True)
+    maps = surface_maps(vertices, faces, uv, SIZE)
+    guides = maps.guides()[..., :6]
+    padded = surface_padding(vertices, faces, uv, SIZE, reach=4).apply(guides, maps.mask)
+    rows = np.arange(58, 74)
+    # Right of chart 0 (past 180°): 180° is chart 1's right side now, column 75 - k;
+    # left of chart 0 (below 360°): chart 1's left side, column 44 + k.
+    for pad_column, mate in [(36 + k, 75 - k) for k in range(3)] + [
+        (3 - k, 44 + k) for k in range(3)
+    ]:
+        error = np.abs(padded[rows, pad_column] - guides[rows, mate]).max()
+        assert error < SAME_POINT, (pad_column, error)
+    # Chart 1's own padding continues onto chart 0 the same way: right of column 75 (past
+    # 180° backwards, i.e. below 180°) is chart 0's column 35 - k.
+    for k in range(3):
+        error = np.abs(padded[rows, 76 + k] - guides[rows, 35 - k]).max()
+        assert error < SAME_POINT, (76 + k, error)
 
 
 def test_a_walk_stops_at_the_surfaces_boundary():
