@@ -128,3 +128,16 @@ def test_an_examples_full_size_texture_is_padded_with_the_chart_across_the_seam(
     # Right of chart 0 (past 180°) is chart 1's blue, left of chart 1 (before 180°) red.
     assert np.allclose(padded[rows][:, 36:40], (0, 0, 200 / 255))
     assert np.allclose(padded[rows][:, 40:44], (200 / 255, 0, 0))
+
+
+def test_the_padding_on_the_maps_kept_rasterization_is_the_same():
+    # SurfaceMaps keeps its atlas' rasterization; the padding made on it (no second
+    # rasterization) places the same texels at the same points.
+    vertices, faces, uv = _cylinder(mirrored=True)
+    maps = surface_maps(vertices, faces, uv, SIZE)
+    assert maps.raster is not None and maps.raster[0].size == maps.mask.sum()
+    made = surface_padding(vertices, faces, uv, SIZE, reach=4)
+    kept = surface_padding(vertices, faces, uv, SIZE, reach=4, raster=maps.raster)
+    assert made.texel.size > 0
+    for name in ("texel", "face", "bary", "source", "mask"):
+        assert np.array_equal(getattr(made, name), getattr(kept, name)), name

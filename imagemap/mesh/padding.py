@@ -307,7 +307,12 @@ class SurfacePadding:
 
 
 def surface_padding(
-    vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: int, reach: float
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    size: int,
+    reach: float,
+    raster: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> SurfacePadding:
     """The surface points continuing the charts into the padding texels within ``reach``.
 
@@ -322,6 +327,9 @@ def surface_padding(
         The atlas' width and height.
     reach : float
         Padding texels at most this far (texels) from a used texel are placed; 0: none.
+    raster : (texel, face, barycentrics), optional
+        The atlas' :func:`~imagemap.scene.bake.rasterize_uv` at ``size``, when it was made
+        already (:attr:`imagemap.mesh.uvspace.SurfaceMaps.raster`); made here otherwise.
 
     Returns
     -------
@@ -330,7 +338,7 @@ def surface_padding(
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     uv = np.asarray(uv, dtype=np.float64)
-    texel, texel_face, texel_bary = rasterize_uv(uv, faces, size)
+    texel, texel_face, texel_bary = raster if raster is not None else rasterize_uv(uv, faces, size)
     used = np.zeros(size * size, dtype=bool)
     used[texel] = True
     mask = used.reshape(size, size)

@@ -140,12 +140,21 @@ class SurfaceMaps:
         Unit normals; padded.
     curvature : (T, T) float32
         Scale-free mean curvature; padded.
+    raster : (texel (N,), face (N,), barycentrics (N, 3)) or None
+        The atlas' rasterization these maps were made from
+        (:func:`imagemap.scene.bake.rasterize_uv` at ``size``): each used texel's face
+        and barycentrics, kept so that the surface padding of the same atlas
+        (:func:`imagemap.mesh.padding.surface_padding`) does not rasterize it again;
+        None for maps made otherwise (resampled examples).
     """
 
     mask: np.ndarray
     position: np.ndarray
     normal: np.ndarray
     curvature: np.ndarray
+    raster: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
+        default=None, repr=False, compare=False
+    )
 
     @property
     def size(self) -> int:
@@ -287,6 +296,7 @@ def surface_maps(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, size: 
         position=stack[..., :3].copy(),
         normal=stack[..., 3:6].copy(),
         curvature=stack[..., 6].copy(),
+        raster=(texel, face, bary),
     )
 
 
@@ -733,24 +743,29 @@ def colorize_uv(
 
     paddings: dict[int, SurfacePadding] = {}
 
-    def padding_of(owner, reach: int) -> SurfacePadding:
+    def padding_of(owner, reach: int, maps: SurfaceMaps) -> SurfacePadding:
         """The surface padding of a mesh's atlas at the working size (once per mesh: the
-        registered examples all lie on the query's)."""
+        registered examples all lie on the query's), on the rasterization its ``maps``
+        were made from when they kept it."""
         if id(owner) not in paddings:
-            paddings[id(owner)] = surface_padding(*mesh_uv_arrays(owner), working, reach)
+            raster = maps.raster if maps.size == working else None
+            paddings[id(owner)] = surface_padding(
+                *mesh_uv_arrays(owner), working, reach, raster=raster
+            )
         return paddings[id(owner)]
 
     def bands(state: SynthesisState, config) -> SynthesisState:
         levels, kind = config.pyramid.levels, config.matching.appearance_pyramid
         # The padding the windows reach, read on the surface across the seams.
         reach = engine_reach(config.pyramid.patch_sizes)
-        pad = padding_of(mesh, reach)
+        pad = padding_of(mesh, reach, query)
         state.query_levels = ReleasableLevels(
             _uv_mappings(pad.apply(query.guides(*weights), query.mask), query.mask, levels)
         )
         exemplar_levels = []
         for e, texture in zip(chosen, textures, strict=True):
-            maps, pad = e.maps(working), padding_of(e.mesh, reach)
+            maps = e.maps(working)
+            pad = padding_of(e.mesh, reach, maps)
             exemplar_levels.append(
                 ReleasableLevels(
                     _uv_mappings(
