@@ -110,10 +110,14 @@ def test_a_walk_stops_at_the_surfaces_boundary():
     assert np.allclose(point, [[0.8, 0.2, 0.0]])
 
 
-def test_an_examples_full_size_texture_is_padded_with_the_chart_across_the_seam():
+def test_an_examples_full_size_texture_is_padded_with_the_chart_across_the_seam(
+    tmp_path, monkeypatch
+):
     # The uv-space path copies full-size texels at sub-positions of used working texels;
     # one that falls in the example's padding reads the surface beyond the seam there.
     import trimesh
+
+    monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path))  # (the padding is cached)
 
     from imagemap.mesh.uvspace import UVExample, _surface_padded
 
@@ -141,3 +145,37 @@ def test_the_padding_on_the_maps_kept_rasterization_is_the_same():
     assert made.texel.size > 0
     for name in ("texel", "face", "bary", "source", "mask"):
         assert np.array_equal(getattr(made, name), getattr(kept, name)), name
+
+
+def test_an_examples_padded_texture_is_cached_with_the_same_bytes(tmp_path, monkeypatch):
+    # The full-size padding depends on the example alone: made once, then read from the
+    # library's cache (keyed by the example's digest), the same bytes.
+    import trimesh
+
+    from imagemap.mesh.uvspace import UVExample, _surface_padded
+
+    monkeypatch.setenv("IMAGEMAP_CACHE", str(tmp_path))
+    vertices, faces, uv = _cylinder()
+    mesh = trimesh.Trimesh(vertices, faces, process=False,
+                           visual=trimesh.visual.TextureVisuals(uv=uv))  # fmt: skip
+    texture = np.random.default_rng(0).integers(0, 256, (SIZE, SIZE, 3), dtype=np.uint8)
+    example = UVExample("cylinder", mesh, texture)
+    made = _surface_padded(example, texture, SIZE // 4)
+    (entry,) = (tmp_path / "padded").glob("cylinder-*.npz")
+    again = _surface_padded(example, texture, SIZE // 4)
+    assert again.dtype == made.dtype and np.array_equal(again, made)
+    # It is the entry that is read: one texel's value changed in it comes back.
+    with np.load(entry) as data:
+        texel, values = data["texel"], data["values"].copy()
+    assert texel.size > 0
+    values[0] = 0.5
+    np.savez_compressed(entry, texel=texel, values=values)
+    read = _surface_padded(example, texture, SIZE // 4)
+    assert np.allclose(read.reshape(-1, 3)[texel[0]], 0.5)
+    # Another texture is another entry; a damaged entry is made anew.
+    other = texture.copy()
+    other[0, 0] = 1
+    _surface_padded(UVExample("cylinder", mesh, other), other, SIZE // 4)
+    assert len(list((tmp_path / "padded").glob("cylinder-*.npz"))) == 2
+    entry.write_bytes(b"not an npz")
+    assert np.array_equal(_surface_padded(example, texture, SIZE // 4), made)

@@ -48,10 +48,13 @@ Examples
 
 from __future__ import annotations
 
+import hashlib
 import logging
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage, sparse
@@ -75,6 +78,7 @@ from imagemap.depth.finish import (
 from imagemap.depth.guides import sized_config, to_ycbcr
 from imagemap.depth.pipeline import ColorizeResult, engine_params
 from imagemap.errors import InputError
+from imagemap.io import read_npz, write_npz
 from imagemap.mesh.padding import SurfacePadding, engine_reach, surface_padding, weld
 from imagemap.scene.bake import covered_texels, rasterize_uv
 
@@ -118,6 +122,9 @@ LAYOUT_MAX_DISTANCE = 0.3
 #: scale and the query-in-database check, registration, and the completion of small
 #: features, which registers depth relief).
 FINISH_STAGES = (COLLAPSE, COPY, SEAMS, OUTSIDE, BLEND, RGB)
+#: Bumped whenever the examples' full-size padding (:func:`_surface_padded`) changes, so
+#: that cached paddings are made anew.
+PADDED_VERSION = 1
 #: Guide weights (per band standard deviation): the surface point places a texel on the
 #: object; the normal and curvature say what the surface does there.
 POSITION_WEIGHT = 1.0
@@ -566,17 +573,69 @@ def fine_texture(
     return image, fine
 
 
+def _padded_cache_dir() -> Path:
+    """Where the examples' padded textures are cached: ``padded/`` in the library's cache
+    (``$IMAGEMAP_CACHE``, default ``~/.cache/imagemap``; the examples' renders are in
+    ``meshes/`` there)."""
+    root = os.environ.get("IMAGEMAP_CACHE")
+    return (Path(root) if root else Path.home() / ".cache" / "imagemap") / "padded"
+
+
+def _padded_key(arrays: Sequence[np.ndarray], size: int, reach: int) -> str:
+    """The cache key of an example's padded texture: a digest of what the padding reads
+    (its vertices, faces, UVs and texture: their dtype, shape and bytes), the size, the
+    reach and :data:`PADDED_VERSION`."""
+    digest = hashlib.sha256()
+    for array in arrays:
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.dtype.str}{array.shape}|".encode())
+        digest.update(memoryview(array).cast("B"))
+    digest.update(f"{size}|{reach}|v{PADDED_VERSION}".encode())
+    return digest.hexdigest()[:24]
+
+
 def _surface_padded(example: UVExample, texture: np.ndarray, working: int) -> np.ndarray:
     """An example's full-size texture (float32) with the padding within one working texel
     of its charts read on its surface (:mod:`imagemap.mesh.padding`); a texture that is
-    not square is returned as it is."""
+    not square is returned as it is.
+
+    It depends on the example alone (its mesh, texture and the working size), so it is
+    cached on disk beside the examples' renders (:func:`_padded_cache_dir`), keyed by a
+    digest of those (:func:`_padded_key`): the texels it changed and their values, so a
+    cached read gives the same bytes. A damaged entry is made anew; a cache that cannot
+    be written only costs time.
+    """
     size = texture.shape[0]
     if texture.shape[1] != size:
         return texture
     vertices, faces, uv = mesh_uv_arrays(example.mesh)
     reach = int(np.ceil(size / working)) + 1
+    plain = _unit(texture)
+    flat = plain.reshape(size * size, -1)
+    cached = (
+        _padded_cache_dir()
+        / f"{example.name}-{_padded_key((vertices, faces, uv, texture), size, reach)}.npz"
+    )
+    if cached.is_file():
+        try:
+            arrays = read_npz(cached, what="cached padded texture")
+            texel, values = arrays["texel"], arrays["values"]
+            fits = values.dtype == np.float32 and values.shape == (len(texel), flat.shape[1])
+            if fits and (texel.size == 0 or 0 <= texel.min() <= texel.max() < len(flat)):
+                flat[texel] = values  # plain is this call's own copy (_unit)
+                return plain
+        except (InputError, KeyError, IndexError):
+            pass  # made anew
     pad = surface_padding(vertices, faces, uv, size, reach)
-    return pad.apply(_unit(texture), pad.mask)
+    out = pad.apply(plain, pad.mask)
+    changed = np.flatnonzero(np.any(out.reshape(size * size, -1) != flat, axis=1))
+    try:
+        write_npz(
+            cached, texel=changed.astype(np.int64), values=out.reshape(size * size, -1)[changed]
+        )
+    except OSError:
+        pass  # a read-only cache only costs time
+    return out
 
 
 def same_texel_source(source: np.ndarray, mask: np.ndarray, examples: int) -> np.ndarray:
