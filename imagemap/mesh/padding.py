@@ -112,19 +112,16 @@ def _neighbours(welded_faces: np.ndarray) -> np.ndarray:
 
 
 def _barycentric(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Barycentrics (N, 3) of points in the planes of triangles (N, 3, 3) (least squares;
-    a degenerate triangle gives its first corner)."""
-    e1 = triangles[:, 1] - triangles[:, 0]
-    e2 = triangles[:, 2] - triangles[:, 0]
-    d = points - triangles[:, 0]
-    d11, d12, d22 = (np.einsum("nc,nc->n", x, y) for x, y in ((e1, e1), (e1, e2), (e2, e2)))
-    p1, p2 = np.einsum("nc,nc->n", d, e1), np.einsum("nc,nc->n", d, e2)
-    det = d11 * d22 - d12 * d12
-    ok = np.abs(det) > 1e-30 * np.maximum(d11 * d22, 1e-300)
-    safe = np.where(ok, det, 1.0)
-    b1 = np.where(ok, (d22 * p1 - d12 * p2) / safe, 0.0)
-    b2 = np.where(ok, (d11 * p2 - d12 * p1) / safe, 0.0)
-    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+    """Barycentrics (N, 3) of points in the planes of triangles (N, 3, 3)
+    (:func:`trimesh.triangles.points_to_barycentric`; a degenerate triangle gives its
+    first corner)."""
+    import trimesh  # deferred: start-up
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bary = trimesh.triangles.points_to_barycentric(triangles, points)
+    bad = ~np.all(np.isfinite(bary), axis=1)
+    bary[bad] = (1.0, 0.0, 0.0)
+    return bary
 
 
 def walk(
