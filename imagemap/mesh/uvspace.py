@@ -589,7 +589,7 @@ def _padded_key(arrays: Sequence[np.ndarray], size: int, reach: int) -> str:
     for array in arrays:
         array = np.ascontiguousarray(array)
         digest.update(f"{array.dtype.str}{array.shape}|".encode())
-        digest.update(memoryview(array).cast("B"))
+        digest.update(array.data)  # C-contiguous: its bytes
     digest.update(f"{size}|{reach}|v{PADDED_VERSION}".encode())
     return digest.hexdigest()[:24]
 
