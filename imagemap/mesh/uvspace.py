@@ -59,6 +59,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage, sparse
 
+import imagemap.mesh.padding as padding_code
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.core.engine import ReleasableLevels, synthesize
 from imagemap.core.mapping import Mapping
@@ -122,9 +123,6 @@ LAYOUT_MAX_DISTANCE = 0.3
 #: scale and the query-in-database check, registration, and the completion of small
 #: features, which registers depth relief).
 FINISH_STAGES = (COLLAPSE, COPY, SEAMS, OUTSIDE, BLEND, RGB)
-#: Bumped whenever the examples' full-size padding (:func:`_surface_padded`) changes, so
-#: that cached paddings are made anew.
-PADDED_VERSION = 1
 #: Guide weights (per band standard deviation): the surface point places a texel on the
 #: object; the normal and curvature say what the surface does there.
 POSITION_WEIGHT = 1.0
@@ -584,13 +582,16 @@ def _padded_cache_dir() -> Path:
 def _padded_key(arrays: Sequence[np.ndarray], size: int, reach: int) -> str:
     """The cache key of an example's padded texture: a digest of what the padding reads
     (its vertices, faces, UVs and texture: their dtype, shape and bytes), the size, the
-    reach and :data:`PADDED_VERSION`."""
+    reach and the code that pads (this module's and :mod:`imagemap.mesh.padding`'s source:
+    an edit to either makes the paddings anew, with no version number to remember)."""
     digest = hashlib.sha256()
+    for module in (__file__, padding_code.__file__):
+        digest.update(Path(module).read_bytes())
     for array in arrays:
         array = np.ascontiguousarray(array)
         digest.update(f"{array.dtype.str}{array.shape}|".encode())
         digest.update(array.data)  # C-contiguous: its bytes
-    digest.update(f"{size}|{reach}|v{PADDED_VERSION}".encode())
+    digest.update(f"{size}|{reach}".encode())
     return digest.hexdigest()[:24]
 
 
