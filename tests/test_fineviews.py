@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from imagemap.mesh.fineviews import fine_factor, fine_view, source_derivatives
+from imagemap.mesh.fineviews import fine_factor, fine_view
 from imagemap.scene.bake import bake_views
 from imagemap.scene.views import render_mesh
 
@@ -60,16 +60,28 @@ def test_a_mirrored_patch_is_copied_at_the_examples_fine_edge():
     assert np.count_nonzero(magnified != truth) >= MAGNIFIED_MIN_WRONG
 
 
-def test_the_source_derivative_follows_a_turned_patch_and_falls_back_to_the_pose():
-    """A patch turned by 90 degrees (rows run along the example's columns) gives the turn;
-    a lone pixel of another example takes that example's median (its pose)."""
+def test_a_turned_patch_is_copied_at_its_turn_and_a_lone_pixel_as_itself():
+    """A patch turned by 90 degrees (rows run along the example's columns) is read at the
+    turned fine positions between its pixels' centres; a lone pixel of another example
+    in it reads its own source moved by the fine pixel's offset (a translated copy)."""
+    from imagemap.mesh.fineviews import fine_source
+
     source = np.zeros((4, 5, 3), np.int32)
     source[..., 1] = 20 - np.arange(5)[None, :]  # example row falls as the column grows
     source[..., 2] = np.arange(4)[:, None] + 3  # example column grows with the row
-    source[2, 2] = (1, 0, 0)  # a lone pixel of example 1
-    d = source_derivatives(source, np.ones((4, 5), bool))
-    assert d[0, 0].tolist() == [[0.0, -1.0], [1.0, 0.0]]
-    assert d[2, 2].tolist() == [[1.0, 0.0], [0.0, 1.0]]  # example 1 has no pose: identity
+    source[2, 2] = (1, 7, 9)  # a lone pixel of example 1
+    fine = fine_source(SimpleNamespace(source=source, mask=np.ones((4, 5), bool)), FACTOR)
+    offset = (np.arange(FACTOR) + 0.5) / FACTOR - 0.5
+    # Fine rows and columns between the centres of coarse pixels (0, 0) and (1, 1): no
+    # neighbour of example 1 among their four.
+    at = np.arange(FACTOR // 2, FACTOR + FACTOR // 2)
+    u = (at + 0.5) / FACTOR - 0.5
+    assert np.allclose(fine.y[np.ix_(at, at)], 20 - u[None, :])
+    assert np.allclose(fine.x[np.ix_(at, at)], 3 + u[:, None])
+    lone = (slice(2 * FACTOR, 3 * FACTOR), slice(2 * FACTOR, 3 * FACTOR))
+    assert (fine.index[lone] == 1).all()
+    assert np.allclose(fine.y[lone], 7 + offset[:, None])
+    assert np.allclose(fine.x[lone], 9 + offset[None, :])
 
 
 def test_the_factor_reaches_one_texel_per_pixel():

@@ -63,6 +63,7 @@ from skimage import color
 
 from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
+from imagemap.core.finecopy import fine_positions
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
@@ -282,28 +283,20 @@ def _working(state: State, config: DepthConfig) -> State:
     return state
 
 
-#: A block's neighbour whose offset (source minus position, in averaged pixels) differs
-#: from the block's by at most this much, in the same example, continues the block's copy
-#: (the fragments' definition of one copy, :data:`imagemap.metrics.coherence.
-#: FRAGMENT_DRIFT`): the full-size offset is interpolated between them, so a copy that
-#: drifts by one averaged pixel steps by one full-size pixel, not by ``factor``.
-FINE_DRIFT = 1
-
-
 def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
                 example_shapes: list[tuple[int, int]]) -> np.ndarray:  # fmt: skip
     """A source map of block-averaged pictures at full size: pixel ``(y, x)`` copies the
-    pixel at the same place in its source's block, ``(e, factor * sy + y % factor,
-    factor * sx + x % factor)`` where ``(e, sy, sx)`` is the source of block ``(y //
-    factor, x // factor)``; clipped to its example, -1 kept where there is no source.
+    full-size pixel nearest to its position in its block's copy
+    (:func:`imagemap.core.finecopy.fine_positions`: interpolated between the blocks'
+    centres where the neighbouring blocks continue the copy); clipped to its example, -1
+    kept where there is no source.
 
-    Where a neighbouring block continues the copy (the same example, its offset within
-    :data:`FINE_DRIFT` averaged pixels of the block's), the pixel's offset is the
-    bilinear interpolation of the blocks' offsets between their centres, rounded to a
-    full-size pixel: a copy that drifts by one averaged pixel steps by one full-size
-    pixel at a time, as a full-size synthesis's slowly warping copy does, instead of
-    jumping ``factor`` pixels at a block's edge. Seams (another example, a larger jump)
-    are kept where the blocks put them.
+    Within a block whose neighbours continue a translated copy, pixel ``(y, x)`` copies
+    ``(e, factor * sy + y % factor, factor * sx + x % factor)``, ``(e, sy, sx)`` the
+    block's source: the same place in the source's block. A copy that drifts by one
+    averaged pixel steps by one full-size pixel at a time, as a full-size synthesis's
+    slowly warping copy does, instead of jumping ``factor`` pixels at a block's edge.
+    Seams (another example, a larger jump) are kept where the blocks put them.
 
     Examples
     --------
@@ -317,53 +310,20 @@ def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
     >>> drift = np.array([[[0, 0, 4], [0, 0, 6]]], np.int32)  # offsets 4 and 5
     >>> fine = fine_source(drift, 2, (2, 4), [(8, 16)])
     >>> (fine[0, :, 2] - np.arange(4)).tolist()  # by blocks alone: 8, 8, 10, 10
-    [8, 9, 10, 10]
+    [8, 9, 10, 11]
     """
     height, width = shape
-    rows, cols = source.shape[:2]
     heights = np.array([s[0] for s in example_shapes], dtype=np.int64)
     widths = np.array([s[1] for s in example_shapes], dtype=np.int64)
-    # Offsets of the blocks (source minus block position, averaged pixels).
-    index = source[..., 0]
-    offset = source[..., 1:].astype(np.int64) - np.moveaxis(
-        np.indices((rows, cols)), 0, -1
-    )  # (rows, cols, 2)
-
-    def axis(n: int, blocks: int):
-        # Each full-size pixel's block, its lower and upper neighbouring block centres
-        # and its weight on the upper one.
-        u = (np.arange(n) + 0.5) / factor - 0.5
-        low = np.floor(u)
-        return (
-            np.arange(n) // factor,
-            np.clip(low, 0, blocks - 1).astype(np.int64),
-            np.clip(low + 1, 0, blocks - 1).astype(np.int64),
-            u - low,
-        )
-
-    bx, x0, x1, wx = axis(width, cols)
     fine = np.empty((height, width, 3), dtype=np.int32)
     for y0 in range(0, height, _ROWS):
-        ys = np.arange(y0, min(y0 + _ROWS, height))
-        by, ya, yb, wy = (part[ys] for part in axis(height, rows))
-        own_index = index[by][:, bx]
-        own = offset[by][:, bx]  # (rows, width, 2)
-        blended = np.zeros(own.shape, dtype=np.float64)
-        for cy, weight_y in ((ya, 1 - wy), (yb, wy)):
-            for cx, weight_x in ((x0, 1 - wx), (x1, wx)):
-                other = offset[cy][:, cx]
-                continues = (index[cy][:, cx] == own_index) & (
-                    np.abs(other - own).max(axis=-1) <= FINE_DRIFT
-                )
-                used = np.where(continues[..., None], other, own)
-                blended += (weight_y[:, None] * weight_x[None, :])[..., None] * used
-        step = np.floor(factor * blended + 0.5).astype(np.int64)
-        known = np.clip(own_index, 0, len(example_shapes) - 1)
-        fine[y0 : y0 + len(ys), :, 0] = own_index
-        fine[y0 : y0 + len(ys), :, 1] = np.clip(ys[:, None] + step[..., 0], 0, heights[known] - 1)
-        fine[y0 : y0 + len(ys), :, 2] = np.clip(
-            np.arange(width)[None, :] + step[..., 1], 0, widths[known] - 1
-        )
+        y1 = min(y0 + _ROWS, height)
+        index, sy, sx = fine_positions(source, factor, shape, (y0, y1))
+        known = np.clip(index, 0, len(example_shapes) - 1)
+        # The full-size pixel whose centre is nearest: (p + 0.5) * factor - 0.5, rounded.
+        fine[y0:y1, :, 0] = index
+        fine[y0:y1, :, 1] = np.clip(np.floor((sy + 0.5) * factor), 0, heights[known] - 1)
+        fine[y0:y1, :, 2] = np.clip(np.floor((sx + 0.5) * factor), 0, widths[known] - 1)
     return fine
 
 

@@ -9,10 +9,11 @@ pixel covers no more of the surface than a texel), as the uv-space path copies i
 texture at the output size:
 
 - every fine pixel lies in one synthesized pixel; it copies from that pixel's example at
-  the source position moved by the fine pixel's offset within the pixel, through the
-  source map's local derivative (:func:`source_derivatives`: the pose's turn, scale and
-  mirror as the neighbouring sources show it), so an edge that runs across a copied
-  patch is the example's own edge at the fine size, not the synthesized pixels' steps;
+  the source position interpolated between the neighbouring pixels' sources that
+  continue its copy (:func:`imagemap.core.finecopy.fine_positions`, the depth maps' and
+  the uv-space textures' fine copy too: a turned or mirrored patch at its own turn), so
+  an edge that runs across a copied patch is the example's own edge at the fine size,
+  not the synthesized pixels' steps;
 - from the example's picture at the fine size (a mesh example rendered at ``k`` times the
   view's size; a picture example at its own size, sampled between its pixels);
 - plus the finish's smooth correction (blend minus plain copy) of the synthesized map,
@@ -32,12 +33,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from imagemap.core.blend import copy_through, fill_background
+from imagemap.core.finecopy import fine_positions
 from imagemap.materials import MAP_KINDS, NEUTRAL, decode_normals, encode_normals, example_maps
 from imagemap.scene.bake import planar_barycentric, view_size_for
 from imagemap.scene.views import sample_pixels
 
 __all__ = [
-    "MAX_SOURCE_STEP",
     "FineSource",
     "copy_fine",
     "fine_factor",
@@ -47,12 +48,8 @@ __all__ = [
     "fine_view",
     "fine_view_maps",
     "fine_views",
-    "source_derivatives",
 ]
 
-#: Two neighbouring pixels copy from one patch when their sources (same example) are at
-#: most this many example pixels apart along each axis: a pose's scale of up to 2, a turn.
-MAX_SOURCE_STEP = 2
 #: The largest fine factor: the copy's pictures grow with its square (4: 16x the pixels).
 MAX_FINE_FACTOR = 4
 
@@ -75,54 +72,6 @@ def fine_factor(mesh, views, size: tuple[int, int], texture_size: int | None) ->
     wanted = view_size_for(mesh, views, texture_size, base=(width, int(size[1])),
                            max_pixels=2**62)  # fmt: skip
     return int(min(max(1, -(-wanted[0] // width)), MAX_FINE_FACTOR))
-
-
-def source_derivatives(source: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """The source map's derivative per pixel (H, W, 2, 2): d(source y, x) / d(row, column).
-
-    From the neighbours on either side that copy from the same example within
-    :data:`MAX_SOURCE_STEP` (the mean of the two differences; one if only one qualifies);
-    a pixel with neither takes its example's median derivative (its pose).
-
-    Examples
-    --------
-    A mirrored patch: columns run backwards in the example, rows forwards.
-
-    >>> source = np.zeros((3, 4, 3), np.int32)
-    >>> source[..., 1] = np.arange(3)[:, None] + 5
-    >>> source[..., 2] = 10 - np.arange(4)[None, :]
-    >>> d = source_derivatives(source, np.ones((3, 4), bool))
-    >>> d[1, 1].tolist()
-    [[1.0, 0.0], [0.0, -1.0]]
-    """
-    height, width = mask.shape
-    label = source[..., 0]
-    position = source[..., 1:].astype(np.float64)
-    out = np.zeros((height, width, 2, 2))
-    known = np.zeros((height, width, 2), dtype=bool)
-    for axis in (0, 1):
-        step = np.diff(position, axis=axis)  # (H-1, W, 2) or (H, W-1, 2)
-        same = np.diff(label, axis=axis) == 0
-        both = (mask[1:] & mask[:-1]) if axis == 0 else (mask[:, 1:] & mask[:, :-1])
-        good = same & both & (np.abs(step).max(axis=-1) <= MAX_SOURCE_STEP)
-        total = np.zeros((height, width, 2))
-        count = np.zeros((height, width))
-        ahead = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
-        behind = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
-        for part in (ahead, behind):  # the difference is the pixel's forward or backward one
-            total[part] += np.where(good[..., None], step, 0.0)
-            count[part] += good
-        found = count > 0
-        out[..., :, axis] = np.where(found[..., None], total / np.maximum(count, 1)[..., None], 0)
-        known[..., axis] = found
-    for example in np.unique(label[mask]):
-        mine = mask & (label == example)
-        for axis in (0, 1):
-            have = mine & known[..., axis]
-            pose = np.median(out[have][:, :, axis], axis=0) if have.any() else np.eye(2)[axis]
-            missing = mine & ~known[..., axis]
-            out[missing, :, axis] = pose
-    return out
 
 
 @dataclass
@@ -152,9 +101,10 @@ def fine_source(result, factor: int) -> FineSource:
     """The fine copy's source positions of a view's synthesis (:class:`FineSource`).
 
     Every fine pixel lies in one synthesized pixel; it reads that pixel's example at the
-    source position moved by the fine pixel's offset within the pixel, through the source
-    map's local derivative (:func:`source_derivatives`). The colour and every PBR map are
-    read at these positions (:func:`copy_fine`): one copy for all of them.
+    position interpolated between the neighbouring pixels' sources that continue its copy
+    (:func:`imagemap.core.finecopy.fine_positions`: a turned or mirrored patch at its own
+    turn, a seam kept on the pixels' edge). The colour and every PBR map are read at these
+    positions (:func:`copy_fine`): one copy for all of them.
 
     Examples
     --------
@@ -176,17 +126,9 @@ def fine_source(result, factor: int) -> FineSource:
     # Where the synthesis left no source, the nearest pixel's (the fine mask is the coarse
     # one's footprint).
     source = fill_background(source, mask & (source[..., 0] >= 0))
-    derivative = source_derivatives(source, mask)
-    offsets = (np.arange(k) + 0.5) / k - 0.5  # a fine pixel's offset within its pixel
-    rows = np.repeat(np.arange(height), k)
-    cols = np.repeat(np.arange(width), k)
-    dy = np.tile(offsets, height)[:, None]
-    dx = np.tile(offsets, width)[None, :]
-    cell = source[rows][:, cols]  # (kH, kW, 3)
-    d = derivative[rows][:, cols]  # (kH, kW, 2, 2)
-    sy = cell[..., 1] + d[..., 0, 0] * dy + d[..., 0, 1] * dx
-    sx = cell[..., 2] + d[..., 1, 0] * dy + d[..., 1, 1] * dx
-    return FineSource(np.where(inside, cell[..., 0], -1), sy, sx, inside, k)
+    source[~mask, 0] = -1  # outside the object: continues no copy
+    index, sy, sx = fine_positions(source, k, inside.shape)
+    return FineSource(np.where(inside, index, -1), sy, sx, inside, k)
 
 
 def copy_fine(fine: FineSource, shapes: list[tuple[int, ...]], pictures: list) -> np.ndarray:

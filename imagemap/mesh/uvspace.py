@@ -62,6 +62,7 @@ from scipy import ndimage, sparse
 import imagemap.mesh.padding as padding_code
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.core.engine import ReleasableLevels, synthesize
+from imagemap.core.finecopy import fine_positions
 from imagemap.core.mapping import Mapping
 from imagemap.core.poisson import seamless_copy
 from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
@@ -82,6 +83,7 @@ from imagemap.errors import InputError
 from imagemap.io import read_npz, write_npz
 from imagemap.mesh.padding import SurfacePadding, engine_reach, surface_padding, weld
 from imagemap.scene.bake import covered_texels, rasterize_uv
+from imagemap.scene.views import sample_pixels
 
 __all__ = [
     "LAYOUT_TEST_SIZE",
@@ -512,10 +514,12 @@ def fine_texture(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The texture at ``size`` copied through a coarser source map from full-size textures.
 
-    Each output texel lies in one texel of the working atlas (``source``'s grid, W x W);
-    it copies the texel of its source example's own texture (any size) at the same
-    sub-position within the source texel, plus ``correction`` (W, W, C) of its working
-    texel. Detail is then the examples' own, at their resolution.
+    Each output texel copies the texel of its example's own texture (any size) nearest to
+    its position in the copy (:func:`imagemap.core.finecopy.fine_positions`: interpolated
+    between the working texels' sources that continue its working texel's copy, so a copy
+    that drifts by one working texel steps one texel at a time, and two patches from
+    far-apart places are not mixed), plus ``correction`` (W, W, C) interpolated between the
+    working texels' centres. Detail is then the examples' own, at their resolution.
 
     Parameters
     ----------
@@ -524,7 +528,7 @@ def fine_texture(
     source : (W, W, 3) int array
         Example, y, x in the working atlas (example < 0: none; taken as example 0).
     correction : (W, W, C) array
-        Added to every output texel of a working texel.
+        The finish's smooth correction per working texel, added interpolated.
     size : int
 
     Returns
@@ -534,40 +538,47 @@ def fine_texture(
 
     Examples
     --------
-    Working texel (0, 1) copies the texel (1, 0) of a 2 x 2 atlas; at 4 x 4, its four
-    texels copy the four under that one:
+    A 4 x 4 atlas copies its example where it lies, but working texel (0, 1) copies the
+    working texel (3, 3), far away: at 8 x 8 its four texels copy the four under that
+    one, not mixed with their neighbours' positions:
 
-    >>> texture = np.arange(16, dtype=np.float32).reshape(4, 4, 1) / 16
-    >>> src = np.zeros((2, 2, 3), np.int32); src[0, 1] = (0, 1, 0)
-    >>> image, fine = fine_texture([texture], src, np.zeros((2, 2, 1), np.float32), 4)
+    >>> texture = np.arange(64, dtype=np.float32).reshape(8, 8, 1) / 64
+    >>> src = np.zeros((4, 4, 3), np.int32); src[..., 1:] = np.moveaxis(np.indices((4, 4)), 0, -1)
+    >>> src[0, 1] = (0, 3, 3)
+    >>> image, fine = fine_texture([texture], src, np.zeros((4, 4, 1), np.float32), 8)
     >>> fine[0:2, 2:4, 1:].tolist()
-    [[[2, 0], [2, 1]], [[3, 0], [3, 1]]]
-    >>> (image[0:2, 2:4, 0] * 16).tolist()
-    [[8.0, 9.0], [12.0, 13.0]]
+    [[[6, 6], [6, 7]], [[7, 6], [7, 7]]]
+    >>> (image[0:2, 2:4, 0] * 64).tolist()
+    [[54.0, 55.0], [62.0, 63.0]]
+    >>> bool(np.array_equal(fine[4:, :, 1:], np.moveaxis(np.indices((4, 8)), 0, -1) + (4, 0)))
+    True
     """
     working = source.shape[0]
-    centres = (np.arange(size) + 0.5) * working / size
-    cell = np.minimum(centres.astype(np.int64), working - 1)
-    within = centres - cell  # sub-position in the working texel, [0, 1)
     heights = np.array([t.shape[0] for t in textures], dtype=np.float64)
     widths = np.array([t.shape[1] for t in textures], dtype=np.float64)
     channels = correction.shape[2]
+    correction = np.asarray(correction, dtype=np.float32)
+    centres = (np.arange(size) + 0.5) * working / size - 0.5  # in working texels
     image = np.empty((size, size, channels), dtype=np.float32)
     fine = np.empty((size, size, 3), dtype=np.int32)
     for y0 in range(0, size, _BLOCK_ROWS):
-        rows = slice(y0, y0 + _BLOCK_ROWS)
-        coarse = source[cell[rows]][:, cell]
-        index = np.clip(coarse[..., 0], 0, len(textures) - 1)
-        sy = np.floor((coarse[..., 1] + within[rows, None]) * heights[index] / working)
-        sx = np.floor((coarse[..., 2] + within[None, :]) * widths[index] / working)
+        y1 = min(y0 + _BLOCK_ROWS, size)
+        index, py, px = fine_positions(source, size / working, (size, size), (y0, y1))
+        index = np.clip(index, 0, len(textures) - 1)
+        # The example's texel whose centre is nearest the position, (p + 0.5) * s - 0.5.
+        sy = np.floor((py + 0.5) * heights[index] / working)
+        sx = np.floor((px + 0.5) * widths[index] / working)
         sy = np.clip(sy, 0, heights[index] - 1).astype(np.int32)
         sx = np.clip(sx, 0, widths[index] - 1).astype(np.int32)
-        block = correction[cell[rows]][:, cell].astype(np.float32)
+        # The finish's smooth correction, between the working texels' centres.
+        grid_y, grid_x = np.meshgrid(centres[y0:y1], centres, indexing="ij")
+        block = sample_pixels(correction, grid_x.ravel(), grid_y.ravel())
+        block = block.reshape(y1 - y0, size, channels)
         for k, texture in enumerate(textures):
             here = index == k
             block[here] += _unit(texture[sy[here], sx[here]][..., :channels])
-        image[rows] = np.clip(block, 0.0, 1.0)
-        fine[rows] = np.stack([index, sy, sx], axis=-1)
+        image[y0:y1] = np.clip(block, 0.0, 1.0)
+        fine[y0:y1] = np.stack([index, sy, sx], axis=-1)
     return image, fine
 
 

@@ -1,0 +1,71 @@
+"""The fine copy (:mod:`imagemap.core.finecopy`): one copy at full resolution through a
+coarser source map, for the depth maps above the search size, the uv-space textures and
+the views (issues #44, #46)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imagemap.core.finecopy import fine_positions
+
+#: The known answers' factor (fine pixels per coarse pixel).
+FACTOR = 4
+#: Positions equal up to float64 rounding of the bilinear weights.
+EXACT = 1e-9
+
+
+def _full_size(position: np.ndarray) -> np.ndarray:
+    """A coarse position in the full-size example's pixels, rounded to the nearest."""
+    return np.floor((position + 0.5) * FACTOR).astype(np.int64)
+
+
+def test_a_copy_drifting_by_one_coarse_pixel_steps_one_source_pixel_at_a_time():
+    """One row of coarse pixels copying a translated patch whose offset grows by one coarse
+    pixel every two: at full size the offset steps by one pixel at a time (by blocks alone
+    it would jump by FACTOR at a block's edge), and over the row it gains the drift."""
+    cols = 6
+    offsets = np.array([0, 0, 1, 1, 2, 2])
+    source = np.zeros((1, cols, 3), np.int64)
+    source[0, :, 2] = np.arange(cols) + offsets
+    _, _, x = fine_positions(source, FACTOR, (FACTOR, FACTOR * cols))
+    fine_offset = _full_size(x[0]) - np.arange(FACTOR * cols)
+    steps = np.diff(fine_offset)
+    assert set(steps.tolist()) == {0, 1}
+    assert fine_offset[-1] - fine_offset[0] == 2 * FACTOR
+    blocks = FACTOR * np.repeat(offsets, FACTOR)  # the blocks' own offsets, for comparison
+    assert np.abs(np.diff(blocks)).max() == FACTOR
+
+
+def test_a_turned_copy_gives_the_turned_positions():
+    """A copy turned by 30 degrees (float sources: the turn exact at the coarse centres)
+    gives exactly the turned positions of the fine pixels, up to the map's sides."""
+    angle = np.radians(30.0)
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    rows, cols = 6, 7
+    centres = np.moveaxis(np.indices((rows, cols)), 0, -1).astype(np.float64)
+    source = np.zeros((rows, cols, 3))
+    source[..., 1:] = centres @ turn.T + (20.0, 30.0)
+    _, y, x = fine_positions(source, FACTOR, (FACTOR * rows, FACTOR * cols))
+    fine = (np.moveaxis(np.indices(y.shape), 0, -1) + 0.5) / FACTOR - 0.5
+    truth = fine @ turn.T + (20.0, 30.0)
+    assert np.abs(y - truth[..., 0]).max() < EXACT
+    assert np.abs(x - truth[..., 1]).max() < EXACT
+
+
+def test_neighbouring_patches_from_far_apart_places_are_never_mixed():
+    """A checkerboard of two translated patches (one example, 40 pixels apart) and a strip
+    of another example: every fine pixel reads its own coarse pixel's patch at the same
+    place in the source's block, as a translated copy of its own."""
+    rows, cols = 5, 6
+    yy, xx = np.indices((rows, cols))
+    far = (yy + xx) % 2 == 1
+    source = np.stack([np.zeros_like(yy), yy + 3, xx + 3 + 40 * far], axis=-1)
+    source[:, 5, 0] = 1  # another example
+    index, y, x = fine_positions(source, FACTOR, (FACTOR * rows, FACTOR * cols))
+    fy, fx = np.indices(y.shape)
+    own = source[fy // FACTOR, fx // FACTOR]
+    assert np.array_equal(index, own[..., 0])
+    # The same place within the source's block: block position times FACTOR plus the
+    # pixel's own place in its block.
+    assert np.array_equal(_full_size(y), FACTOR * own[..., 1] + fy % FACTOR)
+    assert np.array_equal(_full_size(x), FACTOR * own[..., 2] + fx % FACTOR)
