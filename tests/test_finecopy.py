@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imagemap.core.finecopy import fine_positions
+from imagemap.core.finecopy import copy_steps, fine_positions
 
 #: The known answers' factor (fine pixels per coarse pixel).
 FACTOR = 4
@@ -38,14 +38,17 @@ def test_a_copy_drifting_by_one_coarse_pixel_steps_one_source_pixel_at_a_time():
 
 def test_a_turned_copy_gives_the_turned_positions():
     """A copy turned by 30 degrees (float sources: the turn exact at the coarse centres)
-    gives exactly the turned positions of the fine pixels, up to the map's sides."""
+    gives exactly the turned positions of the fine pixels, up to the map's sides, where
+    the copy is continued at its step (:func:`copy_steps`: the turn)."""
     angle = np.radians(30.0)
     turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
     rows, cols = 6, 7
     centres = np.moveaxis(np.indices((rows, cols)), 0, -1).astype(np.float64)
     source = np.zeros((rows, cols, 3))
     source[..., 1:] = centres @ turn.T + (20.0, 30.0)
-    _, y, x = fine_positions(source, FACTOR, (FACTOR * rows, FACTOR * cols))
+    steps = copy_steps(source, 1)
+    assert np.allclose(steps[0], turn)
+    _, y, x = fine_positions(source, FACTOR, (FACTOR * rows, FACTOR * cols), steps=steps)
     fine = (np.moveaxis(np.indices(y.shape), 0, -1) + 0.5) / FACTOR - 0.5
     truth = fine @ turn.T + (20.0, 30.0)
     assert np.abs(y - truth[..., 0]).max() < EXACT

@@ -8,71 +8,98 @@ and registered textures (the working atlas against the output size) and the view
 
 Every fine pixel's source position is the bilinear interpolation of the source
 positions at the centres of the four coarse pixels around it. A neighbour enters with
-its own position only where it *continues the copy* of the fine pixel's own coarse pixel
-(same example, and the source positions lie about as far apart as the pixels:
-``| |source step| - |pixel step| | <= FINE_DRIFT``, the same test for a translated, a
-turned or a mirrored copy). One that does not enters with the position the own copy
-would give there: the own position extended by the step the copy takes on the other side
-(from the mirror neighbour, if that one continues), else by the pixel step (a translated
-copy); a corner neighbour that does not continue, with the parallelogram of the two
-beside it (the corner of the copy they show). So
+its own position only where it *continues the copy* of the fine pixel's own coarse pixel:
+the same example, and its source where the copy's step puts it within ``FINE_DRIFT``
+(``max |source step - S pixel step| <= FINE_DRIFT``, ``S`` the example's copy step: the
+identity for a translated copy, the pose's turn, scale or mirror for one copied through a
+pose; :func:`copy_steps`). One that does not enters with the position the own copy
+would give there (the own position moved by ``S`` times the pixel step); a corner one,
+the parallelogram of the two beside it (the corner of the copy they show). So
 
-- a translated, turned or mirrored copy (any locally affine one) is reproduced exactly,
-  up to a seam or the map's side: the fine pixels step through the example at its own
-  resolution, with no derivative to estimate;
+- a translated, turned or mirrored copy (any locally affine one) is reproduced exactly:
+  the fine pixels step through the example at its own resolution, with no per-pixel
+  derivative to estimate;
 - a copy that drifts by one coarse pixel between two coarse pixels steps by one pixel
   at a time, not by the whole factor at their edge;
-- two neighbouring patches from far-apart places fail the test and are never averaged:
-  the seam stays on the coarse pixels' edge.
+- two neighbouring patches from other places (another example, or a source more than
+  ``FINE_DRIFT`` off the copy's step) are never averaged: the seam stays on the coarse
+  pixels' edge, and the copy is not extrapolated beyond its neighbours' positions.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FINE_DRIFT", "fine_positions"]
+__all__ = ["FINE_DRIFT", "copy_steps", "fine_positions"]
 
-#: A neighbour continues a coarse pixel's copy when their source positions' distance
-#: differs from their pixels' by at most this many coarse pixels: a copy drifting by one
-#: pixel (as PatchMatch copies drift over a curved object; the fragments' definition of
-#: one copy, :data:`imagemap.metrics.coherence.FRAGMENT_DRIFT`) still continues.
+#: A neighbour continues a coarse pixel's copy when its source lies at most this many
+#: coarse pixels (along each axis) from where the copy's step puts it: a copy drifting by
+#: one pixel (as PatchMatch copies drift over a curved object; the fragments' definition
+#: of one copy, :data:`imagemap.metrics.coherence.FRAGMENT_DRIFT`) still continues.
 FINE_DRIFT = 1.0
 
 #: The eight neighbours' steps (row, column).
 _STEPS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
 
 
-def _neighbour_positions(label: np.ndarray, position: np.ndarray) -> np.ndarray:
+def copy_steps(source: np.ndarray, examples: int) -> np.ndarray:
+    """Each example's copy step (E, 2, 2): d(source y, x) / d(row, column), the median of
+    the steps between neighbouring coarse pixels of that example (the identity for an
+    example with none): the pose through which a map copies it, turned, scaled or mirrored.
+
+    Examples
+    --------
+    A mirrored copy: columns run backwards in the example, rows forwards.
+
+    >>> source = np.zeros((3, 4, 3), np.int32)
+    >>> source[..., 1] = np.arange(3)[:, None] + 5
+    >>> source[..., 2] = 10 - np.arange(4)[None, :]
+    >>> copy_steps(source, 1)[0].tolist()
+    [[1.0, 0.0], [0.0, -1.0]]
+    """
+    label = np.asarray(source)[..., 0].astype(np.int64)
+    position = np.asarray(source)[..., 1:].astype(np.float64)
+    out = np.repeat(np.eye(2)[None], examples, axis=0)
+    for axis in (0, 1):
+        step = np.diff(position, axis=axis).reshape(-1, 2)
+        ahead = (label[1:] if axis == 0 else label[:, 1:]).ravel()
+        behind = (label[:-1] if axis == 0 else label[:, :-1]).ravel()
+        same = (ahead == behind) & (behind >= 0) & (behind < examples)
+        for example in np.unique(behind[same]):
+            out[example, :, axis] = np.median(step[same & (behind == example)], axis=0)
+    return out
+
+
+def _neighbour_positions(label: np.ndarray, position: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """For the inner cells of a padded slab: own position (index 4) and the position each
     of the eight neighbours enters the interpolation with, (3, 3, h, w, 2) by step + 1.
 
     ``label`` (h + 2, w + 2) int (< 0: no source; the padding's), ``position`` (h + 2,
-    w + 2, 2) float64.
+    w + 2, 2) float64, ``steps`` (E, 2, 2) the examples' copy steps.
     """
     height, width = label.shape[0] - 2, label.shape[1] - 2
     own_label = label[1:-1, 1:-1]
     own = position[1:-1, 1:-1]
-    found, seen = [], []
-    for dy, dx in _STEPS:
-        other = position[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
-        distance = np.hypot(*np.moveaxis(other - own, -1, 0))
-        found.append(
-            (label[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width] == own_label)
-            & (own_label >= 0)
-            & (np.abs(distance - np.hypot(dy, dx)) <= FINE_DRIFT)
-        )
-        seen.append(other)
+    step = steps[np.clip(own_label, 0, len(steps) - 1)]  # (h, w, 2, 2)
+    step[own_label < 0] = np.eye(2)
     out = np.empty((3, 3, height, width, 2))
     out[1, 1] = own
-    for n, (dy, dx) in enumerate(_STEPS):  # along the axes first
-        if not (dy and dx):
-            m = _STEPS.index((-dy, -dx))  # the mirror neighbour: the copy's step there
-            extended = np.where(found[m][..., None], 2 * own - seen[m], own + (dy, dx))
-            out[dy + 1, dx + 1] = np.where(found[n][..., None], seen[n], extended)
-    for n, (dy, dx) in enumerate(_STEPS):  # a corner: the parallelogram of its two sides
+    found = {}
+    for dy, dx in _STEPS:
+        other = position[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
+        expected = own + step[..., 0] * dy + step[..., 1] * dx
+        found[dy, dx] = (
+            (label[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width] == own_label)
+            & (own_label >= 0)
+            & (np.abs(other - expected).max(axis=-1) <= FINE_DRIFT)
+        )
+        if not (dy and dx):  # along the axes: else the own copy's step
+            out[dy + 1, dx + 1] = np.where(found[dy, dx][..., None], other, expected)
+    for dy, dx in _STEPS:  # a corner: else the parallelogram of its two sides
         if dy and dx:
+            other = position[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
             extended = out[dy + 1, 1] + out[1, dx + 1] - own
-            out[dy + 1, dx + 1] = np.where(found[n][..., None], seen[n], extended)
+            out[dy + 1, dx + 1] = np.where(found[dy, dx][..., None], other, extended)
     return out
 
 
@@ -81,6 +108,7 @@ def fine_positions(
     factor: float | tuple[float, float],
     shape: tuple[int, int],
     rows: tuple[int, int] | None = None,
+    steps: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where each fine pixel copies from, through a coarse source map.
 
@@ -97,6 +125,9 @@ def fine_positions(
     rows : (int, int), optional
         Only the fine rows ``rows[0]`` to ``rows[1] - 1`` (default all): a large map is made
         a band at a time.
+    steps : (E, 2, 2) array, optional
+        Each example's copy step (:func:`copy_steps`); default the identity (translated
+        copies, as the engine makes them).
 
     Returns
     -------
@@ -108,16 +139,15 @@ def fine_positions(
 
     Examples
     --------
-    A copy turned by 90 degrees (columns run down the example) at twice the size: between
-    the coarse pixels' centres the fine pixels step half a pixel at a time along the
-    turned axes.
+    A copy turned by 90 degrees (columns run down the example) at twice the size: the fine
+    pixels step half a pixel at a time along the turned axes, up to the map's sides.
 
     >>> source = np.zeros((3, 3, 3), np.int32)
     >>> source[..., 1], source[..., 2] = np.mgrid[:3, :3][::-1]
     >>> source[..., 1] += 5
-    >>> _, y, x = fine_positions(source, 2, (6, 6))
-    >>> y[2, 1:5].tolist(), x[1:5, 2].tolist()
-    ([5.25, 5.75, 6.25, 6.75], [0.25, 0.75, 1.25, 1.75])
+    >>> _, y, x = fine_positions(source, 2, (6, 6), steps=copy_steps(source, 1))
+    >>> y[2].tolist(), x[:, 2].tolist()
+    ([4.75, 5.25, 5.75, 6.25, 6.75, 7.25], [-0.25, 0.25, 0.75, 1.25, 1.75, 2.25])
     """
     source = np.asarray(source)
     coarse_rows, coarse_cols = source.shape[:2]
@@ -143,7 +173,10 @@ def fine_positions(
     top, bottom = max(low - 1, 0), min(high + 1, coarse_rows)
     label[top - low + 1 : bottom - low + 1, 1:-1] = source[top:bottom, :, 0]
     position[top - low + 1 : bottom - low + 1, 1:-1] = source[top:bottom, :, 1:]
-    near = _neighbour_positions(label, position)
+    examples = max(int(source[..., 0].max()) + 1, 1)
+    if steps is None:
+        steps = np.repeat(np.eye(2)[None], examples, axis=0)
+    near = _neighbour_positions(label, position, np.asarray(steps, dtype=np.float64))
     ry = (cy - low)[:, None]
     rx = cx[None, :]
     sy = np.where(oy < 0, 0, 2)[:, None]  # the neighbour's index (step + 1) on each axis

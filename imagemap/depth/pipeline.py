@@ -310,7 +310,7 @@ def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
     >>> drift = np.array([[[0, 0, 4], [0, 0, 6]]], np.int32)  # offsets 4 and 5
     >>> fine = fine_source(drift, 2, (2, 4), [(8, 16)])
     >>> (fine[0, :, 2] - np.arange(4)).tolist()  # by blocks alone: 8, 8, 10, 10
-    [8, 9, 10, 11]
+    [8, 9, 10, 10]
     """
     height, width = shape
     heights = np.array([s[0] for s in example_shapes], dtype=np.int64)

@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from imagemap.core.blend import copy_through, fill_background
-from imagemap.core.finecopy import fine_positions
+from imagemap.core.finecopy import copy_steps, fine_positions
 from imagemap.materials import MAP_KINDS, NEUTRAL, decode_normals, encode_normals, example_maps
 from imagemap.scene.bake import planar_barycentric, view_size_for
 from imagemap.scene.views import sample_pixels
@@ -102,7 +102,8 @@ def fine_source(result, factor: int) -> FineSource:
 
     Every fine pixel lies in one synthesized pixel; it reads that pixel's example at the
     position interpolated between the neighbouring pixels' sources that continue its copy
-    (:func:`imagemap.core.finecopy.fine_positions`: a turned or mirrored patch at its own
+    (:func:`imagemap.core.finecopy.fine_positions`, each example's pose as the map copies
+    it, :func:`~imagemap.core.finecopy.copy_steps`: a turned or mirrored patch at its own
     turn, a seam kept on the pixels' edge). The colour and every PBR map are read at these
     positions (:func:`copy_fine`): one copy for all of them.
 
@@ -127,7 +128,9 @@ def fine_source(result, factor: int) -> FineSource:
     # one's footprint).
     source = fill_background(source, mask & (source[..., 0] >= 0))
     source[~mask, 0] = -1  # outside the object: continues no copy
-    index, sy, sx = fine_positions(source, k, inside.shape)
+    # The examples' poses (turned, scaled, mirrored) as the map copies them.
+    steps = copy_steps(source, int(source[..., 0].max()) + 1)
+    index, sy, sx = fine_positions(source, k, inside.shape, steps=steps)
     return FineSource(np.where(inside, index, -1), sy, sx, inside, k)
 
 

@@ -32,9 +32,10 @@ most :data:`WORKING_SIZE` texels; the depth front end's finish then copies each 
 from the example texel its windows agree on and places and blends the seams
 (:func:`imagemap.core.seams.place_seams`, :func:`~imagemap.core.poisson.seamless_copy`).
 The texture is made at the output size by copying every output texel from its
-example's full-resolution texture through the working source map (a source texel is
-refined into the output texel's sub-position), plus the blend's smooth correction: so
-the result is as crisp as the examples' textures.
+example's full-resolution texture through the working source map (the position
+interpolated between the working texels that continue one copy,
+:func:`imagemap.core.finecopy.fine_positions`), plus the blend's smooth correction
+interpolated: so the result is as crisp as the examples' textures.
 
 Examples
 --------
