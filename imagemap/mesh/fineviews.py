@@ -129,7 +129,7 @@ def fine_source(result, factor: int) -> FineSource:
     source = fill_background(source, mask & (source[..., 0] >= 0))
     source[~mask, 0] = -1  # outside the object: continues no copy
     # The examples' poses (turned, scaled, mirrored) as the map copies them.
-    steps = copy_steps(source, int(source[..., 0].max()) + 1)
+    steps = copy_steps(source, max(int(source[..., 0].max()) + 1, 1))
     index, sy, sx = fine_positions(source, k, inside.shape, steps=steps)
     return FineSource(np.where(inside, index, -1), sy, sx, inside, k)
 
