@@ -72,3 +72,24 @@ def test_neighbouring_patches_from_far_apart_places_are_never_mixed():
     # pixel's own place in its block.
     assert np.array_equal(_full_size(y), FACTOR * own[..., 1] + fy % FACTOR)
     assert np.array_equal(_full_size(x), FACTOR * own[..., 2] + fx % FACTOR)
+
+
+def test_the_uv_copy_never_reads_an_examples_unused_gap_its_own_block_avoids():
+    # A copy drifting over a narrow unused gap of its example (a mouth's slit between the
+    # lips' charts, whose padding is the surface beyond the seam): the interpolated rows
+    # cross the gap, the block copy does not; given the used texels, the copy keeps out.
+    from imagemap.mesh.uvspace import fine_texture
+
+    texture = np.repeat(np.arange(16, dtype=np.float32)[:, None, None] / 16, 16, axis=1)
+    source = np.zeros((4, 4, 3), np.int32)
+    source[..., 1] = np.array([0, 0, 2, 3])[:, None]  # rows drift by one working texel
+    source[..., 2] = np.arange(4)[None, :]
+    used = np.ones((16, 16), bool)
+    used[4:8] = False  # the example's rows between the two blocks the copy reads
+    correction = np.zeros((4, 4, 1), np.float32)
+    _, free = fine_texture([texture], source, correction, 16)
+    _, kept = fine_texture([texture], source, correction, 16, used=[used])
+    gap = (free[..., 1] >= 4) & (free[..., 1] < 8)
+    assert gap.any()  # the interpolated copy reads the gap
+    assert not ((kept[..., 1] >= 4) & (kept[..., 1] < 8)).any()
+    assert np.array_equal(np.any(kept != free, axis=-1), gap)  # only there

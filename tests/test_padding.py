@@ -127,8 +127,9 @@ def test_an_examples_full_size_texture_is_padded_with_the_chart_across_the_seam(
     texture = np.zeros((SIZE, SIZE, 3), np.uint8)  # padding black
     texture[:, :40] = (200, 0, 0)  # chart 0 red (columns 4-35)
     texture[:, 40:] = (0, 0, 200)  # chart 1 blue (columns 44-75)
-    padded = _surface_padded(UVExample("cylinder", mesh, texture), texture, SIZE // 4)
+    padded, used = _surface_padded(UVExample("cylinder", mesh, texture), texture, SIZE // 4)
     rows = np.arange(58, 74)
+    assert used is not None and used[rows][:, 4:36].all() and not used[rows][:, 36:44].any()
     # Right of chart 0 (past 180°) is chart 1's blue, left of chart 1 (before 180°) red.
     assert np.allclose(padded[rows][:, 36:40], (0, 0, 200 / 255))
     assert np.allclose(padded[rows][:, 40:44], (200 / 255, 0, 0))
@@ -160,17 +161,18 @@ def test_an_examples_padded_texture_is_cached_with_the_same_bytes(tmp_path, monk
                            visual=trimesh.visual.TextureVisuals(uv=uv))  # fmt: skip
     texture = np.random.default_rng(0).integers(0, 256, (SIZE, SIZE, 3), dtype=np.uint8)
     example = UVExample("cylinder", mesh, texture)
-    made = _surface_padded(example, texture, SIZE // 4)
+    made, used = _surface_padded(example, texture, SIZE // 4)
     (entry,) = (tmp_path / "padded").glob("cylinder-*.npz")
-    again = _surface_padded(example, texture, SIZE // 4)
+    again, used_again = _surface_padded(example, texture, SIZE // 4)
     assert again.dtype == made.dtype and np.array_equal(again, made)
+    assert used_again is not None and np.array_equal(used_again, used)
     # It is the entry that is read: one texel's value changed in it comes back.
     with np.load(entry) as data:
-        texel, values = data["texel"], data["values"].copy()
+        texel, values, packed = data["texel"], data["values"].copy(), data["used"]
     assert texel.size > 0
     values[0] = 0.5
-    np.savez_compressed(entry, texel=texel, values=values)
-    read = _surface_padded(example, texture, SIZE // 4)
+    np.savez_compressed(entry, texel=texel, values=values, used=packed)
+    read, _ = _surface_padded(example, texture, SIZE // 4)
     assert np.allclose(read.reshape(-1, 3)[texel[0]], 0.5)
     # Another texture is another entry; a damaged entry is made anew.
     other = texture.copy()
@@ -178,4 +180,4 @@ def test_an_examples_padded_texture_is_cached_with_the_same_bytes(tmp_path, monk
     _surface_padded(UVExample("cylinder", mesh, other), other, SIZE // 4)
     assert len(list((tmp_path / "padded").glob("cylinder-*.npz"))) == 2
     entry.write_bytes(b"not an npz")
-    assert np.array_equal(_surface_padded(example, texture, SIZE // 4), made)
+    assert np.array_equal(_surface_padded(example, texture, SIZE // 4)[0], made)

@@ -512,6 +512,7 @@ def fine_texture(
     source: np.ndarray,
     correction: np.ndarray,
     size: int,
+    used: Sequence[np.ndarray | None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The texture at ``size`` copied through a coarser source map from full-size textures.
 
@@ -531,6 +532,12 @@ def fine_texture(
     correction : (W, W, C) array
         The finish's smooth correction per working texel, added interpolated.
     size : int
+    used : list of (H_k, W_k) bool arrays or None, optional
+        Each example's used texels. A texel whose interpolated position reads one that is
+        not used, where its own working texel's copy (the block's position) reads one
+        that is, takes the latter: a copy drifting across a chart's narrow gap (a mouth's
+        slit between the lips' charts) never reads the gap's padding, which is the
+        surface beyond the seam, not this part of the copy.
 
     Returns
     -------
@@ -571,6 +578,8 @@ def fine_texture(
         sx = np.floor((px + 0.5) * widths[index] / working)
         sy = np.clip(sy, 0, heights[index] - 1).astype(np.int32)
         sx = np.clip(sx, 0, widths[index] - 1).astype(np.int32)
+        if used is not None:
+            _keep_to_used(used, source, index, sy, sx, heights, widths, (y0, y1), size)
         # The finish's smooth correction, between the working texels' centres.
         grid_y, grid_x = np.meshgrid(centres[y0:y1], centres, indexing="ij")
         block = sample_pixels(correction, grid_x.ravel(), grid_y.ravel())
@@ -581,6 +590,28 @@ def fine_texture(
         image[y0:y1] = np.clip(block, 0.0, 1.0)
         fine[y0:y1] = np.stack([index, sy, sx], axis=-1)
     return image, fine
+
+
+def _keep_to_used(used, source, index, sy, sx, heights, widths, rows, size):
+    """``sy``, ``sx`` (one band of :func:`fine_texture`'s rows) moved, in place, to the
+    own working texel's block position where they read an unused texel of their example
+    and that position reads a used one."""
+    working = source.shape[0]
+    u = (np.arange(size) + 0.5) * working / size  # working coordinates of texel centres
+    cell = np.minimum(np.floor(u).astype(np.int64), working - 1)
+    cy, cx = cell[rows[0] : rows[1]], cell
+    fy, fx = (u - cell)[rows[0] : rows[1]], u - cell  # within the working texel, 0..1
+    own_y = np.floor((source[cy][:, cx, 1] + fy[:, None]) * heights[index] / working)
+    own_x = np.floor((source[cy][:, cx, 2] + fx[None, :]) * widths[index] / working)
+    own_y = np.clip(own_y, 0, heights[index] - 1).astype(np.int32)
+    own_x = np.clip(own_x, 0, widths[index] - 1).astype(np.int32)
+    for k, mask in enumerate(used):
+        if mask is None:
+            continue
+        here = np.flatnonzero(index.ravel() == k)
+        gap = ~mask[sy.flat[here], sx.flat[here]] & mask[own_y.flat[here], own_x.flat[here]]
+        moved = here[gap]
+        sy.flat[moved], sx.flat[moved] = own_y.flat[moved], own_x.flat[moved]
 
 
 def _padded_cache_dir() -> Path:
@@ -607,10 +638,12 @@ def _padded_key(arrays: Sequence[np.ndarray], size: int, reach: int) -> str:
     return digest.hexdigest()[:24]
 
 
-def _surface_padded(example: UVExample, texture: np.ndarray, working: int) -> np.ndarray:
+def _surface_padded(
+    example: UVExample, texture: np.ndarray, working: int
+) -> tuple[np.ndarray, np.ndarray | None]:
     """An example's full-size texture (float32) with the padding within one working texel
-    of its charts read on its surface (:mod:`imagemap.mesh.padding`); a texture that is
-    not square is returned as it is.
+    of its charts read on its surface (:mod:`imagemap.mesh.padding`), and its used texels
+    (bool, its size); a texture that is not square is returned as it is, with None.
 
     It depends on the example alone (its mesh, texture and the working size), so it is
     cached on disk beside the examples' renders (:func:`_padded_cache_dir`), keyed by a
@@ -620,7 +653,7 @@ def _surface_padded(example: UVExample, texture: np.ndarray, working: int) -> np
     """
     size = texture.shape[0]
     if texture.shape[1] != size:
-        return texture
+        return texture, None
     vertices, faces, uv = mesh_uv_arrays(example.mesh)
     reach = int(np.ceil(size / working)) + 1
     plain = _unit(texture)
@@ -633,22 +666,26 @@ def _surface_padded(example: UVExample, texture: np.ndarray, working: int) -> np
         try:
             arrays = read_npz(cached, what="cached padded texture")
             texel, values = arrays["texel"], arrays["values"]
+            used = np.unpackbits(arrays["used"], count=size * size).astype(bool)
             fits = values.dtype == np.float32 and values.shape == (len(texel), flat.shape[1])
             if fits and (texel.size == 0 or 0 <= texel.min() <= texel.max() < len(flat)):
                 flat[texel] = values  # plain is this call's own copy (_unit)
-                return plain
-        except (InputError, KeyError, IndexError):
+                return plain, used.reshape(size, size)
+        except (InputError, KeyError, IndexError, ValueError):
             pass  # made anew
     pad = surface_padding(vertices, faces, uv, size, reach)
     out = pad.apply(plain, pad.mask)
     changed = np.flatnonzero(np.any(out.reshape(size * size, -1) != flat, axis=1))
     try:
         write_npz(
-            cached, texel=changed.astype(np.int64), values=out.reshape(size * size, -1)[changed]
+            cached,
+            texel=changed.astype(np.int64),
+            values=out.reshape(size * size, -1)[changed],
+            used=np.packbits(pad.mask.ravel()),
         )
     except OSError:
         pass  # a read-only cache only costs time
-    return out
+    return out, pad.mask
 
 
 def same_texel_source(source: np.ndarray, mask: np.ndarray, examples: int) -> np.ndarray:
@@ -934,6 +971,7 @@ def colorize_uv(
     if size == working and all(t.shape[:2] == (working, working) for t in full):
         image, fine_source = working_image, source
     else:
+        used: list[np.ndarray | None] | None = None
         plain = copy_through(textures, source).astype(np.float32)
         # Outside the working mask the finish left 0: continued from the nearest texel,
         # for the output texels at the charts' borders that fall there.
@@ -942,8 +980,10 @@ def colorize_uv(
         if not same_texel:
             # A working texel at a chart's border is used, but some of its full-size texels
             # may not be (the example's padding): read on the surface there too.
-            full = [_surface_padded(e, t, working) for e, t in zip(chosen, full, strict=True)]
-        image, fine_source = fine_texture(full, source, correction, size)
+            padded = [_surface_padded(e, t, working) for e, t in zip(chosen, full, strict=True)]
+            full = [texture for texture, _ in padded]
+            used = [mask for _, mask in padded]
+        image, fine_source = fine_texture(full, source, correction, size, used=used)
     texture = fill_background(np.where(final_mask[..., None], image, 0.0), final_mask)
     seconds = time.perf_counter() - start
     log.info(
