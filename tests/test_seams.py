@@ -174,3 +174,35 @@ def test_seams_weigh_nothing_where_their_weights_are_zero():
     np.testing.assert_array_equal(kept, source)
     ones = place_seams([image], source, voted, smoothness=5.0, weights=np.ones((32, 32)))
     np.testing.assert_array_equal(ones, merged)
+
+
+def test_one_graph_reset_between_moves_finds_what_a_new_graph_per_move_finds(monkeypatch):
+    """The moves of a solve share one PyMaxflow graph, emptied between them: the labels
+    are those of a new graph per move, over moves of many sizes."""
+    import maxflow
+
+    from imagemap.core import seams
+
+    rng = np.random.default_rng(5)
+    exemplars = [rng.random((60, 60, 3)).astype(np.float32) for _ in range(2)]
+    rows, columns = np.indices((48, 48))
+    # Blocks of 12 px a side (top half), 3 px and 1 px, each from a random exemplar at
+    # one of 20 offsets: 40 labels of many areas.
+    size = np.where(rows < 24, 12, np.where(columns < 24, 3, 1))
+    block = (rows // size) * 100 + columns // size + 10_000 * (size == 3) + 20_000 * (size == 1)
+    choice = rng.integers(0, 40, size=block.max() + 1)[block]
+    source = np.stack([choice % 2, rows + 4 + (choice // 2) % 5, columns + 4 + choice // 10], -1)
+    reference = colours(exemplars, source)[0] + 0.1 * rng.standard_normal((48, 48, 3))
+    # smoothness 0.3: most copies stay, so that every label has a move
+    shared = place_seams(exemplars, source, reference, smoothness=0.3)
+    sizes = []
+
+    def new_graph(self, nodes, edges):
+        sizes.append(nodes)
+        return maxflow.Graph[float](nodes, edges)
+
+    monkeypatch.setattr(seams._Graph, "empty", new_graph)
+    fresh = place_seams(exemplars, source, reference, smoothness=0.3)
+    assert len(sizes) >= 20 and max(sizes) > 10 * min(sizes), sizes  # many moves, unlike
+    np.testing.assert_array_equal(shared, fresh)
+    assert (shared != source).any()  # the moves changed labels
