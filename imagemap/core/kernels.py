@@ -953,6 +953,34 @@ def expansion_terms(
 
 
 @njit(cache=True, nogil=True)
+def expansion_apply(node, takes, labels, ids, changed_at, y0, x0, alpha, number, move, lost):
+    """Apply one alpha-expansion move's cut (:func:`expansion_terms`' ``node``, (h, w),
+    and ``takes``, (n,) bool: the nodes that take ``alpha``), in one pass over the crop
+    whose corner is (y0, x0): each such pixel gets ``alpha`` in ``labels`` (label_e,
+    label_y, label_x), ``number`` in ``ids`` and ``move`` in ``changed_at``, and the label
+    it had (``ids``, 1-based) one pixel less in ``lost``. Returns the number of pixels
+    that took ``alpha``.
+    """
+    label_e, label_y, label_x = labels
+    h, w = node.shape
+    count = 0
+    for i in range(h):
+        for j in range(w):
+            p = node[i, j]
+            if p < 0 or not takes[p]:
+                continue
+            y, x = y0 + i, x0 + j
+            lost[ids[y, x] - 1] += 1
+            ids[y, x] = number
+            changed_at[y, x] = move
+            label_e[y, x] = alpha[0]
+            label_y[y, x] = alpha[1]
+            label_x[y, x] = alpha[2]
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
 def nearest_host_distance(colours, host, cell_y, cell_x):
     """Each pixel's smallest colour distance to the host colours of its low-resolution
     cell (``cell_y[y]``, ``cell_x[x]``) and of the eight cells around it (clipped).

@@ -272,6 +272,8 @@ def _solve(
         inside[k, : exemplar.shape[0], : exemplar.shape[1]] = (
             True if exemplar_masks is None else exemplar_masks[k]
         )
+    from imagemap.core import kernels  # deferred: start-up (numba)
+
     height, width = source.shape[:2]
     yy, xx = np.ogrid[0:height, 0:width]
     # int32 labels (a source map's own type; offsets and indices < 2^31): the move's
@@ -323,7 +325,7 @@ def _solve(
             if groups is not None:  # a group's pixels only take its own labels
                 grouped = groups[rows, columns]
                 region &= (grouped == 0) | np.isin(grouped, in_groups.get(key, ()))
-            moved = _expand(
+            cut = _expand(
                 (packed, shapes, inside),
                 reference,
                 (label_e, label_y, label_x),
@@ -335,16 +337,25 @@ def _solve(
                 weights,
                 graphs,
             )
-            if moved is None:
+            if cut is None:
                 expanded_at[key] = moves
                 continue
             # it spread: its next move reaches further
             expanded_at[key] = moves - 1
-            changed_at[rows, columns][moved] = moves
-            losers = ids[rows, columns][moved]
-            areas -= np.bincount(losers - 1, minlength=len(areas))[: len(areas)]
-            areas[k] += int(moved.sum())
-            ids[rows, columns][moved] = k + 1
+            lost = np.zeros(len(areas), np.int64)
+            areas[k] += kernels.expansion_apply(
+                *cut,
+                (label_e, label_y, label_x),
+                ids,
+                changed_at,
+                rows.start,
+                columns.start,
+                alpha,
+                k + 1,
+                moves,
+                lost,
+            )
+            areas -= lost
     del ids, changed_at, held
     # Written into the int32 map a channel at a time: no (H, W, 3) int64 stack beside it.
     placed = np.empty((height, width, 3), np.int32)
@@ -627,9 +638,9 @@ class _Graph:
 def _expand(
     exemplars, reference, labels, movable, crop, region, alpha, smoothness, weights, graphs
 ):
-    """One alpha-expansion move over ``region`` (inside ``crop``), labels updated in place;
-    the pixels that took ``alpha`` (in the crop), or None. ``graphs``: the solve's
-    :class:`_Graph`."""
+    """One alpha-expansion move over ``region`` (inside ``crop``): its nodes' numbers in
+    the crop and whether each takes ``alpha`` (for :func:`imagemap.core.kernels.
+    expansion_apply`), or None where none does. ``graphs``: the solve's :class:`_Graph`."""
     from imagemap.core import kernels  # deferred: start-up (numba)
 
     label_e, label_y, label_x = labels
@@ -665,13 +676,7 @@ def _expand(
     takes = graph.get_grid_segments(nodes)
     if not takes.any():
         return None
-    free = node >= 0
-    moved = np.zeros(node.shape, bool)
-    moved[free] = takes[node[free]]
-    label_e[rows, columns][moved] = alpha[0]
-    label_y[rows, columns][moved] = alpha[1]
-    label_x[rows, columns][moved] = alpha[2]
-    return moved
+    return node, takes
 
 
 def _packed(exemplars):
