@@ -123,3 +123,47 @@ def test_coarse_to_fine_keeps_to_the_exemplars_objects_and_ignores_unused_ones()
         **kwargs,
     )
     np.testing.assert_array_equal(again, banded)
+
+
+@pytest.mark.parametrize("coarse_above", [None, 612])
+def test_the_exemplars_cut_to_what_the_labels_read_give_the_same_labels(monkeypatch, coarse_above):
+    """Every solve reads only the part of each exemplar its labels can reach (an unused
+    exemplar dropped): the same labels as from the whole exemplars, extra channels too."""
+    from imagemap.core import seams
+    from imagemap.core.seams import with_channels
+
+    exemplars, source, reference, mask, groups = problem(60, 56)
+    rng = np.random.default_rng(1)
+    # 30 px more below and right of what the labels read, and a third exemplar unused.
+    exemplars = [np.pad(e, ((0, 30), (0, 30), (0, 0)), mode="reflect") for e in exemplars]
+    exemplars.append(exemplars[0][::-1].copy())
+    objects = [np.zeros(e.shape[:2], bool) for e in exemplars]
+    for k, (rows, columns) in enumerate([(76, 70), (74, 68), (70, 70)]):
+        objects[k][:rows, 3 * k : columns] = True
+    planes = [[(0.5, rng.random(e.shape[:2]).astype(np.float32))] for e in exemplars]
+    reference = with_channels(reference, [(0.5, np.full(mask.shape, 0.5))])
+    kwargs = dict(
+        mask=mask,
+        groups=groups,
+        exemplar_masks=objects,
+        exemplar_channels=planes,
+        coarse_above=coarse_above,
+    )
+    read = []
+    real = seams._crops
+
+    def spy(*args):
+        corners, crops, crop_masks = real(*args)
+        read.extend(crop.shape[:2] for crop in crops)
+        return corners, crops, crop_masks
+
+    monkeypatch.setattr(seams, "_crops", spy)
+    cut = place_seams(exemplars, source, reference, **kwargs)
+    assert read[:3] == [(84, 78), (82, 76), (0, 0)]  # of (110, 106) each
+    whole = lambda exemplars, masks, source, mask: (  # noqa: E731
+        np.zeros((len(exemplars), 2), np.int64),
+        exemplars,
+        masks,
+    )
+    monkeypatch.setattr(seams, "_crops", whole)
+    np.testing.assert_array_equal(cut, place_seams(exemplars, source, reference, **kwargs))

@@ -93,8 +93,7 @@ def place_seams(
         More channels of each exemplar, after its own (``reference`` has them all):
         ``scale * values`` (values (H_e, W_e)) or, with values None, the constant
         ``scale`` (:func:`with_channels`). They are added once the exemplars are cut to
-        what the labels can read (with ``coarse_above``): the full-size exemplars with
-        them are never made.
+        what the labels can read: the full-size exemplars with them are never made.
 
     Returns
     -------
@@ -115,18 +114,19 @@ def place_seams(
     >>> np.unique(placed[..., 1] - rows).tolist()  # one offset left
     [8]
     """
+    # Each level of the coarse-to-fine form holds its own copy of the exemplars (block-
+    # averaged), and every solve packs them into one array: only the part the labels can
+    # read is kept, as views (no copy): an example no pixel copies is dropped, and a large
+    # example is cut to its object (the labelling's costs are unchanged, :func:`_crops`).
+    corners, exemplars, exemplar_masks = _crops(exemplars, exemplar_masks, source, mask)
+    if exemplar_channels is not None:
+        exemplars = [
+            with_channels(
+                crop, [(scale, _crop_like(values, crop, corner)) for scale, values in planes]
+            )
+            for crop, corner, planes in zip(exemplars, corners, exemplar_channels, strict=True)
+        ]
     if coarse_above is not None and source.shape[0] * source.shape[1] > coarse_above:
-        # Each level holds its own copy of the exemplars (block-averaged): only the part
-        # the labels can read is kept, as views (no copy): an example no pixel copies
-        # is dropped, and a large example is cut to its object.
-        corners, exemplars, exemplar_masks = _crops(exemplars, exemplar_masks, source, mask)
-        if exemplar_channels is not None:
-            exemplars = [
-                with_channels(
-                    crop, [(scale, _crop_like(values, crop, corner)) for scale, values in planes]
-                )
-                for crop, corner, planes in zip(exemplars, corners, exemplar_channels, strict=True)
-            ]
         placed = _coarse_to_fine(
             exemplars,
             _shifted(source, -corners),  # handed over: freed there once the band is known
@@ -141,24 +141,20 @@ def place_seams(
             band=band,
             weights=weights,
         )
-        return _shifted(placed, corners)
-    if exemplar_channels is not None:
-        exemplars = [
-            with_channels(exemplar, planes)
-            for exemplar, planes in zip(exemplars, exemplar_channels, strict=True)
-        ]
-    return _solve(
-        exemplars,
-        source,
-        reference,
-        smoothness,
-        spread,
-        sweeps,
-        mask,
-        exemplar_masks,
-        groups,
-        weights=weights,
-    )
+    else:
+        placed = _solve(
+            exemplars,
+            _shifted(source, -corners),  # handed over: freed there once the labels are made
+            reference,
+            smoothness,
+            spread,
+            sweeps,
+            mask,
+            exemplar_masks,
+            groups,
+            weights=weights,
+        )
+    return _shifted(placed, corners)
 
 
 def with_channels(values: np.ndarray, planes: list[tuple[float, np.ndarray | None]]) -> np.ndarray:
