@@ -338,9 +338,11 @@ def _solve(
                 continue
             # it spread: its next move reaches further
             expanded_at[key] = moves - 1
+            node, takes = cut
             lost = np.zeros(len(areas), np.int64)
             areas[k] += kernels.expansion_apply(
-                *cut,
+                node,
+                takes,
                 (label_e, label_y, label_x),
                 ids,
                 changed_at,
