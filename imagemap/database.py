@@ -5,7 +5,10 @@ A database is a directory of ``NAME_depth.png`` (8- or 16-bit), ``NAME_depth.tif
 (``NAME_labels.png``, ``NAME.json``, PBR maps ``NAME_normal.png``, ``NAME_roughness.png``
 ... of :mod:`imagemap.materials`, contact sheets) may sit beside them and are read when
 present. Arrays are loaded on first use and cached, so opening a large
-database costs nothing until its examples are needed.
+database costs nothing until its examples are needed. A database opened with
+``keep_arrays=False`` (``imagemap synthesize`` with one query) has them dropped once
+the synthesis has posed its examples (:meth:`Database.release_arrays`): the selection
+reads every example's depth, and a single synthesis needs none of them after it.
 """
 
 from __future__ import annotations
@@ -48,6 +51,10 @@ def _meshes(path, view, size, taken) -> tuple[list, list[str]]:
     return mesh_examples(path, view, size, taken)
 
 
+#: The arrays an :class:`Example` reads from its files and caches (``NAME_path`` beside
+#: each): what :meth:`Database.release_arrays` drops.
+_FILE_ARRAYS = ("depth", "image", "labels")
+
 _DEPTH_RE = re.compile(r"^(?P<name>.+)_depth\.(?:png|tif|tiff|npy)$", re.IGNORECASE)
 _IMAGE_RE = re.compile(r"^(?P<name>.+)_image\.(?:png|jpg|jpeg|tif|tiff)$", re.IGNORECASE)
 
@@ -74,7 +81,9 @@ class Database:
     >>> shutil.rmtree(folder)
     """
 
-    def __init__(self, examples: list[Example], source: str = "") -> None:
+    def __init__(
+        self, examples: list[Example], source: str = "", *, keep_arrays: bool = True
+    ) -> None:
         if isinstance(examples, (str, Example)) or not hasattr(examples, "__iter__"):
             raise InputError(f"Database: expected a list of Example, got {examples!r}")
         examples = list(examples)
@@ -89,15 +98,64 @@ class Database:
             raise InputError(f"{source or 'database'}: duplicate example names")
         self.examples = sorted(examples, key=lambda e: e.name)
         self.source = source
+        #: False: the arrays its examples read from files are dropped once a synthesis
+        #: has posed its examples (:meth:`release_arrays`); True (a batch, the library):
+        #: kept for the next query's selection.
+        self.keep_arrays = keep_arrays
+
+    def release_arrays(self) -> int:
+        """Drop the arrays its examples read from files and cached (depth, image,
+        labels; read again from the files when next asked for). Examples built from
+        arrays and mesh examples (their renders) keep theirs.
+
+        Returns
+        -------
+        int
+            Bytes of arrays no longer held by the examples.
+
+        Examples
+        --------
+        >>> import shutil, tempfile
+        >>> import numpy as np
+        >>> from imagemap.io import write_image
+        >>> depth = np.zeros((8, 8), np.float32); depth[2:6, 2:6] = 0.5
+        >>> folder = Path(tempfile.mkdtemp())
+        >>> np.save(folder / "a_depth.npy", depth)
+        >>> _ = write_image(folder / "a_image.png", np.ones((8, 8, 3)))
+        >>> db = Database.from_directory(folder, keep_arrays=False)
+        >>> first = db["a"].depth
+        >>> db.release_arrays(), db["a"].depth is first, np.array_equal(db["a"].depth, first)
+        (256, False, True)
+        >>> shutil.rmtree(folder)
+        """
+        released = 0
+        for example in self.examples:
+            if type(example) is not Example:  # a mesh example's renders: costly to remake
+                continue
+            cache = example.__dict__  # functools.cached_property keeps its values here
+            if "depth" in cache:
+                _ = example.shape  # kept: reading the image again checks it without the depth
+            for name in _FILE_ARRAYS:
+                if name not in example._arrays and getattr(example, f"{name}_path") is not None:
+                    array = cache.pop(name, None)
+                    released += getattr(array, "nbytes", 0)
+        return released
 
     @classmethod
     def from_directory(
-        cls, path: str | os.PathLike, strict: bool = True, view=None, size=None
+        cls,
+        path: str | os.PathLike,
+        strict: bool = True,
+        view=None,
+        size=None,
+        *,
+        keep_arrays: bool = True,
     ) -> Database:
         """Open a database directory; with ``strict``, unpaired files are an error.
 
         Textured meshes in it (``NAME.glb``, ``.obj``, ``.ply``...) are examples too,
         rendered from ``view`` at ``size`` (W, H) on first use (see :mod:`imagemap.scene`).
+        ``keep_arrays``: see :attr:`keep_arrays`.
         """
         if not isinstance(path, str | os.PathLike) or not str(path):
             raise InputError(f"Database.from_directory: expected a folder, got {path!r}")
@@ -111,7 +169,7 @@ class Database:
                 f"{path}: no examples found (expected NAME_depth.png beside NAME_image.png, "
                 "or textured meshes)"
             )
-        return cls(examples, source=str(path))
+        return cls(examples, source=str(path), keep_arrays=keep_arrays)
 
     def __len__(self) -> int:
         return len(self.examples)
@@ -178,7 +236,11 @@ class Database:
                 f"(have: {', '.join(self.names[:10])}{'...' if len(self) > 10 else ''})"
             )
         drop = set(flat)
-        return Database([e for e in self.examples if e.name not in drop], source=self.source)
+        return Database(
+            [e for e in self.examples if e.name not in drop],
+            source=self.source,
+            keep_arrays=self.keep_arrays,
+        )
 
 
 def _scan(root: Path) -> tuple[list[Example], list[str]]:
@@ -317,7 +379,7 @@ def database_at_view(
     examples = [
         e.at_view(view, size) if isinstance(e, MeshExample) else e for e in database.examples
     ]
-    return Database(examples, source=database.source)
+    return Database(examples, source=database.source, keep_arrays=database.keep_arrays)
 
 
 def prepare_database(database: Database, loaded: dict[int, Example] | None = None) -> Database:

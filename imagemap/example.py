@@ -96,12 +96,20 @@ class Example:
             return self._arrays["image"]
         image_path = self._path("image_path")
         image = read_image(image_path)
-        if image.shape[:2] != self.depth.shape:
+        if image.shape[:2] != self.shape:
             raise InputError(
                 f"{image_path}: image is {image.shape[1]}x{image.shape[0]} but its depth "
-                f"{self._path('depth_path').name} is {self.depth.shape[1]}x{self.depth.shape[0]}"
+                f"{self._path('depth_path').name} is {self.shape[1]}x{self.shape[0]}"
             )
         return image
+
+    @cached_property
+    def shape(self) -> tuple[int, int]:
+        """The depth's (H, W): kept when the arrays are dropped
+        (:meth:`imagemap.database.Database.release_arrays`), so reading the image again
+        does not read the depth again to check it."""
+        height, width = self.depth.shape
+        return height, width
 
     def _path(self, field_name: str) -> Path:
         """The file behind a field (``"depth_path"``...), or :class:`InputError` when the

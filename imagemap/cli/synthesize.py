@@ -332,7 +332,9 @@ def run_synthesize(args: argparse.Namespace) -> int:
     # Bad input stops at the door, before any synthesis: every depth is read first.
     depths = [read_depth(job["depth"]) for job in jobs]
     map_large_blocks(args, max(depth.size for depth in depths))
-    database = Database.from_directory(args.db)
+    # One query: the examples' arrays are dropped once it has posed them (a batch keeps
+    # them for the next query's selection).
+    database = Database.from_directory(args.db, keep_arrays=len(jobs) > 1)
     if args.exclude:
         database = database.without([n.strip() for n in args.exclude.split(",") if n.strip()])
     examples = [n.strip() for n in args.examples.split(",") if n.strip()] if args.examples else None

@@ -214,6 +214,10 @@ def _pose(state: State, config: DepthConfig) -> State:
         PosedExample.of(e, mirrored=flip)
         for e, flip in zip(state.chosen, state.mirrored, strict=True)
     ]
+    if not getattr(state.database, "keep_arrays", True):
+        # Memory: from here on the synthesis reads the posed copies; the depths the
+        # selection read (every example's) are not held through it.
+        state.database.release_arrays()
     found = state.poses[0]
     state.changed = (
         f"turned {found.angle:.1f} deg, scaled x{found.scale:.3f}"
@@ -330,6 +334,17 @@ def fine_source(source: np.ndarray, factor: int, shape: tuple[int, int],
 _ROWS = 256  # rows per block where a full-size map is made block by block
 
 
+@dataclass(frozen=True)
+class ExampleFrame:
+    """A chosen example once the fine stage has made its colours at full size: its name
+    and its frame's (height, width), what the stages after it read of it. Its posed
+    full-size depth (4 bytes a pixel) is not held through the blend, the peak of a map
+    synthesized averaged."""
+
+    name: str
+    shape: tuple[int, int]
+
+
 def _fine(state: State, config: DepthConfig) -> State:
     # The sources at full size (each pixel from the same place in its source's block of
     # the full-size example: the examples' own detail), the map being finished (the
@@ -362,6 +377,8 @@ def _fine(state: State, config: DepthConfig) -> State:
     del ycbcr
     if state.exemplars is not None:
         state.exemplars = [example_ycbcr(example) for example in state.chosen]
+    # Memory: from here on the examples' names and sizes are read, not their depths.
+    state.chosen = [ExampleFrame(e.name, e.mask.shape) for e in state.chosen]
     state.features = None
     if state.engine is not None:
         cost = state.engine.cost
@@ -545,7 +562,8 @@ def _unpose(state: State, config: DepthConfig) -> State:
     for index, (example, flip) in enumerate(zip(state.chosen, state.mirrored, strict=True)):
         if flip:  # a mirrored example's column x is its own column width - 1 - x
             mine = source[..., 0] == index
-            source[..., 2][mine] = example.mask.shape[1] - 1 - source[..., 2][mine]
+            width = (example.shape if isinstance(example, ExampleFrame) else example.mask.shape)[1]
+            source[..., 2][mine] = width - 1 - source[..., 2][mine]
     if state.engine is not None:
         state.engine.cost = unpose_nearest(frame, state.query_depth.shape, state.engine.cost)
     state.ycbcr, state.source, state.exemplars = ycbcr, source, None
