@@ -230,3 +230,18 @@ def test_a_folder_of_pictures_does_not_import_the_mesh_modules(tmp_path):
         [sys.executable, "-c", probe], capture_output=True, text=True, check=True, env=env
     ).stdout.split()
     assert out == ["1", "False", "False", "2", "True"]
+
+
+def test_a_synthesis_skips_the_optional_imports_no_part_of_it_uses():
+    # SciPy's array-API layer imports numpy.f2py, which looks for charset_normalizer;
+    # numba looks for PyYAML: `imagemap synthesize` reports both missing while it imports.
+    code = (
+        "import os; os.chdir({!r})\n"  # no .numba_config.yaml here
+        "from imagemap.cli import skip_optional_imports\n"
+        "with skip_optional_imports(True):\n"
+        "    import numba, scipy.ndimage\n"
+        "import sys; skipped = [n for n in ('charset_normalizer', 'yaml') if n in sys.modules]\n"
+    ).format(str(ROOT / "imagemap"))
+    loaded = _modules_after(code + "print(skipped)")
+    assert {"numba", "scipy"} <= loaded
+    assert not loaded.intersection({"charset_normalizer", "yaml"})

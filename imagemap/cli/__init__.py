@@ -205,6 +205,55 @@ def _map_large_blocks() -> None:
         ctypes.CDLL("libc.so.6").mallopt(-3, _MMAP_THRESHOLD)  # -3: M_MMAP_THRESHOLD
 
 
+#: Optional dependencies that the libraries a synthesis imports look for at import and
+#: that no part of a synthesis uses: NumPy's ``f2py`` (imported through SciPy's array-API
+#: layer, which loads every NumPy submodule) reads Fortran files' encodings with
+#: ``charset_normalizer`` (0.05-0.09 s of CPU to import), numba reads a
+#: ``.numba_config.yaml`` with PyYAML (0.02-0.05 s). While ``imagemap synthesize`` runs
+#: in its own process they are reported missing (``sys.modules[name] = None``, taken out
+#: again after), so those libraries take their own fallbacks; PyYAML is left alone
+#: where a ``.numba_config.yaml`` is there to be read.
+SKIPPED_OPTIONAL_IMPORTS = ("charset_normalizer", "yaml")
+
+
+class skip_optional_imports:
+    """While active (``on``), :data:`SKIPPED_OPTIONAL_IMPORTS` not yet imported raise
+    ``ImportError`` when imported; afterwards they import as before.
+
+    Examples
+    --------
+    >>> import sys
+    >>> before = {name: sys.modules.get(name) for name in SKIPPED_OPTIONAL_IMPORTS}
+    >>> with skip_optional_imports(True) as skipped:
+    ...     all(sys.modules[name] is None for name in skipped.names)
+    True
+    >>> all(sys.modules.get(name) is module for name, module in before.items())
+    True
+    """
+
+    def __init__(self, on: bool) -> None:
+        self.names: list[str] = []
+        if on:
+            import os  # deferred: start-up (the parser alone needs it not)
+
+            self.names = [
+                name
+                for name in SKIPPED_OPTIONAL_IMPORTS
+                if name not in sys.modules
+                and not (name == "yaml" and os.path.isfile(".numba_config.yaml"))
+            ]
+
+    def __enter__(self) -> skip_optional_imports:
+        for name in self.names:
+            sys.modules[name] = None  # type: ignore[assignment]
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for name in self.names:
+            if name in sys.modules and sys.modules[name] is None:
+                del sys.modules[name]
+
+
 def _record_given(parser: argparse.ArgumentParser) -> None:
     """Make every action of ``parser`` (and its subcommands') note its destination in the
     namespace's ``_given`` set when the command line invokes it."""
@@ -266,7 +315,8 @@ def _main(argv: list[str] | None, own_process: bool = False) -> int:
     if args.command != "synthesize":  # synthesize decides by the map's size
         map_large_blocks(args)
     try:
-        return int(args.func(args) or 0)
+        with skip_optional_imports(own_process and args.command == "synthesize"):
+            return int(args.func(args) or 0)
     except InputError as exc:
         print(f"imagemap: error: {exc}", file=sys.stderr)
         return 2
