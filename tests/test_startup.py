@@ -245,3 +245,31 @@ def test_a_synthesis_skips_the_optional_imports_no_part_of_it_uses():
     loaded = _modules_after(code + "print(skipped)")
     assert {"numba", "scipy"} <= loaded
     assert not loaded.intersection({"charset_normalizer", "yaml"})
+
+
+def test_a_kernel_loaded_lean_gives_the_python_functions_answer():
+    # `imagemap synthesize` links imagemap's cached kernels without numba's registries
+    # (cli.lean_kernel_loads): the kernel's answer is its Python function's, and where
+    # it came from the cache numba's lowering registries (its cffi support among them)
+    # were not imported.
+    code = (
+        "import numpy as np\n"
+        "from imagemap.cli import lean_kernel_loads\n"
+        "from imagemap.core.kernels import nearest_host_distance as kernel\n"
+        "lean = lean_kernel_loads()\n"
+        "rng = np.random.default_rng(0)\n"
+        "colours, host = rng.random((5, 6, 3), np.float32), rng.random((2, 3, 3), np.float32)\n"
+        "cells = np.array([0, 0, 0, 1, 1], np.int64), np.array([0, 0, 1, 1, 2, 2], np.int64)\n"
+        "got, want = kernel(colours, host, *cells), kernel.py_func(colours, host, *cells)\n"
+        "import sys\n"
+        "hit = kernel.stats.cache_hits.most_common(1) != []\n"
+        "print(lean, np.array_equal(got, want), hit, 'numba.misc.cffiimpl' in sys.modules)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    ).stdout.split()
+    lean, same, from_cache, registries = (word == "True" for word in out[-4:])
+    assert same
+    if lean and from_cache:
+        assert not registries

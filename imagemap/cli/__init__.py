@@ -254,6 +254,57 @@ class skip_optional_imports:
                 del sys.modules[name]
 
 
+#: numba versions (major.minor) on which :func:`lean_kernel_loads` was checked: every
+#: kernel of a synthesis loaded and the same bytes out (``benchmarks/identity.py``).
+#: Elsewhere numba's own cache load runs.
+LEAN_LOAD_NUMBA = ("0.68",)
+
+
+def lean_kernel_loads() -> bool:
+    """Load imagemap's kernels from numba's cache without numba's registry refresh.
+
+    numba's ``Cache.load_overload`` first calls ``target_context.refresh()``, which
+    imports and installs every typing and lowering registry numba has (``numba.typed``,
+    ``numba.np.*``, cffi's C parser...): 0.15-0.25 s of CPU on the first kernel a process
+    loads, needed to compile but not to link cached machine code. Here a cached kernel
+    of imagemap's (its function in an ``imagemap.`` module) is loaded after only the
+    runtime it links against is set up (``rtsys.initialize``, which numba's refresh
+    does first); any other function, a kernel not in the cache (numba's compiler
+    refreshes itself) or a load that fails takes numba's own path. Set by the program
+    for ``imagemap synthesize`` (it owns the process), not on import.
+
+    Returns
+    -------
+    bool
+        Whether the lean load is in place (False on numba versions not in
+        :data:`LEAN_LOAD_NUMBA`).
+    """
+    import numba  # deferred: start-up (only a synthesis loads kernels)
+    from numba.core import caching  # deferred: start-up (as above)
+    from numba.core.runtime import rtsys  # deferred: start-up (as above)
+
+    if ".".join(numba.__version__.split(".")[:2]) not in LEAN_LOAD_NUMBA:
+        return False
+    standard = caching.Cache.load_overload
+    if getattr(standard, "imagemap_lean", False):
+        return True
+
+    def load_overload(self, sig, target_context):
+        module = getattr(getattr(self, "_py_func", None), "__module__", None) or ""
+        if not module.startswith("imagemap."):
+            return standard(self, sig, target_context)
+        try:
+            rtsys.initialize(target_context)
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
+        except Exception:  # numba's own load, with its refresh, decides
+            return standard(self, sig, target_context)
+
+    load_overload.imagemap_lean = True  # type: ignore[attr-defined]
+    caching.Cache.load_overload = load_overload  # type: ignore[method-assign]
+    return True
+
+
 def _record_given(parser: argparse.ArgumentParser) -> None:
     """Make every action of ``parser`` (and its subcommands') note its destination in the
     namespace's ``_given`` set when the command line invokes it."""
