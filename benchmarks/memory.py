@@ -3,8 +3,11 @@
 For each size (generated fish, 2 examples and a held-out query, the data of
 ``benchmarks/run.py``'s square sizes) a fresh Python process runs one
 ``colorize(depth, database, preset="fish", m=2, seed=0)`` as ``imagemap synthesize``
-would (large blocks in their own mappings, :func:`imagemap.cli._map_large_blocks`;
-``--library`` leaves glibc's default) and reports, per stage of the pipeline
+would for one depth map (large blocks in their own mappings,
+:func:`imagemap.cli._map_large_blocks`; the kernels loaded by
+:func:`imagemap.cli.lean_kernel_loads`; the database opened with ``keep_arrays=False``;
+``--library`` runs it as a library call does: glibc's default, numba's own load, the
+arrays kept) and reports, per stage of the pipeline
 (:data:`imagemap.depth.pipeline.STAGES`) and per phase of the engine:
 
 - the wall time (``time.perf_counter`` around the stage);
@@ -30,6 +33,7 @@ Usage
     python benchmarks/memory.py --sizes 1024,2048           # a table per size
     python benchmarks/memory.py --sizes 512 --save-maps DIR  # also the maps (PNG, hashed)
     python benchmarks/memory.py --json out.json
+    python benchmarks/memory.py --task benchmarks/.data/ebsynth_side_by_side/1024x1024
 
 4096² takes about ten minutes and 3-5 GB on 2 cores.
 """
@@ -90,7 +94,10 @@ class PeakMarks:
 
 
 def _child(class_dir: str, save: str | None, library: bool) -> dict:
-    """One colorization in this (fresh) process, measured stage by stage."""
+    """One colorization in this (fresh) process, measured stage by stage.
+
+    ``class_dir``: a generated class (its examples, the query in ``holdout/``), or a task
+    folder of ``ebsynth_side_by_side.py`` (``db/`` and ``query_depth.npy``)."""
     started = time.perf_counter()
     import numpy as np
 
@@ -102,9 +109,10 @@ def _child(class_dir: str, save: str | None, library: bool) -> dict:
     from imagemap.depth.config import resolve_config
 
     if not library:
-        from imagemap.cli import _map_large_blocks
+        from imagemap.cli import _map_large_blocks, lean_kernel_loads
 
         _map_large_blocks()  # as `imagemap synthesize` does for maps of a megapixel or more
+        lean_kernel_loads()  # as `imagemap synthesize` loads its kernels
     imports_mb = _status_mb("VmRSS")
     imports_seconds = time.perf_counter() - started
     marks = PeakMarks()
@@ -143,8 +151,16 @@ def _child(class_dir: str, save: str | None, library: bool) -> dict:
     pipeline.STAGES = tuple(measured(stage) for stage in pipeline.STAGES)
     solver.Timer.add = add  # type: ignore[method-assign]
 
-    database = Database.from_directory(class_dir)
-    depth = read_depth(sorted(Path(class_dir, "holdout").glob("*_depth.png"))[0])
+    # One query, as `imagemap synthesize` opens the database for one depth map: the
+    # examples' arrays are dropped once the synthesis has posed them.
+    task = Path(class_dir, "query_depth.npy").is_file()
+    database = Database.from_directory(
+        Path(class_dir, "db") if task else class_dir, keep_arrays=library
+    )
+    if task:
+        depth = read_depth(Path(class_dir, "query_depth.npy"))
+    else:
+        depth = read_depth(sorted(Path(class_dir, "holdout").glob("*_depth.png"))[0])
     estimate = colorize_estimate(depth, database, resolve_config("fish", m=2))
     gc.collect()
     rss_before_mb = _status_mb("VmRSS")
@@ -196,10 +212,12 @@ def _child(class_dir: str, save: str | None, library: bool) -> dict:
     }
 
 
-def run_size(side: int, data_dir: Path, save_dir: Path | None, library: bool) -> dict:
+def run_size(
+    side: int, data_dir: Path, save_dir: Path | None, library: bool, task: Path | None = None
+) -> dict:
     from run import _child_env, fish_class  # benchmarks/run.py: the same generated fish
 
-    class_dir = fish_class(data_dir, (side, side))
+    class_dir = task if task is not None else fish_class(data_dir, (side, side))
     command = [sys.executable, __file__, "--child", str(class_dir)]
     if save_dir:
         save_dir.mkdir(parents=True, exist_ok=True)
@@ -211,7 +229,7 @@ def run_size(side: int, data_dir: Path, save_dir: Path | None, library: bool) ->
     if done.returncode != 0:
         raise RuntimeError(f"{side}x{side} failed: {done.stderr.strip()[-2000:]}")
     figures = json.loads(done.stdout.strip().splitlines()[-1])
-    figures["side"] = side
+    figures["side"] = figures["shape"][0] if task is not None else side
     figures["load_before"] = load_before
     return figures
 
@@ -266,7 +284,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--save-maps", type=Path, help="write each map as a PNG here")
     parser.add_argument("--json", type=Path, help="write the figures as JSON")
     parser.add_argument(
-        "--library", action="store_true", help="glibc's default allocator (no mallopt)"
+        "--library",
+        action="store_true",
+        help="as a library call: glibc's default allocator (no mallopt), numba's own "
+        "kernel load, the database's arrays kept",
+    )
+    parser.add_argument(
+        "--task",
+        type=Path,
+        help="instead of --sizes: a task folder of ebsynth_side_by_side.py (db/ and "
+        "query_depth.npy, e.g. benchmarks/.data/ebsynth_side_by_side/1024x1024)",
     )
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--save", help=argparse.SUPPRESS)
@@ -275,8 +302,9 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(_child(args.child, args.save, args.library)))
         return 0
     results = []
-    for side in (int(s) for s in args.sizes.split(",")):
-        figures = run_size(side, args.data, args.save_maps, args.library)
+    sides = [0] if args.task else [int(s) for s in args.sizes.split(",")]
+    for side in sides:
+        figures = run_size(side, args.data, args.save_maps, args.library, args.task)
         results.append(figures)
         print(format_figures(figures), flush=True)
         if args.json:

@@ -129,10 +129,16 @@ try:  # as imagemap.cli.main
 except ImportError:  # a checkout from before the constant
     GC_THRESHOLDS = (10_000, 10, 10)
 gc.set_threshold(*GC_THRESHOLDS)
-import base64, importlib, json, pickle, sys, warnings
+import base64, contextlib, importlib, json, pickle, sys, warnings
 
+try:  # as `imagemap synthesize`: optional imports skipped, kernels linked lean
+    from imagemap.cli import lean_kernel_loads, skip_optional_imports
+except ImportError:  # a checkout from before them
+    lean_kernel_loads, skip_optional_imports = None, None
 plan = json.load(open(sys.argv[1]))
-with warnings.catch_warnings():
+with warnings.catch_warnings(), (
+    skip_optional_imports(True) if skip_optional_imports else contextlib.nullcontext()
+):
     warnings.simplefilter("ignore")  # deprecated aliases (numpy.core...) imported by name
     for name in plan["modules"]:
         if name != "__main__":
@@ -141,6 +147,8 @@ with warnings.catch_warnings():
             except Exception:  # a module made at run time, not importable by name
                 pass
 imported = time.perf_counter()
+if lean_kernel_loads:
+    lean_kernel_loads()
 for kernel in plan["kernels"]:
     function = importlib.import_module(kernel["module"])
     for part in kernel["name"].split("."):
