@@ -129,17 +129,27 @@ class Database:
         >>> shutil.rmtree(folder)
         """
         released = 0
-        for example in self.examples:
-            if type(example) is not Example:  # a mesh example's renders: costly to remake
-                continue
+        for example, name in self._releasable():
             cache = example.__dict__  # functools.cached_property keeps its values here
             if "depth" in cache:
                 _ = example.shape  # kept: reading the image again checks it without the depth
+            released += getattr(cache.pop(name, None), "nbytes", 0)
+        return released
+
+    def releasable_bytes(self) -> int:
+        """Bytes of the arrays :meth:`release_arrays` would drop now."""
+        return sum(
+            getattr(example.__dict__.get(name), "nbytes", 0) for example, name in self._releasable()
+        )
+
+    def _releasable(self):
+        """(example, array name) of every array read from a file that may be cached."""
+        for example in self.examples:
+            if type(example) is not Example:  # a mesh example's renders: costly to remake
+                continue
             for name in _FILE_ARRAYS:
                 if name not in example._arrays and getattr(example, f"{name}_path") is not None:
-                    array = cache.pop(name, None)
-                    released += getattr(array, "nbytes", 0)
-        return released
+                    yield example, name
 
     @classmethod
     def from_directory(

@@ -75,7 +75,11 @@ _FEATURE_BYTES = 2  # per feature dimension: int16 (EngineParams.quantize_featur
 _EXEMPLAR_PIXEL_BYTES = 10
 _QUERY_LEVEL_BYTES = 13  # a level of the query's pyramid: guide bands, mask
 _EXEMPLAR_LEVEL_BYTES = 25  # a level of an example's pyramid: guide and colour bands, mask
-_OVERHEAD_BYTES = 80 * 2**20  # numba kernels and lazily imported modules on first use
+# numba kernels and lazily imported modules on first use: 80 MB until `imagemap synthesize`
+# loaded its kernels without numba's registries (imagemap.cli.lean_kernel_loads, 16-19 MB
+# less at 1024^2; a library call still loads them: this estimate is then that much low).
+_OVERHEAD_BYTES = 64 * 2**20
+_REGISTRY_BYTES = 16 * 2**20  # numba's registries, which the mesh route still loads
 _MEMORY_FACTOR = 0.8
 # Seconds per window centre and feature dimension, all iterations, the whole pipeline
 # (engine and finish) in one figure, from fresh-process runs of benchmarks/memory.py
@@ -99,8 +103,13 @@ _SECONDS_OVERHEAD = 0.3
 # benchmarks/memory.py (generated fish, m = 2, 2026-11-29, load 8.5-9.6): 2048^2 483 MB
 # added, 25.0 s of CPU (two runs), 4096^2 1680 MB, 56.7 s; these give 485 MB, 23.5 s and
 # 1701 MB, 52.8 s (+0 %, -6 %; +1 %, -7 %). The peak is the full-size blend's.
+# #44 fifth round: the examples' full-size depth is no longer held through the blend
+# (pipeline.ExampleFrame): 12 bytes per example pixel (their colours), not 16. With the
+# overhead above and the database's cached depths dropped (colorize_estimate), 2026-11-29,
+# benchmarks/memory.py, load 5-6: 1024^2 188 MB added / 224 estimated, 2048^2 381 / 416,
+# 4096^2 1297 / 1471 (+19 %, +9 %, +13 %).
 _FULL_PIXEL_BYTES = 80
-_FULL_EXAMPLE_PIXEL_BYTES = 16
+_FULL_EXAMPLE_PIXEL_BYTES = 12
 _SECONDS_PER_FULL_PIXEL = 0.85e-6  # refitted with _SECONDS_PER_FEATURE above
 
 #: Runs estimated to take longer than this are announced with a warning (not refused).
@@ -342,7 +351,7 @@ def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Est
     # The engine gets each example cut to its object and margin (guides.crop_levels).
     crop = (2 * (max(pyramid.patch_sizes) // 2) + CROP_SLACK) * 2 ** (len(pyramid.patch_sizes) - 1)
     exemplars = [(_crop_shape(e.mask, crop), int(e.mask.sum()), _boundary(e.mask)) for e in chosen]
-    return estimate_colorize(
+    estimate = estimate_colorize(
         mask.shape,
         int(mask.sum()),
         _boundary(mask),
@@ -352,6 +361,12 @@ def colorize_estimate(depth: np.ndarray, database, config, examples=None) -> Est
         guide_bands,
         config.pyramid.search_size,
     )
+    if getattr(database, "keep_arrays", True):
+        return estimate
+    # One query (Database(keep_arrays=False)): the arrays the database holds now are
+    # dropped once the synthesis has posed its examples, below what the process holds.
+    released = database.releasable_bytes()
+    return replace(estimate, bytes=max(estimate.bytes - released, _OVERHEAD_BYTES))
 
 
 def _crop_shape(mask: np.ndarray, margin: int) -> tuple[int, int]:
@@ -448,6 +463,7 @@ def estimate_mesh(size: tuple[int, int], views: int, texture_size: int) -> int:
     pixels = int(size[0]) * int(size[1])
     return int(
         _OVERHEAD_BYTES
+        + _REGISTRY_BYTES
         + pixels * (_VIEW_PIXEL_BYTES + _KEPT_VIEW_PIXEL_BYTES * max(views - 1, 0))
         + int(texture_size) ** 2 * _TEXEL_BYTES
     )
