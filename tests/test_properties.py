@@ -101,11 +101,8 @@ def test_full_mask_stays_full(h, w, levels):
     st.integers(0, 2**32 - 1),
 )
 def test_pca_basis_is_orthonormal_and_projection_bounded(n, dim, keep, seed):
-    from imagemap.core import engine
+    from imagemap.core.solver import _fit_pca as fit
 
-    fit = getattr(engine, "_fit_pca", None)
-    if fit is None:
-        pytest.skip("engine._fit_pca is gone")
     keep = min(keep, dim)
     rng = np.random.default_rng(seed)
     samples = rng.normal(size=(n, dim)).astype(np.float32) * rng.uniform(0.1, 3, dim)
