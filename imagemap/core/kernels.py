@@ -273,6 +273,10 @@ def feature_distances(
     return out
 
 
+#: Random-search trials a PatchMatch visit may draw (one per halving of a radius < 2^63).
+_MAX_TRIALS = 64
+
+
 @njit(cache=True, nogil=True)
 def _patchmatch_band(
     band,
@@ -309,6 +313,8 @@ def _patchmatch_band(
         return
     row0 = query_y[m0]
     row1 = query_y[m1 - 1]
+    # One random-search trial per halving of the radius (at most 63 for any int64 radius).
+    offsets = np.empty((_MAX_TRIALS, 2), dtype=np.int64)
     for p in range(n_passes):
         forward = p % 2 == 0
         step = stride if forward else -stride
@@ -370,13 +376,27 @@ def _patchmatch_band(
             radius = max(exemplar_shape[e, 0], exemplar_shape[e, 1])
             if max_radius > 0:
                 radius = min(radius, max_radius)
-            trial = 0
+            # The trials' offsets depend on the counter alone: drawn first, and the rows
+            # they reach from the current best prefetched (most trials lose, so best
+            # mostly stays), then tried in the same order as drawn.
+            n_trials = 0
             while radius >= 1:
-                cy = cand_y[best] + _random_below(seed, m, p, 2 * trial, 2 * radius + 1) - radius
-                cx = cand_x[best] + _random_below(seed, m, p, 2 * trial + 1, 2 * radius + 1)
-                cx -= radius
-                cy = min(max(cy, 0), exemplar_shape[e, 0] - 1)
-                cx = min(max(cx, 0), exemplar_shape[e, 1] - 1)
+                offsets[n_trials, 0] = (
+                    _random_below(seed, m, p, 2 * n_trials, 2 * radius + 1) - radius
+                )
+                offsets[n_trials, 1] = (
+                    _random_below(seed, m, p, 2 * n_trials + 1, 2 * radius + 1) - radius
+                )
+                cy = min(max(cand_y[best] + offsets[n_trials, 0], 0), exemplar_shape[e, 0] - 1)
+                cx = min(max(cand_x[best] + offsets[n_trials, 1], 0), exemplar_shape[e, 1] - 1)
+                cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cx)
+                if cc >= 0:
+                    _prefetch_row(candidate_features, cc)
+                radius //= 2
+                n_trials += 1
+            for trial in range(n_trials):
+                cy = min(max(cand_y[best] + offsets[trial, 0], 0), exemplar_shape[e, 0] - 1)
+                cx = min(max(cand_x[best] + offsets[trial, 1], 0), exemplar_shape[e, 1] - 1)
                 cc = _looked_up(exemplar_lookup, lookup_origin, e, cy, cx)
                 if cc >= 0 and cc != best:
                     d = _sq_dist_below(
@@ -385,8 +405,6 @@ def _patchmatch_band(
                     if d < best_d:
                         best = cc
                         best_d = d
-                radius //= 2
-                trial += 1
             # One jump anywhere: lets a pixel leave a poor exemplar.
             cc = _random_below(seed, m, p, 1000003, n_candidates)
             d = _sq_dist_below(qf, candidate_features[cc], ndims, position_dim, scale, best_d)
