@@ -203,9 +203,9 @@ def synthesize(
     # One BLAS thread: the numba kernels own the cores, and a multithreaded
     # OpenBLAS on a busy machine spins (a 363x363 eigh measured 300x slower).
     trim_heap()  # the front end's temporaries: freed, not yet given back
-    # deferred: start-up: SciPy's own OpenBLAS (the PCA's eigh) loaded before the limit
-    # below, so that the limit covers it too (threadpoolctl limits the libraries loaded)
-    import scipy.linalg  # noqa: F401
+    # SciPy's own OpenBLAS (the PCA's eigh) loaded before the limit below, so that the
+    # limit covers it too (threadpoolctl limits the libraries loaded)
+    import scipy.linalg  # deferred: start-up: only a synthesis fits a PCA  # noqa: F401
 
     with threadpool_limits(limits=1, user_api="blas"):
         return _synthesize(query_levels, exemplar_levels, params, seed, quiet)

@@ -215,8 +215,7 @@ def _fit_pca(
         centered = (samples - mean).astype(np.float32, copy=False)
     dim = centered.shape[1]
     if not _randomised(dim, n_keep):
-        # deferred: start-up: scipy.linalg only when a level is fitted
-        from scipy.linalg import eigh
+        from scipy.linalg import eigh  # deferred: start-up: only when a level is fitted
 
         # The kept directions alone, in float32 (LAPACK ssyevr, MRRR): the covariance
         # is a float32 product already, and float64's full eigh took twice as long (a
