@@ -365,7 +365,7 @@ def _fine(state: State, config: DepthConfig) -> State:
         reach = ndimage.binary_dilation(small_mask, iterations=2) & missing
         _, (iy, ix) = ndimage.distance_transform_edt(missing, return_indices=True)
         source[reach] = source[iy[reach], ix[reach]]
-    state.source = fine_source(source, factor, shape, [e.mask.shape for e in state.chosen])
+    state.source = fine_source(source, factor, shape, [e.shape for e in state.chosen])
     del source
     ycbcr = state.made("ycbcr")
     state.ycbcr = np.ascontiguousarray(
@@ -378,7 +378,7 @@ def _fine(state: State, config: DepthConfig) -> State:
     if state.exemplars is not None:
         state.exemplars = [example_ycbcr(example) for example in state.chosen]
     # Memory: from here on the examples' names and sizes are read, not their depths.
-    state.chosen = [ExampleFrame(e.name, e.mask.shape) for e in state.chosen]
+    state.chosen = [ExampleFrame(e.name, e.shape) for e in state.chosen]
     state.features = None
     if state.engine is not None:
         cost = state.engine.cost
@@ -562,8 +562,7 @@ def _unpose(state: State, config: DepthConfig) -> State:
     for index, (example, flip) in enumerate(zip(state.chosen, state.mirrored, strict=True)):
         if flip:  # a mirrored example's column x is its own column width - 1 - x
             mine = source[..., 0] == index
-            width = (example.shape if isinstance(example, ExampleFrame) else example.mask.shape)[1]
-            source[..., 2][mine] = width - 1 - source[..., 2][mine]
+            source[..., 2][mine] = example.shape[1] - 1 - source[..., 2][mine]
     if state.engine is not None:
         state.engine.cost = unpose_nearest(frame, state.query_depth.shape, state.engine.cost)
     state.ycbcr, state.source, state.exemplars = ycbcr, source, None

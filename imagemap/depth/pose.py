@@ -440,6 +440,12 @@ class PosedExample:
         return self.depth > 0
 
     @property
+    def shape(self) -> tuple[int, int]:
+        """Its frame's (H, W), as :attr:`imagemap.example.Example.shape` (no mask made)."""
+        height, width = self.depth.shape
+        return height, width
+
+    @property
     def image(self) -> np.ndarray:
         return _arranged(_read_uncached(self.example, "image"), self.mirrored)
 
