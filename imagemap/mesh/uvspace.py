@@ -574,10 +574,8 @@ def fine_texture(
         index, py, px = fine_positions(source, size / working, (size, size), (y0, y1))
         index = np.clip(index, 0, len(textures) - 1)
         # The example's texel whose centre is nearest the position, (p + 0.5) * s - 0.5.
-        sy = np.floor((py + 0.5) * heights[index] / working)
-        sx = np.floor((px + 0.5) * widths[index] / working)
-        sy = np.clip(sy, 0, heights[index] - 1).astype(np.int32)
-        sx = np.clip(sx, 0, widths[index] - 1).astype(np.int32)
+        sy = _texel_at(py + 0.5, heights[index], working)
+        sx = _texel_at(px + 0.5, widths[index], working)
         if used is not None:
             _keep_to_used(used, source, index, sy, sx, heights, widths, (y0, y1), size)
         # The finish's smooth correction, between the working texels' centres.
@@ -592,6 +590,12 @@ def fine_texture(
     return image, fine
 
 
+def _texel_at(edge: np.ndarray, extent: np.ndarray, working: int) -> np.ndarray:
+    """The texel of an example ``extent`` texels across that holds the point ``edge``
+    working texels from its edge (int32, clipped to the example)."""
+    return np.clip(np.floor(edge * extent / working), 0, extent - 1).astype(np.int32)
+
+
 def _keep_to_used(used, source, index, sy, sx, heights, widths, rows, size):
     """``sy``, ``sx`` (one band of :func:`fine_texture`'s rows) moved, in place, to the
     own working texel's block position where they read an unused texel of their example
@@ -601,10 +605,8 @@ def _keep_to_used(used, source, index, sy, sx, heights, widths, rows, size):
     cell = np.minimum(np.floor(u).astype(np.int64), working - 1)
     cy, cx = cell[rows[0] : rows[1]], cell
     fy, fx = (u - cell)[rows[0] : rows[1]], u - cell  # within the working texel, 0..1
-    own_y = np.floor((source[cy][:, cx, 1] + fy[:, None]) * heights[index] / working)
-    own_x = np.floor((source[cy][:, cx, 2] + fx[None, :]) * widths[index] / working)
-    own_y = np.clip(own_y, 0, heights[index] - 1).astype(np.int32)
-    own_x = np.clip(own_x, 0, widths[index] - 1).astype(np.int32)
+    own_y = _texel_at(source[cy][:, cx, 1] + fy[:, None], heights[index], working)
+    own_x = _texel_at(source[cy][:, cx, 2] + fx[None, :], widths[index], working)
     for k, mask in enumerate(used):
         if mask is None:
             continue
