@@ -23,9 +23,35 @@ def bench():
     return load_script()
 
 
-# The quick run (the tests marked slow + ci_slow below) takes about 40 s: every case, both
-# backends, two fresh processes, and the quality group. Out of the default run; CI keeps
-# it, as the check that the benchmark script (and ``imagemap bench``) still works.
+# The whole quick run (the tests marked slow below) takes about 30 s: every case, both
+# backends, two fresh processes and the quality group. CI runs a smaller one (the tests
+# marked ci_slow: the JIT and colorize groups, PatchMatch only, about 10 s) as its check
+# that the benchmark script (and ``imagemap bench``) still works; the whole quick run is
+# in the slow command.
+
+
+@pytest.fixture(scope="module")
+def ci_run(tmp_path_factory):
+    """``imagemap bench --quick --only jit,colorize --backends patchmatch``: its report."""
+    tmp = tmp_path_factory.mktemp("bench_ci")
+    out = tmp / "results.json"
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = imagemap_main(
+            [
+                "bench",
+                "--quick",
+                "--only",
+                "jit,colorize",
+                "--backends",
+                "patchmatch",
+                "--json",
+                str(out),
+                "--data",
+                str(tmp / "data"),
+            ]
+        )
+    assert code == 0
+    return json.loads(out.read_text())
 
 
 @pytest.fixture(scope="module")
@@ -61,8 +87,29 @@ def test_memory_probe_sees_an_allocation(bench):
     assert figures["rss_peak_mb"] >= figures["rss_delta_mb"]
 
 
-@pytest.mark.slow
 @pytest.mark.ci_slow
+def test_ci_run_has_its_rows_with_stages_and_a_report(bench, ci_run):
+    rows = ci_run["rows"]
+    assert {(r["case"], r["backend"]) for r in rows} == {
+        ("first call (JIT / cache load) 40x30", "patchmatch"),
+        ("second call 40x30", "patchmatch"),
+        ("colorize 80x60", "patchmatch"),
+        ("colorize 128x96", "patchmatch"),
+    }
+    for row in rows:
+        assert row["seconds"] > 0 and row["rss_peak_mb"] > 10, row["case"]
+        assert math.isfinite(row["objective"]) and row["objective"] > 0, row["case"]
+        assert {"synthesize.search", "synthesize.vote", "select", "blend"} <= set(row["stages"])
+        assert 0 < sum(row["stages"].values()) <= row["seconds"] * 1.01, row["case"]
+    # the same 40x30 task twice in one process: the second call's map is the first's
+    first, second = (r for r in rows if r["case"].endswith("40x30"))
+    assert first["objective"] == second["objective"]
+    text = bench.format_report(ci_run)
+    assert "| colorize 128x96 | patchmatch |" in text
+    assert "| synthesize.search |" in text
+
+
+@pytest.mark.slow
 def test_quick_run_has_every_row_with_positive_figures(quick_report):
     rows = quick_report["rows"]
     cases = {(r["case"], r["backend"]) for r in rows}
@@ -98,7 +145,6 @@ def test_quick_run_has_every_row_with_positive_figures(quick_report):
 
 
 @pytest.mark.slow
-@pytest.mark.ci_slow
 def test_quick_run_exact_is_no_worse_than_patchmatch(quick_report):
     # Exact search finds the best window of each query: its final target value is
     # at most the approximate one (up to EM taking a different path, hence the slack).
@@ -109,7 +155,6 @@ def test_quick_run_exact_is_no_worse_than_patchmatch(quick_report):
 
 
 @pytest.mark.slow
-@pytest.mark.ci_slow
 def test_quick_run_report_names_the_machine_and_breaks_down_stages(bench, quick_report):
     assert quick_report["machine"]["cores"] >= 1
     assert quick_report["machine"]["memory_gb"] > 0
@@ -120,7 +165,6 @@ def test_quick_run_report_names_the_machine_and_breaks_down_stages(bench, quick_
 
 
 @pytest.mark.slow
-@pytest.mark.ci_slow
 def test_imagemap_bench_quality(quick_run):
     report, printed = quick_run
     quality = report["quality"]
