@@ -233,18 +233,27 @@ def test_a_folder_of_pictures_does_not_import_the_mesh_modules(tmp_path):
 
 
 def test_a_synthesis_skips_the_optional_imports_no_part_of_it_uses():
-    # SciPy's array-API layer imports numpy.f2py, which looks for charset_normalizer;
-    # numba looks for PyYAML: `imagemap synthesize` reports both missing while it imports.
+    # numba looks for PyYAML: `imagemap synthesize` reports it missing while it imports.
+    # SciPy's array-API layer reads every NumPy attribute, numpy.testing and numpy.f2py
+    # among them: they are lazy, so their code (f2py's Fortran parser, which looked for
+    # charset_normalizer; numpy.testing's unittest) never runs, yet they work when used.
     code = (
         "import os; os.chdir({!r})\n"  # no .numba_config.yaml here
         "from imagemap.cli import skip_optional_imports\n"
         "with skip_optional_imports(True):\n"
         "    import numba, scipy.ndimage\n"
-        "import sys; skipped = [n for n in ('charset_normalizer', 'yaml') if n in sys.modules]\n"
+        "import sys; unused = sorted(n for n in sys.modules if n.startswith(\n"
+        "    ('yaml', 'charset_normalizer', 'numpy.f2py.', 'numpy.testing.', 'unittest')))\n"
+        "print(unused)\n"
     ).format(str(ROOT / "imagemap"))
-    loaded = _modules_after(code + "print(skipped)")
-    assert {"numba", "scipy"} <= loaded
-    assert not loaded.intersection({"charset_normalizer", "yaml"})
+    loaded = _modules_after(code, top_level=False)
+    assert {"numba", "scipy.ndimage", "numpy.testing", "numpy.f2py"} <= loaded
+    assert not {n for n in loaded if n.startswith(("yaml", "charset_normalizer", "unittest"))}
+    assert not {n for n in loaded if n.startswith(("numpy.f2py.", "numpy.testing."))}
+    used = _modules_after(
+        code + "import numpy.testing\nnumpy.testing.assert_equal(1, 1)", top_level=False
+    )
+    assert "numpy.testing._private.utils" in used
 
 
 def test_a_kernel_loaded_lean_gives_the_python_functions_answer():

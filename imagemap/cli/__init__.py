@@ -206,19 +206,51 @@ def _map_large_blocks() -> None:
 
 
 #: Optional dependencies that the libraries a synthesis imports look for at import and
-#: that no part of a synthesis uses: NumPy's ``f2py`` (imported through SciPy's array-API
-#: layer, which loads every NumPy submodule) reads Fortran files' encodings with
-#: ``charset_normalizer`` (0.05-0.09 s of CPU to import), numba reads a
-#: ``.numba_config.yaml`` with PyYAML (0.02-0.05 s). While ``imagemap synthesize`` runs
-#: in its own process they are reported missing (``sys.modules[name] = None``, taken out
-#: again after), so those libraries take their own fallbacks; PyYAML is left alone
-#: where a ``.numba_config.yaml`` is there to be read.
-SKIPPED_OPTIONAL_IMPORTS = ("charset_normalizer", "yaml")
+#: that no part of a synthesis uses: numba reads a ``.numba_config.yaml`` with PyYAML
+#: (0.02-0.05 s of CPU to import). While ``imagemap synthesize`` runs in its own process
+#: it is reported missing (``sys.modules[name] = None``, taken out again after), so numba
+#: takes its own fallback; PyYAML is left alone where a ``.numba_config.yaml`` is there
+#: to be read.
+SKIPPED_OPTIONAL_IMPORTS = ("yaml",)
+
+#: Modules that the libraries a synthesis imports load whole although no part of a
+#: synthesis uses them: SciPy's array-API layer (imported with ``scipy.ndimage``) copies
+#: every NumPy attribute, which imports ``numpy.testing`` (with ``unittest``) and
+#: ``numpy.f2py`` (with its Fortran parser, which looked for ``charset_normalizer``).
+#: While ``imagemap synthesize`` runs in its own process they are made lazy
+#: (:class:`importlib.util.LazyLoader`): the module object is in place at once and its
+#: code runs on the first attribute read, which a synthesis never makes. Not here:
+#: ``numpy.ma`` (``np.median`` reads it) and ``scipy.special`` / ``scipy.fft`` (the
+#: Poisson blend's DCTs import both). Only imagemap's kernel threads run beside the
+#: main thread, and they read none of these (the lazy load is thread-safe only from
+#: Python 3.12 on).
+LAZY_MODULES = ("numpy.testing", "numpy.f2py")
+
+
+def _defer_module(name: str) -> None:
+    """Put ``name`` in ``sys.modules`` (and on its parent) as a lazy module, unless it
+    is imported already or cannot be found."""
+    import importlib.util  # deferred: start-up (the parser alone needs it not)
+
+    if name in sys.modules:
+        return
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+        return
+    loader = importlib.util.LazyLoader(spec.loader)
+    spec.loader = loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    loader.exec_module(module)
+    parent, _, child = name.rpartition(".")
+    setattr(sys.modules[parent], child, module)
 
 
 class skip_optional_imports:
     """While active (``on``), :data:`SKIPPED_OPTIONAL_IMPORTS` not yet imported raise
-    ``ImportError`` when imported; afterwards they import as before.
+    ``ImportError`` when imported; afterwards they import as before. Entering also makes
+    :data:`LAZY_MODULES` not yet imported lazy; they stay so (a lazy module is the whole
+    module from its first use on).
 
     Examples
     --------
@@ -232,6 +264,7 @@ class skip_optional_imports:
     """
 
     def __init__(self, on: bool) -> None:
+        self.on = on
         self.names: list[str] = []
         if on:
             import os  # deferred: start-up (the parser alone needs it not)
@@ -246,6 +279,9 @@ class skip_optional_imports:
     def __enter__(self) -> skip_optional_imports:
         for name in self.names:
             sys.modules[name] = None  # type: ignore[assignment]
+        if self.on:
+            for name in LAZY_MODULES:
+                _defer_module(name)
         return self
 
     def __exit__(self, *exc) -> None:
