@@ -282,3 +282,31 @@ def test_a_kernel_loaded_lean_gives_the_python_functions_answer():
     assert same
     if lean and from_cache:
         assert not registries
+
+
+def test_the_program_warms_its_kernels_on_a_thread_and_writes_the_same_map(tmp_path):
+    # `imagemap synthesize` as its own process imports numba and the kernels on a thread
+    # beside the first stages (cli.warm): the map is byte for byte the in-process call's,
+    # which has no such thread.
+    import numpy as np
+
+    from imagemap.cli import main as imagemap_main
+    from imagemap.io import write_image
+    from tests.conftest import PALETTE, blob, painted
+
+    db = tmp_path / "db"
+    db.mkdir()
+    for i, (cy, cx) in enumerate([(24, 32), (23, 30)]):
+        depth = blob(centre=(cy, cx), bumps=0.02, seed=i)
+        np.save(db / f"blob_{i}_depth.npy", depth)
+        write_image(db / f"blob_{i}_image.png", painted(depth, PALETTE))
+    np.save(tmp_path / "q_depth.npy", blob(radii=(15, 25), bumps=0.02, seed=9))
+    argv = ["synthesize", str(tmp_path / "q_depth.npy"), "--db", str(db), "--seed", "3", "-q"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    subprocess.run(
+        [sys.executable, "-m", "imagemap", *argv, "-o", str(tmp_path / "program.png")],
+        check=True,
+        env=env,
+    )
+    assert imagemap_main([*argv, "-o", str(tmp_path / "call.png")]) == 0
+    assert (tmp_path / "program.png").read_bytes() == (tmp_path / "call.png").read_bytes()

@@ -403,6 +403,9 @@ def _main(argv: list[str] | None, own_process: bool = False) -> int:
         map_large_blocks(args)
     try:
         with skip_optional_imports(own_process and args.command == "synthesize"):
+            from imagemap.cli.warm import warm_kernels  # deferred: start-up (one command's)
+
+            warm_kernels(own_process and args.command == "synthesize", link=lean_kernel_loads)
             return int(args.func(args) or 0)
     except InputError as exc:
         print(f"imagemap: error: {exc}", file=sys.stderr)
