@@ -368,3 +368,30 @@ def test_a_degenerate_example_is_named_before_any_work():
     flat = trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]], process=False)
     with pytest.raises(InputError, match="mesh example flat: the mesh has no surface"):
         registered_examples(query, {"flat": flat}, m=1, texture_size=16)
+
+
+def test_the_query_atlas_is_rasterized_once_per_size_for_every_example(monkeypatch):
+    """Two examples at the texture's size and the guides' size: the query's atlas
+    rasterized twice (once per size; per example and size before, four times), and each
+    example's texture, correspondence and guides what its own resampling gives alone."""
+    import imagemap.mesh.register as register_module
+
+    calls: list[int] = []
+    real = register_module.rasterize_uv
+
+    def counted(uv, faces, size):
+        calls.append(size)
+        return real(uv, faces, size)
+
+    monkeypatch.setattr(register_module, "rasterize_uv", counted)
+    query = two_tone(lumpy(subdivisions=2), flip=False)
+    examples = {"a": two_tone(lumpy(1.1, 2), flip=True), "b": two_tone(lumpy(0.9, 2), flip=False)}
+    made, _ = registered_examples(query, examples, m=2, texture_size=32, guide_size=16)
+    assert sorted(calls) == [16, 32]
+    for example in made:
+        alone = resample(examples[example.name], example.registration, query, 32)
+        assert np.array_equal(example.texture, np.round(alone.colour * 255.0).astype(np.uint8))
+        for ours, theirs in zip(example.correspondence, alone.correspondence, strict=True):
+            assert np.array_equal(ours, theirs)
+        guides = resample(examples[example.name], example.registration, query, 16).maps
+        assert np.array_equal(example.maps(16).guides(), guides.guides())

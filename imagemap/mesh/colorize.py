@@ -476,6 +476,7 @@ def _colorize_registered(
         mirror=bool(config.selection.mirror),
         names=names,
         seed=seed,
+        guide_size=min(REGISTERED_WORKING_SIZE, int(texture_size)),  # the engine's (colorize_uv)
     )
     log.info(
         "mesh route: registered path (%d mesh examples in other layouts, kept %s), %d^2 texture",

@@ -46,6 +46,7 @@ import itertools
 import logging
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import trimesh
@@ -66,6 +67,7 @@ from imagemap.scene.bake import rasterize_uv
 from imagemap.scene.views import surface_colours
 
 __all__ = [
+    "MeshSurface",
     "Registration",
     "RegisteredExample",
     "deform",
@@ -222,6 +224,127 @@ def surface_samples(
     return points, face, bary
 
 
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """A read-only view of ``array`` (kept in a cache, shared by every caller)."""
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
+class MeshSurface:
+    """A mesh's arrays and what the registered path reads of them, each made once.
+
+    The registered path reads the same things of the query for every example: its fine
+    samples and surface frame for each rigid fit, its connected parts, their frames and
+    closest-point indices for each part matching and deformation, and its atlas' texel
+    points at each size for each resampling (:func:`resample`: ``rasterize_uv``, a weld
+    and the points, 0.35 s for a head's 1024^2 atlas); and of an example, its samples
+    and frame for its rigid fit and again for its refinement. A MeshSurface makes each on
+    first use and keeps it (as trimesh's cached properties do), so that every example
+    and every size of one query share them; the values are those made each time before,
+    so the same bytes come out. Its arrays are read-only views: the mesh must not change
+    while it is in use.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Or any object with ``vertices`` and ``faces`` (and per-vertex ``visual.uv`` for
+        :meth:`atlas_points`).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> sheet = trimesh.creation.box(extents=(2.0, 1.0, 0.2)).subdivide()
+    >>> sheet.visual = trimesh.visual.TextureVisuals(uv=sheet.vertices[:, :2] / [2, 1] + 0.5)
+    >>> surface = MeshSurface(sheet)
+    >>> surface.atlas_points(16) is surface.atlas_points(16), MeshSurface.of(surface) is surface
+    (True, True)
+    """
+
+    def __init__(self, mesh) -> None:
+        self.mesh = mesh
+        self.vertices = _read_only(np.asarray(mesh.vertices, dtype=np.float64))
+        self.faces = _read_only(np.asarray(mesh.faces, dtype=np.int64))
+        self._samples: dict[tuple[int, int], tuple] = {}
+        self._atlas: dict[int, tuple] = {}
+        self._indices: dict[tuple[int, int], SurfaceIndex] = {}
+
+    @classmethod
+    def of(cls, mesh) -> MeshSurface:
+        """``mesh`` itself when it is a MeshSurface, else a new one of it."""
+        return mesh if isinstance(mesh, cls) else cls(mesh)
+
+    @cached_property
+    def frame(self) -> tuple[np.ndarray, float]:
+        """(centroid, RMS radius) of the surface (:func:`surface_frame`)."""
+        return surface_frame(self.vertices, self.faces)
+
+    @cached_property
+    def vertex_frame(self) -> tuple[np.ndarray, float]:
+        """(centroid, RMS radius) of the vertices."""
+        return _frame(self.vertices)
+
+    def samples(self, count: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`surface_samples` of the surface (count, seed), made once."""
+        key = (int(count), int(seed))
+        if key not in self._samples:
+            made = surface_samples(self.vertices, self.faces, count, seed)
+            self._samples[key] = tuple(_read_only(a) for a in made)
+        return self._samples[key]
+
+    @cached_property
+    def part_labels(self) -> np.ndarray:
+        """Each face's connected part (:func:`_part_labels`)."""
+        return _read_only(_part_labels(self.vertices, self.faces))
+
+    @cached_property
+    def part_frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """(area-weighted centroid, sqrt of the area) of each part (:func:`_part_frames`)."""
+        return _part_frames(self.vertices, self.faces, self.part_labels)
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """Unit face normals."""
+        return _read_only(_face_normals(self.vertices, self.faces))
+
+    def part_index(self, part: int, seed: int) -> SurfaceIndex:
+        """The closest-point index of one connected part's faces (:class:`SurfaceIndex`;
+        ``part`` -1: of every face)."""
+        key = (int(part), int(seed))
+        if key not in self._indices:
+            every = np.arange(len(self.faces))
+            subset = every if part < 0 else np.flatnonzero(self.part_labels == part)
+            self._indices[key] = SurfaceIndex(self.vertices, self.faces[subset], seed)
+        return self._indices[key]
+
+    def release_indices(self) -> None:
+        """Let go of the parts' closest-point indices (made again when asked for)."""
+        self._indices.clear()
+
+    def atlas_points(self, size: int) -> tuple[np.ndarray, float, tuple]:
+        """(centroid, RMS radius, (texel, face, point)) of the used texels of the mesh's
+        ``size``^2 atlas: each texel's flat index, face and surface point (on the welded
+        surface, as :func:`imagemap.mesh.uvspace.surface_maps` has them), made once per
+        size.
+
+        Raises
+        ------
+        InputError
+            When the UVs cover no texel.
+        """
+        if size not in self._atlas:
+            uv = np.asarray(self.mesh.visual.uv, dtype=np.float64)
+            texel, face, bary = rasterize_uv(uv, self.faces, size)
+            if texel.size == 0:
+                raise InputError("the mesh's UV layout covers no texel")
+            welded, welded_faces, _ = weld(self.vertices, self.faces)
+            points = np.einsum("nk,nkc->nc", bary, welded[welded_faces[face]])
+            centre, radius = _frame(points)
+            arrays = tuple(_read_only(a) for a in (texel, face, points))
+            self._atlas[size] = (_read_only(centre), radius, arrays)
+        return self._atlas[size]
+
+
 def _residual(a: np.ndarray, b: np.ndarray, tree_b: cKDTree | None = None) -> float:
     """Symmetric mean nearest-neighbour distance between two point sets."""
     tree_b = tree_b or cKDTree(b)
@@ -280,16 +403,14 @@ def _trimmed_similarity(
 
 def _normalised(example, query, seed: int) -> tuple:
     """(source, target, e_frame, q_frame): both meshes' fine samples in their own normalised
-    frames (centroid, RMS radius of the surface), with those frames."""
-    e_vertices = np.asarray(example.vertices, dtype=np.float64)
-    e_faces = np.asarray(example.faces, dtype=np.int64)
-    q_vertices = np.asarray(query.vertices, dtype=np.float64)
-    q_faces = np.asarray(query.faces, dtype=np.int64)
+    frames (centroid, RMS radius of the surface), with those frames (each a mesh or its
+    :class:`MeshSurface`, whose samples and frame are made once)."""
+    e_surface, q_surface = MeshSurface.of(example), MeshSurface.of(query)
     # The same seed for both: a mesh registered to itself is its own samples' fit (identity).
-    e_fine = surface_samples(e_vertices, e_faces, FINE_SAMPLES, seed)[0]
-    q_fine = surface_samples(q_vertices, q_faces, FINE_SAMPLES, seed)[0]
-    e_frame = surface_frame(e_vertices, e_faces)
-    q_frame = surface_frame(q_vertices, q_faces)
+    e_fine = e_surface.samples(FINE_SAMPLES, seed)[0]
+    q_fine = q_surface.samples(FINE_SAMPLES, seed)[0]
+    e_frame = e_surface.frame
+    q_frame = q_surface.frame
     source = (e_fine - e_frame[0]) / e_frame[1]
     target = (q_fine - q_frame[0]) / q_frame[1]
     return source, target, e_frame, q_frame
@@ -299,6 +420,8 @@ def _registration(matrix, residual, example, e_frame, q_frame) -> Registration:
     """The Registration of a fit in the normalised frames (``matrix`` maps the example's
     normalised samples onto the query's)."""
     (e_centre, e_radius), (q_centre, q_radius) = e_frame, q_frame
+    if isinstance(example, MeshSurface):
+        example = example.mesh  # its own arrays (the surface's are read-only views)
     # y = q_radius (L (x - e_centre) / e_radius + b) + q_centre in world units.
     linear = matrix[:3, :3]
     full = np.eye(4)
@@ -435,17 +558,17 @@ def match_parts(registration: Registration, query) -> Parts:
 
     One-to-one (:func:`scipy.optimize.linear_sum_assignment`) on the distance of the parts'
     centroids after the rigid fit, in RMS radii of the query, plus the absolute log of
-    their sizes' ratio. A mesh of one part matches it to the other's largest.
+    their sizes' ratio. A mesh of one part matches it to the other's largest. ``query``
+    is the mesh or its :class:`MeshSurface` (whose parts are then found once).
     """
     from scipy.optimize import linear_sum_assignment  # deferred: start-up (scipy.optimize)
 
-    q_vertices = np.asarray(query.vertices, dtype=np.float64)
-    q_faces = np.asarray(query.faces, dtype=np.int64)
-    q_labels = _part_labels(q_vertices, q_faces)
+    surface = MeshSurface.of(query)
+    q_labels = surface.part_labels
     e_labels = _part_labels(registration.vertices, registration.faces)
-    q_centres, q_sizes = _part_frames(q_vertices, q_faces, q_labels)
+    q_centres, q_sizes = surface.part_frames
     e_centres, e_sizes = _part_frames(registration.vertices, registration.faces, e_labels)
-    _, radius = _frame(q_vertices)
+    _, radius = surface.vertex_frame
     cost = np.linalg.norm(q_centres[:, None] - e_centres[None], axis=2) / radius + np.abs(
         np.log(np.maximum(q_sizes[:, None], 1e-30) / np.maximum(e_sizes[None], 1e-30))
     )
@@ -470,15 +593,19 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
     two surfaces face alike, :data:`NORMAL_AGREEMENT`), smoothed by ``(W + s L) x = W d``
     (``L`` the graph Laplacian, ``s`` from :data:`STIFFNESS`).
 
+    ``query`` is the mesh or its :class:`MeshSurface` (whose samples, normals and parts'
+    closest-point indices then serve every example); ``parts`` the example's
+    (:func:`match_parts`), found here when not given.
+
     Returns
     -------
     Registration
         With ``deformed`` set (``vertices``, the rigid fit, kept).
     """
-    parts = parts or match_parts(registration, query)
-    q_vertices = np.asarray(query.vertices, dtype=np.float64)
-    q_faces = np.asarray(query.faces, dtype=np.int64)
-    targets, target_face, _ = surface_samples(q_vertices, q_faces, FINE_SAMPLES, seed + 2)
+    surface = MeshSurface.of(query)
+    parts = parts or match_parts(registration, surface)
+    q_vertices, q_faces = surface.vertices, surface.faces
+    targets, target_face, _ = surface.samples(FINE_SAMPLES, seed + 2)
     target_part = parts.query[target_face]
     _, q_radius = _frame(targets)
     pull = PULL_DISTANCE * q_radius
@@ -487,7 +614,12 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
     vertex_part = np.full(count, -1, dtype=np.int64)
     for k in range(3):
         vertex_part[welded_faces[:, k]] = parts.example
-    q_centres, q_sizes = _part_frames(q_vertices, q_faces, parts.query)
+    # The query's parts as the surface has them (made once for every example) when they
+    # are its own, as they are when found by match_parts.
+    own_parts = np.array_equal(parts.query, surface.part_labels)
+    q_centres, q_sizes = (
+        surface.part_frames if own_parts else _part_frames(q_vertices, q_faces, parts.query)
+    )
     e_centres, e_sizes = _part_frames(registration.vertices, registration.faces, parts.example)
     points = welded.copy()
     # The example's largest part (a body, a head) stays where the rigid fit put it: that fit
@@ -509,8 +641,8 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
         groups.append((-1, -1))
     everything = np.arange(len(q_faces))
     laplacian = _laplacian(welded_faces, count)
-    indices: dict[int, SurfaceIndex] = {}  # the query's parts: made once
-    q_normals = _face_normals(q_vertices, q_faces)
+    indices: dict[int, SurfaceIndex] = {}  # the query's parts' (-1: all faces)
+    q_normals = surface.face_normals
     target_normal = q_normals[target_face]
     for stiffness in STIFFNESS:
         pulls = np.zeros_like(points)
@@ -531,7 +663,11 @@ def deform(registration: Registration, query, seed: int = 0, parts: Parts | None
             # Each vertex towards its closest point of the query part (exact: none on
             # the same surface) ...
             if q_part not in indices:
-                indices[q_part] = SurfaceIndex(q_vertices, q_faces[q_subset], seed)
+                indices[q_part] = (
+                    surface.part_index(q_part, seed)
+                    if own_parts
+                    else SurfaceIndex(q_vertices, q_faces[q_subset], seed)
+                )
             f, b, d = indices[q_part].closest(points[v_index])
             facing = np.einsum("nc,nc->n", e_normals[v_index], q_normals[q_subset[f]])
             near = (d < pull) & (facing > NORMAL_AGREEMENT)
@@ -632,8 +768,9 @@ class Resampled:
 
     Attributes
     ----------
-    colour : (T, T, 3) float32
-        The example's texture at each used texel's corresponding point; padded.
+    colour : (T, T, 3) float32 or None
+        The example's texture at each used texel's corresponding point; padded (None when
+        only the guides were asked for).
     maps : SurfaceMaps
         The example's guides at each texel (position in the query's normalised frame);
         its mask is the query's used texels.
@@ -646,24 +783,80 @@ class Resampled:
         are carried the same way, :func:`imagemap.mesh.maps.registered_maps`).
     """
 
-    colour: np.ndarray
+    colour: np.ndarray | None
     maps: SurfaceMaps
     distance: np.ndarray
     correspondence: tuple | None = None
 
 
-def _query_frame(vertices, faces, uv, size) -> tuple[np.ndarray, float, tuple]:
-    """The query atlas' texel points and their (centroid, RMS radius), as surface_maps has them."""
-    texel, face, bary = rasterize_uv(uv, faces, size)
-    if texel.size == 0:
-        raise InputError("the mesh's UV layout covers no texel")
-    welded, welded_faces, _ = weld(vertices, faces)
-    points = np.einsum("nk,nkc->nc", bary, welded[welded_faces[face]])
-    centre, radius = _frame(points)
-    return centre, radius, (texel, face, points)
+class RegisteredSurface:
+    """A registered example as :func:`resample` reads it at every size, each part made once.
+
+    Its parts matched to the query's (:func:`match_parts`), the closest-point index of each
+    of its deformed parts, and its rigid fit's welded surface with normals and curvature
+    (the guides): the same at the output size and at the engine's working size, so made
+    on first use and kept.
+
+    Parameters
+    ----------
+    registration : Registration
+        The example's registration, deformed (:func:`deform`).
+    query : MeshSurface
+    seed : int
+    parts : Parts, optional
+        The example's parts matched to the query's (found here when not given).
+    """
+
+    def __init__(
+        self, registration: Registration, query: MeshSurface, seed: int = 0, parts=None
+    ) -> None:
+        self.registration = registration
+        self.query = query
+        self.seed = seed
+        self.parts: Parts = parts if parts is not None else match_parts(registration, query)
+        self._indices: dict[int, tuple[np.ndarray, SurfaceIndex]] = {}
+
+    def closest(self, q_part: int, points: np.ndarray) -> tuple:
+        """(face (N,), barycentrics (N, 3), distance (N,)) of the closest points to
+        ``points`` of query part ``q_part`` on the deformed example: on its matched part,
+        else on its parts matched to none (else on all of it)."""
+        parts = self.parts
+        key = parts.pairs.get(q_part, -1)
+        if key not in self._indices:
+            if key >= 0:
+                subset = np.flatnonzero(parts.example == key)
+            else:
+                matched = set(parts.pairs.values())
+                subset = np.flatnonzero(~np.isin(parts.example, list(matched)))
+                if not subset.size:
+                    subset = np.arange(len(self.registration.faces))
+            index = SurfaceIndex(self.registration.deformed, self.registration.faces[subset],
+                                 self.seed)  # fmt: skip
+            self._indices[key] = (subset, index)
+        subset, index = self._indices[key]
+        face, bary, distance = index.closest(points)
+        return subset[face], bary, distance
+
+    @cached_property
+    def guides(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(welded vertices, each vertex's welded index, welded normals, curvature) of the
+        rigid fit."""
+        welded, welded_faces, index = weld(self.registration.vertices, self.registration.faces)
+        normals = _vertex_normals(welded, welded_faces)
+        curvature = vertex_curvature(welded, welded_faces, normals)
+        return welded, index, normals, curvature
 
 
-def resample(example, registration: Registration, query, size: int, seed: int = 0) -> Resampled:
+def resample(
+    example,
+    registration: Registration,
+    query,
+    size: int,
+    seed: int = 0,
+    *,
+    surface: RegisteredSurface | None = None,
+    colour: bool = True,
+) -> Resampled:
     """An example's texture and surface guides in the query's atlas at ``size``.
 
     Parameters
@@ -672,41 +865,36 @@ def resample(example, registration: Registration, query, size: int, seed: int = 
         The example, with UVs and a texture.
     registration : Registration
         Its registration to the query (:func:`register_rigid`, :func:`deform`).
-    query : trimesh.Trimesh
-        With per-vertex UVs.
+    query : trimesh.Trimesh or MeshSurface
+        With per-vertex UVs (a :class:`MeshSurface` rasterizes its atlas once per size,
+        for every example).
     size : int
+    seed : int
+    surface : RegisteredSurface, optional
+        What this example's resampling reads at every size (made here when not given).
+    colour : bool
+        Sample the texture too (False: the guides only; ``colour`` is None).
 
     Returns
     -------
     Resampled
     """
-    q_vertices = np.asarray(query.vertices, dtype=np.float64)
-    q_faces = np.asarray(query.faces, dtype=np.int64)
-    q_uv = np.asarray(query.visual.uv, dtype=np.float64)
-    centre, radius, (texel, q_face, points) = _query_frame(q_vertices, q_faces, q_uv, size)
+    query = MeshSurface.of(query)
+    if surface is None:
+        surface = RegisteredSurface(registration, query, seed)
+    centre, radius, (texel, q_face, points) = query.atlas_points(size)
     faces = registration.faces
-    parts = match_parts(registration, query)
-    texel_part = parts.query[q_face]
+    texel_part = surface.parts.query[q_face]
     face = np.zeros(len(points), dtype=np.int64)
     bary = np.zeros((len(points), 3))
     distance = np.zeros(len(points))
-    matched = set(parts.pairs.values())
-    rest_faces = np.flatnonzero(~np.isin(parts.example, list(matched)))
     for q_part in np.unique(texel_part):
         here = texel_part == q_part
-        if q_part in parts.pairs:
-            subset = np.flatnonzero(parts.example == parts.pairs[q_part])
-        else:
-            subset = rest_faces if rest_faces.size else np.arange(len(faces))
-        f, b, d = closest_points(registration.deformed, faces[subset], points[here], seed)
-        face[here], bary[here], distance[here] = subset[f], b, d
-    # The colour: the example's own faces (its own winding, its own UVs).
+        face[here], bary[here], distance[here] = surface.closest(int(q_part), points[here])
     own_bary = bary[:, ::-1] if registration.mirrored else bary
-    colour = surface_colours(example, face, own_bary)
+    bands = 10 if colour else 7
     # The guides: the same surface point on the rigidly registered example.
-    welded, welded_faces, index = weld(registration.vertices, faces)
-    normals = _vertex_normals(welded, welded_faces)
-    curvature = vertex_curvature(welded, welded_faces, normals)
+    welded, index, normals, curvature = surface.guides
     corners = index[faces[face]]
     position = np.einsum("nk,nkc->nc", bary, welded[corners])
     normal = np.einsum("nk,nkc->nc", bary, normals[corners])
@@ -724,21 +912,24 @@ def resample(example, registration: Registration, query, size: int, seed: int = 
     # synthesis how well the example fits there. Padding outside the charts only: the
     # nearest texel in the atlas is often another chart's (#46: with the texels farther than
     # 0.08 RMS radii padded too, tan blocks of the body on the generated fish's fins, and
-    # 1822 texels of fish_008 off every chosen example where now 0).
-    stack = np.zeros((size * size, 10), dtype=np.float32)
+    # 1822 texels of fish_008 off every chosen example where now 0). Each padding texel is
+    # its nearest used texel's, band by band: the guides the same with or without colour.
+    stack = np.zeros((size * size, bands), dtype=np.float32)
     stack[texel, :3] = (position - centre) / radius
     stack[texel, 3:6] = normal
     stack[texel, 6] = texel_curvature
-    stack[texel, 7:10] = colour
-    stack = fill_background(stack.reshape(size, size, 10), used)
+    if colour:  # the example's own faces (its own winding, its own UVs)
+        stack[texel, 7:10] = surface_colours(example, face, own_bary)
+    stack = fill_background(stack.reshape(size, size, bands), used)
     maps = SurfaceMaps(
         mask=used,
         position=stack[..., :3].copy(),
         normal=stack[..., 3:6].copy(),
         curvature=stack[..., 6].copy(),
     )
-    where = (texel, face.astype(np.int32), own_bary.astype(np.float32))
-    return Resampled(np.clip(stack[..., 7:10], 0.0, 1.0), maps, distance_map, where)
+    where = (np.array(texel), face.astype(np.int32), own_bary.astype(np.float32))
+    made = np.clip(stack[..., 7:10], 0.0, 1.0) if colour else None
+    return Resampled(made, maps, distance_map, where)
 
 
 @dataclass
@@ -762,7 +953,7 @@ class RegisteredExample(UVExample):
             raise ValueError(f"{self.name}: a registered example without its registration")
         if size not in self._maps:
             self._maps[size] = resample(
-                self.example_mesh, self.registration, self.query, size, self.seed
+                self.example_mesh, self.registration, self.query, size, self.seed, colour=False
             ).maps
         return self._maps[size]
 
@@ -776,6 +967,7 @@ def registered_examples(
     mirror: bool = False,
     names: list[str] | None = None,
     seed: int = 0,
+    guide_size: int | None = None,
 ) -> tuple[list[RegisteredExample], dict[str, float]]:
     """The ``m`` mesh examples nearest the query in shape, registered and resampled into
     its atlas.
@@ -795,17 +987,26 @@ def registered_examples(
     names : list of str, optional
         The examples to use (all registered; no choice).
     seed : int
+    guide_size : int, optional
+        Each example's guides are made at this size too (the engine's working size), with
+        its texture, on the same closest-point indices (:meth:`RegisteredExample.maps`
+        makes those of any other size when asked).
 
     Returns
     -------
     (list of RegisteredExample, nearest first; dict name -> residual of every example)
     """
     start = time.perf_counter()
-    surface_frame(np.asarray(query.vertices, dtype=np.float64), np.asarray(query.faces))
+    # What every example reads of the query (its samples, frame, parts, atlas points at
+    # each size) and each example's samples and frame (its fit and its refinement): made
+    # once, and let go on return (nothing here is kept through the synthesis).
+    surface = MeshSurface(query)
+    _ = surface.frame  # a query of no surface: an InputError before any example's work
+    surfaces = {name: MeshSurface(mesh) for name, mesh in examples.items()}
     fits = {}
-    for name, mesh in examples.items():
+    for name in examples:
         try:
-            fits[name] = register_rigid(mesh, query, mirror, seed, refine=False)
+            fits[name] = register_rigid(surfaces[name], surface, mirror, seed, refine=False)
         except InputError as error:  # a degenerate example: named
             raise InputError(f"mesh example {name}: {error}") from error
     residuals = {name: fit.residual for name, fit in fits.items()}
@@ -813,25 +1014,38 @@ def registered_examples(
         chosen = list(names)
     else:
         chosen = sorted(residuals, key=lambda n: residuals[n])[: max(1, m)]
-    made = []
+    deformed = {}
     for name in chosen:
         # Chosen by the ICP fit's residual; only the chosen are refined (its cost).
-        fits[name] = refine_rigid(fits[name], examples[name], query, seed)
-        fit = deform(fits[name], query, seed)
-        resampled = resample(examples[name], fit, query, texture_size, seed)
+        fits[name] = refine_rigid(fits[name], surfaces[name], surface, seed)
+        parts = match_parts(fits[name], surface)  # the deformation keeps the rigid fit's
+        deformed[name] = deform(fits[name], surface, seed, parts), parts
+    surface.release_indices()  # the query's (the deformations'), before the resampling's
+    made = []
+    for name in chosen:
+        fit, parts = deformed.pop(name)
+        on_query = RegisteredSurface(fit, surface, seed, parts)  # for both sizes
+        resampled = resample(examples[name], fit, surface, texture_size, seed, surface=on_query)
+        if resampled.colour is None:
+            raise RuntimeError("resample made no colour")
         texture = np.round(resampled.colour * 255.0).astype(np.uint8)
-        made.append(
-            RegisteredExample(
-                name,
-                query,
-                texture,
-                example_mesh=examples[name],
-                query=query,
-                registration=fit,
-                seed=seed,
-                correspondence=resampled.correspondence,
-            )  # fmt: skip
+        correspondence = resampled.correspondence
+        del resampled  # (its guides at the output size: not used)
+        example = RegisteredExample(
+            name,
+            query,
+            texture,
+            example_mesh=examples[name],
+            query=query,
+            registration=fit,
+            seed=seed,
+            correspondence=correspondence,
         )
+        if guide_size is not None:
+            example._maps[guide_size] = resample(
+                examples[name], fit, surface, guide_size, seed, surface=on_query, colour=False
+            ).maps
+        made.append(example)
     log.info(
         "registered %d mesh examples in %.1f s (residual in RMS radii: %s); kept %s%s",
         len(examples),
