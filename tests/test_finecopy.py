@@ -93,3 +93,23 @@ def test_the_uv_copy_never_reads_an_examples_unused_gap_its_own_block_avoids():
     assert gap.any()  # the interpolated copy reads the gap
     assert not ((kept[..., 1] >= 4) & (kept[..., 1] < 8)).any()
     assert np.array_equal(np.any(kept != free, axis=-1), gap)  # only there
+
+
+def test_each_fine_pixel_knows_its_coarse_pixel_and_its_place_in_it():
+    """At 2.5 fine pixels per coarse one, fine pixel ``i`` lies in coarse pixel
+    ``floor((i + 0.5) / 2.5)``, at ``(i + 0.5) / 2.5`` minus that from its edge; a
+    translated copy reads its coarse pixel's source plus that place (minus the half pixel
+    to the centre), and the result unpacks as (index, y, x)."""
+    factor, rows, cols = 2.5, 4, 6
+    yy, xx = np.indices((rows, cols))
+    source = np.stack([np.zeros_like(yy), yy + 7, xx + 2], axis=-1)
+    at = fine_positions(source, factor, (10, 15))
+    centres_y, centres_x = (np.arange(10) + 0.5) / factor, (np.arange(15) + 0.5) / factor
+    assert at.cell_y.tolist() == np.floor(centres_y).astype(int).tolist()
+    assert at.cell_x.tolist() == np.floor(centres_x).astype(int).tolist()
+    assert np.abs(at.within_y - (centres_y - at.cell_y)).max() < EXACT
+    own_y = source[at.cell_y][:, at.cell_x, 1] + at.within_y[:, None] - 0.5
+    own_x = source[at.cell_y][:, at.cell_x, 2] + at.within_x[None, :] - 0.5
+    assert np.abs(at.y - own_y).max() < EXACT and np.abs(at.x - own_x).max() < EXACT
+    index, y, x = at
+    assert index is at.index and y is at.y and x is at.x

@@ -28,9 +28,12 @@ the parallelogram of the two beside it (the corner of the copy they show). So
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["FINE_DRIFT", "copy_steps", "fine_positions"]
+__all__ = ["FINE_DRIFT", "FinePositions", "copy_steps", "fine_positions"]
 
 #: A neighbour continues a coarse pixel's copy when its source lies at most this many
 #: coarse pixels (along each axis) from where the copy's step puts it: a copy drifting by
@@ -103,13 +106,46 @@ def _neighbour_positions(label: np.ndarray, position: np.ndarray, steps: np.ndar
     return out
 
 
+@dataclass(frozen=True)
+class FinePositions:
+    """Where each fine pixel of a band copies from (:func:`fine_positions`), and which
+    coarse pixel it lies in; unpacks as ``index, y, x``.
+
+    Attributes
+    ----------
+    index : (h, w) int array
+        Each fine pixel's example: its own coarse pixel's (< 0 where that has none).
+    y, x : (h, w) float64 arrays
+        The position read, in the example's coarse pixels (pixel ``j``'s centre at ``j``).
+    cell_y : (h,) int64 array
+        Each fine row's coarse row (its own coarse pixel's) ...
+    cell_x : (w,) int64 array
+        ... and each fine column's coarse column.
+    within_y, within_x : (h,) and (w,) float64 arrays
+        The fine pixel's centre within its coarse pixel, from the coarse pixel's top (left)
+        edge, in coarse pixels (0 to 1): where a copy that only translates its own coarse
+        pixel reads is that pixel's source plus these.
+    """
+
+    index: np.ndarray
+    y: np.ndarray
+    x: np.ndarray
+    cell_y: np.ndarray
+    cell_x: np.ndarray
+    within_y: np.ndarray
+    within_x: np.ndarray
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.index, self.y, self.x))
+
+
 def fine_positions(
     source: np.ndarray,
     factor: float | tuple[float, float],
     shape: tuple[int, int],
     rows: tuple[int, int] | None = None,
     steps: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> FinePositions:
     """Where each fine pixel copies from, through a coarse source map.
 
     Parameters
@@ -131,11 +167,12 @@ def fine_positions(
 
     Returns
     -------
-    index : (h, w) int array
-        Each fine pixel's example: its own coarse pixel's (< 0 where that has none).
-    y, x : (h, w) float64 arrays
-        The position read, in the example's coarse pixels (pixel ``j``'s centre at
-        ``j``); a picture ``s`` times finer is read at ``(y + 0.5) * s - 0.5``.
+    FinePositions
+        Unpacks as ``index, y, x``: each fine pixel's example (its own coarse pixel's,
+        < 0 where that has none) and the position read, in the example's coarse pixels
+        (pixel ``j``'s centre at ``j``; a picture ``s`` times finer is read at
+        ``(y + 0.5) * s - 0.5``); with each fine row's and column's coarse pixel and the
+        fine pixels' places within it.
 
     Examples
     --------
@@ -155,16 +192,21 @@ def fine_positions(
     first, last = (0, int(shape[0])) if rows is None else (int(rows[0]), int(rows[1]))
 
     def axis(start: int, stop: int, ratio: float, n: int):
-        # Each fine pixel's coarse pixel and its offset from that pixel's centre.
+        # Each fine pixel's coarse pixel and its place in it from its edge (0 to 1).
         u = (np.arange(start, stop) + 0.5) / float(ratio)
         cell = np.clip(np.floor(u).astype(np.int64), 0, n - 1)
-        return cell, u - 0.5 - cell
+        return cell, u - cell
 
-    cy, oy = axis(first, last, fy, coarse_rows)
-    cx, ox = axis(0, int(shape[1]), fx, coarse_cols)
+    cy, within_y = axis(first, last, fy, coarse_rows)
+    cx, within_x = axis(0, int(shape[1]), fx, coarse_cols)
+    # The offset from the coarse pixel's centre (u - 0.5 - cell, to the bit: u - cell is
+    # exact, and so is taking 0.5 from it).
+    oy, ox = within_y - 0.5, within_x - 0.5
     if cy.size == 0:
         empty = np.zeros((0, cx.size))
-        return empty.astype(np.int64), empty, empty.copy()
+        return FinePositions(
+            empty.astype(np.int64), empty, empty.copy(), cy, cx, within_y, within_x
+        )
     # The coarse rows of this band's pixels, with a row on either side and a column on
     # either side (no source beyond the map).
     low, high = int(cy.min()), int(cy.max()) + 1
@@ -190,4 +232,4 @@ def fine_positions(
         + near[sy, sx, ry, rx] * (wy * wx)
     )
     index = source[cy][:, cx, 0].astype(np.int64)
-    return index, position[..., 0], position[..., 1]
+    return FinePositions(index, position[..., 0], position[..., 1], cy, cx, within_y, within_x)

@@ -571,13 +571,13 @@ def fine_texture(
     fine = np.empty((size, size, 3), dtype=np.int32)
     for y0 in range(0, size, _BLOCK_ROWS):
         y1 = min(y0 + _BLOCK_ROWS, size)
-        index, py, px = fine_positions(source, size / working, (size, size), (y0, y1))
-        index = np.clip(index, 0, len(textures) - 1)
+        at = fine_positions(source, size / working, (size, size), (y0, y1))
+        index = np.clip(at.index, 0, len(textures) - 1)
         # The example's texel whose centre is nearest the position, (p + 0.5) * s - 0.5.
-        sy = _texel_at(py + 0.5, heights[index], working)
-        sx = _texel_at(px + 0.5, widths[index], working)
+        sy = _texel_at(at.y + 0.5, heights[index], working)
+        sx = _texel_at(at.x + 0.5, widths[index], working)
         if used is not None:
-            _keep_to_used(used, source, index, sy, sx, heights, widths, (y0, y1), size)
+            _keep_to_used(used, source, at, index, sy, sx, heights, widths)
         # The finish's smooth correction, between the working texels' centres.
         grid_y, grid_x = np.meshgrid(centres[y0:y1], centres, indexing="ij")
         block = sample_pixels(correction, grid_x.ravel(), grid_y.ravel())
@@ -596,17 +596,16 @@ def _texel_at(edge: np.ndarray, extent: np.ndarray, working: int) -> np.ndarray:
     return np.clip(np.floor(edge * extent / working), 0, extent - 1).astype(np.int32)
 
 
-def _keep_to_used(used, source, index, sy, sx, heights, widths, rows, size):
-    """``sy``, ``sx`` (one band of :func:`fine_texture`'s rows) moved, in place, to the
-    own working texel's block position where they read an unused texel of their example
-    and that position reads a used one."""
+def _keep_to_used(used, source, at, index, sy, sx, heights, widths):
+    """``sy``, ``sx`` (one band of :func:`fine_texture`'s rows, ``at`` its
+    :class:`~imagemap.core.finecopy.FinePositions`) moved, in place, to the own working
+    texel's block position where they read an unused texel of their example and that
+    position reads a used one."""
     working = source.shape[0]
-    u = (np.arange(size) + 0.5) * working / size  # working coordinates of texel centres
-    cell = np.minimum(np.floor(u).astype(np.int64), working - 1)
-    cy, cx = cell[rows[0] : rows[1]], cell
-    fy, fx = (u - cell)[rows[0] : rows[1]], u - cell  # within the working texel, 0..1
-    own_y = _texel_at(source[cy][:, cx, 1] + fy[:, None], heights[index], working)
-    own_x = _texel_at(source[cy][:, cx, 2] + fx[None, :], widths[index], working)
+    # The own working texel's source plus the output texel's place within that texel.
+    cy, cx = at.cell_y, at.cell_x
+    own_y = _texel_at(source[cy][:, cx, 1] + at.within_y[:, None], heights[index], working)
+    own_x = _texel_at(source[cy][:, cx, 2] + at.within_x[None, :], widths[index], working)
     for k, mask in enumerate(used):
         if mask is None:
             continue
