@@ -30,6 +30,11 @@ from imagemap.scene import (
 RED, BLUE = np.array([0.9, 0.1, 0.1]), np.array([0.1, 0.2, 0.9])
 
 
+#: The imagemap module a mesh example's render runs that does not decide its values: the
+#: cache file's writing (io; measured: the only one besides the render key's sources).
+NOT_RENDERING = {"io.py"}
+
+
 def stepped_block() -> trimesh.Trimesh:
     """A 2 x 1 x 0.5 slab with a 0.4-wide tower (z up to 0.55) at x, y = (0.6, 0.2)."""
     slab = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
@@ -251,6 +256,68 @@ def test_meshes_in_a_database_are_rendered_once_and_cached(tmp_path, monkeypatch
         Database.from_directory(db_dir, view="front", size=(40, 30))["ball"].image[15, 20, 2] > 0.8
     )
     assert len(list((cache / "meshes").glob("ball-*.npz"))) == 3
+
+
+def test_an_edit_to_the_rendering_code_renders_the_examples_anew(tmp_path, monkeypatch):
+    """The render cache's key holds a digest of the rendering modules' source: the same
+    source (a copy) gives the same cache file, an edit to one of them another."""
+    import shutil
+
+    import imagemap.scene.examples as examples_module
+
+    coloured_sphere(tmp_path / "ball.glb", RED)
+    example = MeshExample("ball", tmp_path / "ball.glb", size=(40, 30), cache_dir=tmp_path)
+    installed = example.cache_path()
+    copy = tmp_path / "code"
+    for name in examples_module.RENDER_SOURCES:
+        (copy / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(examples_module._PACKAGE / name, copy / name)
+    monkeypatch.setattr(examples_module, "_PACKAGE", copy)
+    assert example.cache_path() == installed
+    with open(copy / "scene" / "views.py", "a") as views:
+        views.write("# an edit\n")
+    assert example.cache_path() != installed
+
+
+def test_the_render_key_holds_every_module_a_render_runs(tmp_path):
+    """Every imagemap module whose code runs while a mesh example with a normal map is
+    rendered is in the render key's sources, or only writes the cache file
+    (:data:`NOT_RENDERING`): a module added to the render must join the key."""
+    import sys
+    from pathlib import Path
+
+    import imagemap
+    from imagemap.scene.examples import RENDER_SOURCES
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    uv = sphere.vertices[:, :2] * 0.4 + 0.5
+    normal = np.zeros((8, 8, 3), np.float32) + [0.6, 0.5, 0.9]
+    mesh = textured_mesh(
+        sphere.vertices, sphere.faces, uv, np.full((8, 8, 3), 0.5, np.float32),
+        maps={"normal": normal},
+    )  # fmt: skip
+    mesh.export(tmp_path / "ball.glb")
+    example = MeshExample("ball", tmp_path / "ball.glb", size=(24, 18), cache_dir=tmp_path)
+    package = Path(imagemap.__file__).resolve().parent
+    ran: set[str] = set()
+
+    def note(frame, event, arg):
+        if event == "call":
+            ran.add(frame.f_code.co_filename)
+
+    sys.setprofile(note)
+    try:
+        maps = example.rendered_maps()
+    finally:
+        sys.setprofile(None)
+    assert "normal" in maps
+    ours = {
+        Path(f).resolve().relative_to(package).as_posix()
+        for f in ran
+        if Path(f).resolve().is_relative_to(package)
+    }
+    assert {"scene/raycast.py", "tangents.py"} <= ours  # the render and the normal map ran
+    assert ours - set(RENDER_SOURCES) <= NOT_RENDERING
 
 
 def test_mesh_and_picture_with_one_name_is_a_problem(tmp_path):

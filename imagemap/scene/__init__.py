@@ -16,7 +16,7 @@ mesh examples and the mesh front end (:mod:`imagemap.mesh`) can stand on both.
 from __future__ import annotations
 
 from imagemap.scene.bake import bake_views, project_texture, rasterize_uv, uv_atlas
-from imagemap.scene.examples import RENDER_VERSION, MeshExample, mesh_examples
+from imagemap.scene.examples import MeshExample, mesh_examples
 from imagemap.scene.files import (
     MESH_SUFFIXES,
     TEXTURED_SUFFIXES,
@@ -47,7 +47,6 @@ __all__ = [
     "FRONT",
     "MESH_SUFFIXES",
     "NAMED_VIEWS",
-    "RENDER_VERSION",
     "TEXTURED_SUFFIXES",
     "MeshExample",
     "MeshRender",

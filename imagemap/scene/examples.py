@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+import imagemap
 from imagemap.example import Example
 from imagemap.io import InputError, read_npz, write_npz
 from imagemap.materials import NEUTRAL, atlas_normals_to_view
@@ -23,11 +24,45 @@ from imagemap.scene.views import (
     sample_image,
 )
 
-__all__ = ["RENDER_VERSION", "MeshExample", "maps_seen", "mesh_examples"]
+__all__ = ["RENDER_SOURCES", "MeshExample", "maps_seen", "mesh_examples", "render_digest"]
 
-#: Bumped whenever rendering changes, so cached renders of examples are redone.
-RENDER_VERSION = 3  # 2: the material's PBR maps rendered and cached too; 3: normal maps read
-# in MikkTSpace frames (issue #46 item 4)
+#: The modules (paths under ``imagemap/``) whose code decides a mesh example's render:
+#: this one (the cache and the PBR maps seen, :func:`maps_seen`), the views and colours
+#: (:mod:`~imagemap.scene.views`), the ray caster (:mod:`~imagemap.scene.raycast`), the
+#: mesh's reading and its material's maps (:mod:`~imagemap.scene.files`), and the normal
+#: map's frames (:mod:`imagemap.materials`, :mod:`imagemap.tangents`). The render cache is
+#: keyed by their source (:func:`render_digest`): an edit to any renders the examples anew,
+#: with no version number to remember (a test checks the list against the code a render
+#: runs).
+RENDER_SOURCES = (
+    "scene/examples.py",
+    "scene/views.py",
+    "scene/raycast.py",
+    "scene/files.py",
+    "materials.py",
+    "tangents.py",
+)
+#: The package folder the sources are read from.
+_PACKAGE = Path(__file__).resolve().parents[1]
+
+
+def render_digest() -> str:
+    """A digest of :data:`RENDER_SOURCES`' source (the version where a file cannot be read,
+    as in a frozen install), part of every cached render's key.
+
+    Examples
+    --------
+    >>> len(render_digest())
+    24
+    """
+    digest = hashlib.sha256()
+    try:
+        for name in RENDER_SOURCES:
+            digest.update(name.encode())
+            digest.update((_PACKAGE / name).read_bytes())
+    except OSError:
+        return f"version {imagemap.__version__}"
+    return digest.hexdigest()[:24]
 
 
 def _default_cache() -> Path:
@@ -40,7 +75,8 @@ class MeshExample(Example):
 
     Rendered on first use for its view and size, and cached on disk in
     ``cache_dir/meshes/`` under a key of the file's content hash, the view, the size,
-    the margin and :data:`RENDER_VERSION`: a changed file or view renders anew.
+    the margin and the rendering code (:func:`render_digest`): a changed file, view or
+    renderer renders anew.
     """
 
     def __init__(
@@ -67,7 +103,7 @@ class MeshExample(Example):
 
     def cache_path(self) -> Path:
         digest = file_digest(self.mesh_path)
-        key = f"{digest}|{self.view}|{self.size}|{self.margin}|v{RENDER_VERSION}"
+        key = f"{digest}|{self.view}|{self.size}|{self.margin}|{render_digest()}"
         short = hashlib.sha256(key.encode()).hexdigest()[:24]
         return self.cache_dir / "meshes" / f"{self.name}-{short}.npz"
 
