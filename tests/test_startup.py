@@ -284,6 +284,40 @@ def test_a_kernel_loaded_lean_gives_the_python_functions_answer():
         assert not registries
 
 
+def test_the_programs_lean_start_refuses_bad_input_and_links_kernels_lean(tmp_path):
+    # `imagemap synthesize` as the program (main() without argv) starts lean
+    # (cli.lean_start): numba imported on a thread beside the first stages; a run
+    # stopped by bad input still ends with its error (code 2) while that thread works,
+    # and once it has run the kernels load lean (on the numba checked), the optional
+    # imports still skipped.
+    code = (
+        "import os, sys\n"
+        "os.chdir({root!r})\n"  # no .numba_config.yaml here
+        "from imagemap.cli import LEAN_LOAD_NUMBA, lean_start, main\n"
+        "sys.argv = ['imagemap', 'synthesize', {missing!r}, '--db', {db!r}, '-o', {out!r}]\n"
+        "refused = main() == 2\n"
+        "with lean_start(True) as start:\n"
+        "    start.thread.join()\n"
+        "    import numba\n"
+        "    from numba.core import caching\n"
+        "    lean = getattr(caching.Cache.load_overload, 'imagemap_lean', False)\n"
+        "checked = '.'.join(numba.__version__.split('.')[:2]) in LEAN_LOAD_NUMBA\n"
+        "skipped = not {{'yaml', 'charset_normalizer'}} & set(sys.modules)\n"
+        "print(refused, 'imagemap.core.kernels' in sys.modules, lean == checked, skipped)\n"
+    ).format(
+        root=str(ROOT / "imagemap"),
+        missing=str(tmp_path / "missing_depth.png"),
+        db=str(tmp_path),
+        out=str(tmp_path / "out.png"),
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
+    )
+    assert result.stdout.split()[-4:] == ["True"] * 4
+    assert "missing_depth.png" in result.stderr
+
+
 def test_the_program_warms_its_kernels_on_a_thread_and_writes_the_same_map(tmp_path):
     # `imagemap synthesize` as its own process imports numba and the kernels on a thread
     # beside the first stages (cli.warm): the map is byte for byte the in-process call's,

@@ -307,7 +307,7 @@ def lean_kernel_loads() -> bool:
     runtime it links against is set up (``rtsys.initialize``, which numba's refresh
     does first); any other function, a kernel not in the cache (numba's compiler
     refreshes itself) or a load that fails takes numba's own path. Set by the program
-    for ``imagemap synthesize`` (it owns the process), not on import.
+    for ``imagemap synthesize`` (it owns the process; :class:`lean_start`), not on import.
 
     Returns
     -------
@@ -339,6 +339,44 @@ def lean_kernel_loads() -> bool:
     load_overload.imagemap_lean = True  # type: ignore[attr-defined]
     caching.Cache.load_overload = load_overload  # type: ignore[method-assign]
     return True
+
+
+class lean_start:
+    """The start-up of ``imagemap synthesize`` in its own process.
+
+    The program runs one command and then ends, so it may set what an importing library
+    must not: while this is active (``on``), the optional imports no part of a synthesis
+    uses are reported missing and the unused modules made lazy
+    (:class:`skip_optional_imports`), and numba is imported on a thread of its own beside
+    the first stages (:func:`imagemap.cli.warm.warm_kernels`), imagemap's kernels then
+    linked from numba's cache without numba's registry refresh
+    (:func:`lean_kernel_loads`). Both are for the depth maps and the meshes alike (the
+    mesh route's outputs checked the same bytes both ways in fresh processes).
+    Afterwards the optional imports import as before; the lean kernel loads stay (the
+    process ends).
+
+    Parameters
+    ----------
+    on : bool
+        Set by :func:`_main` for ``imagemap synthesize`` run as the program (``main()``
+        without ``argv``); otherwise nothing changes.
+    """
+
+    def __init__(self, on: bool) -> None:
+        self.on = on
+        self.skip = skip_optional_imports(on)
+        self.thread = None  # the warm-up's thread, once started
+
+    def __enter__(self) -> lean_start:
+        self.skip.__enter__()
+        if self.on:
+            from imagemap.cli.warm import warm_kernels  # deferred: start-up (one command's)
+
+            self.thread = warm_kernels(link=lean_kernel_loads)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.skip.__exit__(*exc)
 
 
 def _record_given(parser: argparse.ArgumentParser) -> None:
@@ -402,10 +440,7 @@ def _main(argv: list[str] | None, own_process: bool = False) -> int:
     if args.command != "synthesize":  # synthesize decides by the map's size
         map_large_blocks(args)
     try:
-        with skip_optional_imports(own_process and args.command == "synthesize"):
-            from imagemap.cli.warm import warm_kernels  # deferred: start-up (one command's)
-
-            warm_kernels(own_process and args.command == "synthesize", link=lean_kernel_loads)
+        with lean_start(own_process and args.command == "synthesize"):
             return int(args.func(args) or 0)
     except InputError as exc:
         print(f"imagemap: error: {exc}", file=sys.stderr)

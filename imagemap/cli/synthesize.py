@@ -399,10 +399,6 @@ def _synthesize_one(args, job, depth, database, config, examples, background, ba
     from imagemap.outputs import write_all
 
     interactive = not args.quiet and sys.stderr.isatty()
-    if getattr(args, "own_process", False):
-        from imagemap.cli import lean_kernel_loads
-
-        lean_kernel_loads()  # the kernels linked from numba's cache without its registries
     start = time.perf_counter()
     # No tracemalloc here: tracing every allocation (numba loading its cached kernels
     # makes many) cost about 1.5 s and 16 MB of a 200x150 run.
