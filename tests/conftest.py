@@ -8,6 +8,19 @@ import pytest
 from imagemap.database import Database, Example
 
 
+@pytest.fixture(scope="session", autouse=True)
+def library_cache_of_the_session(tmp_path_factory):
+    """The library's cache (``IMAGEMAP_CACHE``: the mesh examples' renders in ``meshes/``,
+    the examples' padded textures in ``padded/``) in a folder of the test session's, not
+    the user's ``~/.cache/imagemap``: a test that does not set its own writes nothing to
+    the home folder, and finds no cache a run before it left. A test that sets its own
+    (``monkeypatch.setenv``) has it for that test; this one again after. Subprocesses
+    inherit it."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("IMAGEMAP_CACHE", str(tmp_path_factory.mktemp("imagemap_cache")))
+        yield
+
+
 def blob(shape=(48, 64), centre=(24, 32), radii=(16, 26), bumps=0.0, seed=0):
     """An ellipsoid depth map (nearer = larger, background 0) with optional bumps."""
     h, w = shape
