@@ -15,9 +15,15 @@ def library_cache_of_the_session(tmp_path_factory):
     the user's ``~/.cache/imagemap``: a test that does not set its own writes nothing to
     the home folder, and finds no cache a run before it left. A test that sets its own
     (``monkeypatch.setenv``) has it for that test; this one again after. Subprocesses
-    inherit it."""
+    inherit it.
+
+    imageio's user folder (``IMAGEIO_USERDIR``) too: reading a file no plugin knows
+    (tests/test_io.py, tests/test_fuzz.py) makes an empty ``~/.imageio`` while imageio
+    looks for its plugins' libraries. (Checked with ``HOME`` an empty folder: the default
+    run, 1207 tests, left only that ``.imageio`` there; those two files leave nothing now.)"""
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("IMAGEMAP_CACHE", str(tmp_path_factory.mktemp("imagemap_cache")))
+        patch.setenv("IMAGEIO_USERDIR", str(tmp_path_factory.mktemp("imageio_user")))
         yield
 
 
