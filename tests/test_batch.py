@@ -367,3 +367,35 @@ def test_resume_checks_content_not_size(fish, tmp_path):
     assert (summary.done, summary.skipped) == (1, 0)
     assert output.read_bytes() == good
     assert run_batch(queries, fish / "db", out, OPTIONS).skipped == 1
+
+
+def test_the_engine_digest_covers_every_module_a_synthesis_runs():
+    # A batch resumed after an upgrade redoes its objects when the engine's code changed
+    # (batch.digests.ENGINE_MODULES): every imagemap module that the depth and mesh routes
+    # and the outputs import must be in the digest, but for those that shape no byte.
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from imagemap.batch.digests import ENGINE_MODULES
+
+    shapes_nothing = {"__init__", "__main__", "batch", "cli", "errors", "memory", "progress"}
+    shapes_nothing |= {"validate"}
+    probe = (
+        "import json, sys\n"
+        "import imagemap.depth.pipeline, imagemap.mesh.route, imagemap.outputs\n"
+        "import imagemap.scene.examples, imagemap.mesh.register\n"
+        "print(json.dumps(sorted(n for n in sys.modules if n.startswith('imagemap.'))))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    ).stdout
+    modules = {name.split(".")[1] for name in json.loads(out.splitlines()[-1])}
+    assert modules - shapes_nothing <= set(ENGINE_MODULES)

@@ -18,9 +18,14 @@ ENGINE_MODULES = (
     "core",
     "database",
     "depth",
+    "example",
     "io",
+    "materials",
     "mesh",
+    "outputs",
     "render",
+    "scene",
+    "tangents",
 )
 
 
