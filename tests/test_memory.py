@@ -656,3 +656,20 @@ def test_maps_copied_in_row_blocks_equal_the_whole_maps_copy():
         neutral = np.asarray(materials.NEUTRAL[kind], np.float32)
         expected[~result.mask] = neutral if kind == "normal" else neutral[0]
         assert np.array_equal(found[kind], expected), kind
+
+
+def test_upsampled_at_step_one_is_the_grid_itself():
+    """At a step of 1 on a grid of the map's shape every point is a grid point: the copy
+    _upsampled returns there holds the bilinear interpolation's very values."""
+    from scipy import ndimage
+
+    from imagemap.depth import register
+
+    rng = np.random.default_rng(4)
+    for dtype in (np.float32, np.float64):
+        grid = (rng.random((register._ROWS + 9, 70)) ** 3).astype(dtype)
+        gy, gx = np.meshgrid(np.arange(grid.shape[0]), np.arange(70), indexing="ij")
+        interpolated = ndimage.map_coordinates(grid, [gy, gx], order=1, mode="nearest")
+        found = register._upsampled(grid, 1.0, grid.shape)
+        assert found is not grid and found.dtype == dtype
+        assert np.array_equal(found, interpolated)

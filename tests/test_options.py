@@ -238,7 +238,7 @@ def test_the_internal_thresholds_reach_the_stages(blob_database, query_blob, mon
 
         monkeypatch.setattr(module, name, recording)
 
-    spy(pipeline, "register_all", "register")
+    spy(pipeline, "register_with_detail", "register")
     spy(pipeline.completion, "small_features", "small_features")
     spy(pipeline.completion, "complete_features", "complete_features")
     spy(imagemap.depth.finish, "seamless_copy", "seamless_copy")

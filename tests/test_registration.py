@@ -126,3 +126,28 @@ def test_shifted_copies_of_one_striped_map_give_a_handful_of_fragments():
     lum = ours.image[35:55, 20:100].mean(axis=2)
     dark = lum < 0.45
     assert np.mean(np.abs(dark.mean(axis=0) - 0.5) > 0.35) > 0.8
+
+
+def test_the_registrations_relief_detail_is_the_full_size_one_or_none():
+    """register_with_detail hands on the relief's detail it made where it is the full-size
+    relief_detail of the query and every example (the seams' relief channel, not made
+    again), and none where the registration averaged blocks (a small detail_size)."""
+    from imagemap.depth.config import Registration
+    from imagemap.depth.register import register_all, register_with_detail, relief_detail
+
+    query = ellipsoid()
+    examples = [ellipsoid(centre=(42, 58), radii=(28, 52)), ellipsoid(radii=(26, 44))]
+    registered = register_with_detail(query, examples)
+    assert registered.detail is not None
+    query_detail, example_details = registered.detail
+    assert np.array_equal(query_detail, relief_detail(query, query > 0, 0.03))
+    for detail, example in zip(example_details, examples, strict=True):
+        assert np.array_equal(detail, relief_detail(example, example > 0, 0.03))
+    warps = register_all(query, examples)
+    assert all(
+        np.array_equal(a.coefficients, b.coefficients)
+        and np.array_equal(a.relief_residual, b.relief_residual)
+        for a, b in zip(warps, registered.warps, strict=True)
+    )
+    coarse = register_with_detail(query, examples, registration=Registration(detail_size=16.0))
+    assert coarse.detail is None

@@ -100,7 +100,7 @@ from imagemap.depth.register import (
     Warp,
     block_average,
     position_scales,
-    register_all,
+    register_with_detail,
     registered_positions,
     relief_agreement,
     relief_detail,
@@ -150,6 +150,7 @@ class State(SynthesisState):
     factor: int = 1
     full: tuple[np.ndarray, np.ndarray, list[Any]] | None = None
     searched: np.ndarray | None = None  # the object the engine searched, when averaged
+    finest_scale: np.ndarray | None = None  # the finest level's position factor (bands)
 
     def __post_init__(self) -> None:
         self.query_depth = self.depth
@@ -388,14 +389,26 @@ def _fine(state: State, config: DepthConfig) -> State:
 
 
 def _register(state: State, config: DepthConfig) -> State:
-    state.warps = register_all(
+    registered = register_with_detail(
         state.depth,
         [example.depth for example in state.chosen],
         registration=config.registration,
         angles=state.angles,
     )
+    state.warps = registered.warps
+    if _relief_channel(config):
+        # The relief's detail the residuals were made from is the seams' relief channel
+        # where it is at full size (objects up to 1.5 detail_size across: 12 bytes a
+        # pixel with two examples held through the synthesis, a few MB at most): the
+        # relief stage does not make it again (0.07-0.09 s at 512^2).
+        state.relief = registered.detail
     state.changed = f"{len(state.warps)} examples warped onto the query"
     return state
+
+
+def _relief_channel(config: DepthConfig) -> bool:
+    """Whether the seams read the relief's detail (the relief stage makes it)."""
+    return SEAMS.wanted(config) and config.finish.seam_relief_weight > 0
 
 
 def _bands(state: State, config: DepthConfig) -> State:
@@ -413,6 +426,9 @@ def _bands(state: State, config: DepthConfig) -> State:
         example_positions = list(registered)
         del registered  # each example's positions freed once its mappings are cut
     scales = _position_factors(state, config, levels)
+    # The finest level's factor is the seams' weights' too (the relief stage): kept, not
+    # made again (the engine holds it until it has packed the finest level anyway).
+    state.finest_scale = None if scales is None else scales[0]
     # Handed over to the engine, which drops each level once it has packed its bands.
     state.query_levels = ReleasableLevels(
         depth_mappings(state.depth, levels, config.guides, query_positions, scales)
@@ -526,7 +542,7 @@ def _relief(state: State, config: DepthConfig) -> State:
     # Made here, for the seams, and not with the bands: full-size maps (the query's and
     # each example's relief, 12 bytes a pixel with two examples, and the seams' weights)
     # held through the synthesis, where the peak memory is, for nothing.
-    if config.finish.seam_relief_weight > 0:
+    if config.finish.seam_relief_weight > 0 and state.relief is None:  # else registered
         scale = config.registration.relief_detail_scale
         state.relief = (
             relief_detail(state.depth, state.mask, scale),
@@ -537,9 +553,12 @@ def _relief(state: State, config: DepthConfig) -> State:
     # fragments for 90 % rose from 20-23 to 24-26 (seeds 0-2; the target is 25), with its
     # square root 23-24, and the scales at 768x576 keep a rim F1 of 0.95 (0.97 with the
     # factor, 0.89 at full weight everywhere).
-    levels = sized_config(config, state.mask).pyramid.levels
-    factors = _position_factors(state, config, levels, finest_only=True)
-    finest = None if factors is None else factors[0]
+    finest = state.finest_scale  # the bands' (the same mask and warps)
+    if finest is None and state.warps:
+        levels = sized_config(config, state.mask).pyramid.levels
+        factors = _position_factors(state, config, levels, finest_only=True)
+        finest = None if factors is None else factors[0]
+    state.finest_scale = None
     state.seam_weights = None if finest is None else np.sqrt(finest)
     state.changed = (
         f"the relief's detail of the query and {len(state.chosen)} examples"

@@ -46,7 +46,9 @@ __all__ = [
     "block_average",
     "position_scales",
     "register",
+    "Registered",
     "register_all",
+    "register_with_detail",
     "registered_positions",
     "registration_guide",
     "relief_detail",
@@ -338,6 +340,7 @@ def register_all(
 ) -> list[Warp]:
     """:func:`register` of the query onto each example, the query's guide image and relief
     detail made once, not once per example: the same warps as one :func:`register` each.
+    (:func:`register_with_detail`: the warps and the relief's detail they were made with.)
 
     Examples
     --------
@@ -349,6 +352,45 @@ def register_all(
     >>> warps = register_all(query, examples)
     >>> all(np.array_equal(w.coefficients, register(query, e).coefficients)
     ...     for w, e in zip(warps, examples))
+    True
+    """
+    return register_with_detail(
+        query_depth, example_depths, registration=registration, angles=angles
+    ).warps
+
+
+@dataclass(frozen=True)
+class Registered:
+    """What :func:`register_with_detail` made: the warps, and the relief's detail of the
+    query and of each example at full size (:func:`relief_detail` at the registration's
+    ``relief_detail_scale``) where the registration made it at full size (objects up to
+    about 1.5 ``detail_size`` across), else None."""
+
+    warps: list[Warp]
+    detail: tuple[np.ndarray, list[np.ndarray]] | None
+
+
+def register_with_detail(
+    query_depth: np.ndarray,
+    example_depths: list[np.ndarray],
+    *,
+    registration: Registration = _REGISTRATION,
+    angles: list[float] | None = None,
+) -> Registered:
+    """:func:`register_all`'s warps, and the relief's detail the relief residuals were made
+    from where it is the full-size :func:`relief_detail` of the query and of every example
+    (:class:`Registered`): the seams' relief channel, not made a second time.
+
+    Examples
+    --------
+    >>> yy, xx = np.mgrid[:60, :80]
+    >>> def blob(ry, rx):
+    ...     u = ((yy - 30) / ry) ** 2 + ((xx - 40) / rx) ** 2
+    ...     return np.where(u < 1, 0.2 + np.sqrt(np.clip(1 - u, 0, 1)), 0).astype(np.float32)
+    >>> query, example = blob(12, 25), blob(15, 30)
+    >>> registered = register_with_detail(query, [example])
+    >>> query_detail, (example_detail,) = registered.detail
+    >>> bool(np.array_equal(example_detail, relief_detail(example, example > 0, 0.03)))
     True
     """
     angles = [0.0] * len(example_depths) if angles is None else list(angles)
@@ -379,7 +421,7 @@ def register_all(
     fixed, fixed_mask = working(query_depth, query_mask)
     query_detail = _detail_grid(query_depth, query_mask, registration)
 
-    def one(task: tuple[np.ndarray, float]) -> Warp:
+    def one(task: tuple[np.ndarray, float]) -> tuple[Warp, tuple[np.ndarray, int]]:
         example_depth, angle = task
         moving, moving_mask = working(example_depth, example_depth > 0)
         with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
@@ -400,7 +442,12 @@ def register_all(
             )
         return _with_relief_residual(warp, query_detail, example_depth, registration)
 
-    return [one(task) for task in zip(example_depths, angles, strict=True)]
+    made = [one(task) for task in zip(example_depths, angles, strict=True)]
+    warps = [warp for warp, _ in made]
+    details = [detail for _, detail in made]
+    if query_detail[1] != 1 or any(block != 1 for _, block in details):
+        return Registered(warps, None)
+    return Registered(warps, (query_detail[0], [detail for detail, _ in details]))
 
 
 def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarray:
@@ -466,6 +513,10 @@ def _upsampled(grid: np.ndarray, step: float, shape: tuple[int, int]) -> np.ndar
     interpolation (of the grid's dtype), ``_ROWS`` rows at a time (each point's value is
     its own: the same as of the whole map's coordinates at once)."""
     height, width = shape
+    if step == 1.0 and grid.shape == shape:
+        # Each point on a grid point: the bilinear interpolation is the grid's value
+        # itself (weights 1 and 0), so the same values, copied, without interpolating.
+        return grid.copy()
     # Block pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
     ys = (np.arange(height) + 0.5) / step - 0.5
     xs = (np.arange(width) + 0.5) / step - 0.5
@@ -494,10 +545,11 @@ def _with_relief_residual(
     query_detail: tuple[np.ndarray, int],
     example_depth: np.ndarray,
     registration: Registration,
-) -> Warp:
+) -> tuple[Warp, tuple[np.ndarray, int]]:
     """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail
     (:func:`_detail_grid`) against the example's carried onto it by the warp, with the
-    object about ``detail_size`` pixels across (block averages of larger maps)."""
+    object about ``detail_size`` pixels across (block averages of larger maps); and the
+    example's detail with its block (:func:`_detail_grid`)."""
     query_detail_map, step = query_detail
     example_detail, example_step = _detail_grid(example_depth, example_depth > 0, registration)
     # The query's grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
@@ -510,7 +562,10 @@ def _with_relief_residual(
         order=1, mode="constant", cval=0.0,
     )  # fmt: skip
     residual = np.square(query_detail_map - landed).astype(np.float32)
-    return replace(warp, relief_residual=residual, relief_step=float(step))
+    return replace(warp, relief_residual=residual, relief_step=float(step)), (
+        example_detail,
+        example_step,
+    )
 
 
 def block_average(
