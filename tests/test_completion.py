@@ -452,3 +452,40 @@ def test_joined_components_are_csgraphs_components_in_its_numbering(monkeypatch)
     empty = np.zeros((3, 4), bool)
     labels, none = _joined_components(empty, np.ones((3, 3), bool), np.ones((2, 4), bool))
     assert none == 0 and not labels.any()
+
+
+def test_median_filter_by_partition_is_ndimages_in_blocks_of_rows(monkeypatch):
+    """_median_filter selects the middle value of each mirrored window as
+    ndimage.median_filter does, channel by channel, whatever its blocks of rows."""
+    from scipy import ndimage
+
+    from imagemap.depth import completion
+
+    rng = np.random.default_rng(5)
+    image = rng.random((37, 29, 3)).astype(np.float32)
+    image[5:9, 3:20] = 0.25  # ties
+    for size in (3, 9, 11):
+        expected = np.stack([ndimage.median_filter(image[..., c], size=size) for c in range(3)], -1)
+        assert np.array_equal(completion._median_filter(image, size), expected)
+        monkeypatch.setattr(completion, "MEDIAN_BLOCK_BYTES", 1)  # a row at a time
+        assert np.array_equal(completion._median_filter(image, size), expected)
+        monkeypatch.undo()
+
+
+def test_small_features_of_filled_colours_need_no_second_fill():
+    """An example's YCbCr as the copy stage makes it (example_ycbcr: its background the
+    nearest object colour) gives the same features with ``filled`` as without."""
+    from imagemap import Example
+    from imagemap.depth.guides import example_ycbcr
+
+    yy, xx = np.mgrid[0:90, 0:110]
+    mask = (yy - 45) ** 2 / 35**2 + (xx - 55) ** 2 / 48**2 < 1
+    rng = np.random.default_rng(6)
+    image = np.where(mask[..., None], [0.7, 0.5, 0.3], 0.0) + 0.02 * rng.random((90, 110, 3))
+    image[40:46, 30:38] = [0.1, 0.1, 0.4]  # an eye
+    image[20:23, 60:90] = [0.9, 0.9, 0.2]  # a stripe
+    depth = np.where(mask, 1.0, 0.0).astype(np.float32)
+    exemplar = example_ycbcr(Example.from_arrays("e", depth, np.clip(image, 0, 1)))
+    labels, n = small_features(exemplar, mask)
+    filled, m = small_features(exemplar, mask, filled=True)
+    assert n == m >= 1 and np.array_equal(labels, filled)

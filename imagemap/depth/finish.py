@@ -123,11 +123,20 @@ def changed_pixels(old: np.ndarray, new: np.ndarray) -> int:
     return count
 
 
-def example_features(state: SynthesisState, config: DepthConfig) -> list[tuple[np.ndarray, int]]:
-    """The chosen examples' small features (:func:`completion.small_features`), found once."""
+def example_features(
+    state: SynthesisState, config: DepthConfig, *, filled: bool = False
+) -> list[tuple[np.ndarray, int]]:
+    """The chosen examples' small features (:func:`completion.small_features`), found once
+    (``filled``: the exemplars are :func:`~imagemap.depth.guides.example_ycbcr`'s, their
+    background filled already, as the copy stage makes them)."""
     if state.features is None:
         state.features = [
-            completion.small_features(exemplar, example.mask, completion=config.completion)
+            completion.small_features(
+                exemplar,
+                example.mask,
+                completion=config.completion,
+                filled=filled,
+            )
             for exemplar, example in zip(state.made("exemplars"), state.chosen, strict=True)
         ]
     return state.features

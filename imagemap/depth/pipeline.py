@@ -504,7 +504,8 @@ def _complete_features(state: State, config: DepthConfig) -> State:
     state.source, completed = completion.complete_features(
         exemplars,
         state.made("source"),
-        example_features(state, config),
+        # The copy stage's example_ycbcr colours: their background is filled already.
+        example_features(state, config, filled=True),
         state.mask,
         [example.mask for example in state.chosen],
         completion=config.completion,
