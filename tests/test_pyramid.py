@@ -69,3 +69,26 @@ def test_source_coordinates_propagate_times_two():
     assert np.all(solver.cand_e[matches] == 1)
     np.testing.assert_array_equal(solver.cand_y[matches], 2 * (y // 2) + y % 2)
     np.testing.assert_array_equal(solver.cand_x[matches], np.minimum(2 * (x // 2 + 1) + x % 2, 21))
+
+
+def test_reduce_is_the_whole_gaussian_filter_subsampled():
+    """reduce filters the columns only on the rows it keeps: the values of ndimage's
+    whole-image gaussian_filter taken at every second pixel, grey or colour, odd sizes."""
+    from scipy import ndimage
+
+    from imagemap.core.pyramid import reduce
+
+    rng = np.random.default_rng(7)
+    for shape, sigma in [((31, 45), (1.0, 1.0)), ((20, 17, 3), (1.0, 1.0, 0.0))]:
+        image = rng.random(shape).astype(np.float32)
+        smooth = ndimage.gaussian_filter(image, sigma, mode="reflect")
+        assert np.array_equal(reduce(image), smooth[::2, ::2])
+
+
+def test_laplacian_bands_of_one_pyramid_are_the_laplacian_pyramids():
+    from imagemap.core.pyramid import gaussian_pyramid, laplacian_bands, laplacian_pyramid
+
+    image = np.random.default_rng(8).random((41, 30)).astype(np.float32)
+    bands = laplacian_bands(gaussian_pyramid(image, 4))
+    expected = laplacian_pyramid(image, 4)[:3]
+    assert all(np.array_equal(a, b) for a, b in zip(bands, expected, strict=True))

@@ -18,17 +18,21 @@ __all__ = [
     "coherent_edges",
     "copy_through",
     "fill_background",
+    "nearest_object_pixels",
     "smooth_inside",
 ]
 
 
-def fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def fill_background(
+    image: np.ndarray, mask: np.ndarray, nearest: np.ndarray | None = None
+) -> np.ndarray:
     """Extend the object's values into the background (nearest object pixel).
 
     A window at the silhouette then carries object-like colours beyond the edge,
     so no background colour bleeds into a synthesised object. A new array always: where
     ``mask`` is all or nothing there is nothing to extend from or into, and the result is
-    a copy of ``image``.
+    a copy of ``image``. ``nearest``: :func:`nearest_object_pixels` of ``mask``, when
+    several images of one object are filled (the same values, one distance transform).
 
     Examples
     --------
@@ -37,8 +41,14 @@ def fill_background(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """
     if mask.all() or not mask.any():
         return image.copy()
-    ny, nx = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
+    ny, nx = nearest_object_pixels(mask) if nearest is None else nearest
     return image[ny, nx]
+
+
+def nearest_object_pixels(mask: np.ndarray) -> np.ndarray:
+    """(2, H, W): each pixel's nearest pixel of ``mask`` (itself inside it), as
+    :func:`fill_background` reads it (``ndimage.distance_transform_edt``'s indices)."""
+    return ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
 
 
 def smooth_inside(values: np.ndarray, region: np.ndarray, sigma: float) -> np.ndarray:

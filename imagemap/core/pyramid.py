@@ -21,6 +21,7 @@ __all__ = [
     "collapse_laplacian",
     "expand",
     "gaussian_pyramid",
+    "laplacian_bands",
     "laplacian_pyramid",
     "level_shapes",
     "reduce",
@@ -31,15 +32,24 @@ REDUCE_SIGMA = 1.0
 _EXPAND_ROWS = 128  # rows per block of expand()
 
 
-def _spatial_sigma(image: np.ndarray, sigma: float) -> tuple[float, ...]:
-    return (sigma, sigma) + (0.0,) * (image.ndim - 2)
-
-
 def reduce(image: np.ndarray, sigma: float = REDUCE_SIGMA) -> np.ndarray:
-    """Smooth and take every second pixel: (H, W[, C]) -> (ceil(H/2), ceil(W/2)[, C])."""
+    """Smooth and take every second pixel: (H, W[, C]) -> (ceil(H/2), ceil(W/2)[, C]).
+
+    ``ndimage.gaussian_filter``'s passes, along the rows' axis and then the columns', in
+    float32 as it makes them, but the second pass only on the rows kept (each of its
+    values reads its own row alone): the same values, a quarter less filtering.
+
+    Examples
+    --------
+    >>> image = np.random.default_rng(0).random((9, 7, 2)).astype(np.float32)
+    >>> smooth = ndimage.gaussian_filter(image, (1.0, 1.0, 0.0), mode="reflect")
+    >>> bool(np.array_equal(reduce(image), smooth[::2, ::2]))
+    True
+    """
     image = np.asarray(image, dtype=np.float32)
-    smooth = ndimage.gaussian_filter(image, _spatial_sigma(image, sigma), mode="reflect")
-    return np.ascontiguousarray(smooth[::2, ::2])
+    rows = ndimage.gaussian_filter1d(image, sigma, axis=0, mode="reflect")[::2]
+    smooth = ndimage.gaussian_filter1d(rows, sigma, axis=1, mode="reflect")
+    return np.ascontiguousarray(smooth[:, ::2])
 
 
 def expand(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -116,11 +126,16 @@ def laplacian_pyramid(image: np.ndarray, levels: int = 3) -> list[np.ndarray]:
     True
     """
     gaussian = gaussian_pyramid(image, levels)
-    bands = [
+    return laplacian_bands(gaussian) + [gaussian[-1]]
+
+
+def laplacian_bands(gaussian: list[np.ndarray]) -> list[np.ndarray]:
+    """The band-pass levels of :func:`laplacian_pyramid` from its Gaussian pyramid (one
+    fewer than its levels): ``G_i - expand(G_{i+1})``, without smoothing it again."""
+    return [
         fine - expand(coarse, fine.shape[:2])
         for fine, coarse in zip(gaussian[:-1], gaussian[1:], strict=True)
     ]
-    return bands + [gaussian[-1]]
 
 
 def collapse_laplacian(pyramid: list[np.ndarray]) -> np.ndarray:

@@ -26,10 +26,15 @@ import numpy as np
 from scipy import ndimage
 from skimage import color
 
-from imagemap.core.blend import fill_background
+from imagemap.core.blend import fill_background, nearest_object_pixels
 from imagemap.core.mapping import Mapping
 from imagemap.core.params import APPEARANCE_PYRAMIDS, LevelPlan
-from imagemap.core.pyramid import gaussian_pyramid, laplacian_pyramid, mask_pyramid
+from imagemap.core.pyramid import (
+    gaussian_pyramid,
+    laplacian_bands,
+    laplacian_pyramid,
+    mask_pyramid,
+)
 from imagemap.depth.config import DepthConfig, Guides, Pyramid
 from imagemap.example import Example
 from imagemap.io import validate_depth
@@ -311,13 +316,16 @@ def _interior_scale(detail: np.ndarray, mask: np.ndarray, percentile: float) -> 
     return scale if scale > 0 else max(float(np.abs(detail).max()), 1e-12)
 
 
-def _extend_depth(depth: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
-    """The depth continued past the outline: nearest object depth, smoothed outside.
+def _extend_depth(
+    depth: np.ndarray, mask: np.ndarray, sigma: float, nearest: np.ndarray | None = None
+) -> np.ndarray:
+    """The depth continued past the outline: nearest object depth, smoothed outside
+    (``nearest``: the mask's :func:`~imagemap.core.blend.nearest_object_pixels`, if made).
 
     Windows at the outline then compare relief with relief; the outline itself
     is the silhouette band's job.
     """
-    outside = ndimage.gaussian_filter(fill_background(depth, mask), sigma)
+    outside = ndimage.gaussian_filter(fill_background(depth, mask, nearest), sigma)
     return np.where(mask, depth, outside).astype(np.float32)
 
 
@@ -366,18 +374,26 @@ def silhouette_band(mask: np.ndarray, saturation: float = _GUIDES.silhouette_ran
 _SILHOUETTE_OFFSETS = 48
 
 
-def _depth_guides(depth: np.ndarray, masks: list[np.ndarray], guides: Guides) -> list[np.ndarray]:
+def _depth_guides(
+    depth: np.ndarray,
+    masks: list[np.ndarray],
+    guides: Guides,
+    nearest: np.ndarray | None = None,
+) -> list[np.ndarray]:
     """Per level of ``masks`` (the object's mask pyramid): (H_l, W_l, B) depth Gaussian
     level, its Laplacian (detail) band and, with a silhouette weight, the silhouette band
-    (the depth then extended past the outline)."""
+    (the depth then extended past the outline; ``nearest``: the finest mask's
+    :func:`~imagemap.core.blend.nearest_object_pixels`, if made)."""
     levels = len(masks)
     silhouette = bool(guides.silhouette_weight)
     clip = guides.detail_clip or None
     if silhouette:
-        depth = _extend_depth(depth, masks[0], guides.extension_sigma)
-    gaussian = gaussian_pyramid(depth, levels)
-    # One level more, so that even the coarsest level has a true band-pass detail band.
-    detail = laplacian_pyramid(depth, levels + 1)[:levels]
+        depth = _extend_depth(depth, masks[0], guides.extension_sigma, nearest)
+    # One level more, so that even the coarsest level has a true band-pass detail band
+    # (the Laplacian pyramid's bands of the one Gaussian pyramid: smoothed once).
+    gaussian = gaussian_pyramid(depth, levels + 1)
+    detail = laplacian_bands(gaussian)
+    gaussian = gaussian[:levels]
     if clip:
         scaled = []
         for d, m in zip(detail, masks, strict=True):
@@ -454,8 +470,9 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
     return out
 
 
-def example_ycbcr(example: Example) -> np.ndarray:
-    """An example's image-map in YCbCr, the background filled with the nearest object colour."""
+def example_ycbcr(example: Example, nearest: np.ndarray | None = None) -> np.ndarray:
+    """An example's image-map in YCbCr, the background filled with the nearest object colour
+    (``nearest``: its mask's :func:`~imagemap.core.blend.nearest_object_pixels`, if made)."""
     # The image read from disk is not left cached on the example: the synthesis keeps
     # only its colour bands, and the finish reads it again (a full-size float32 image
     # per example less through the synthesis).
@@ -464,7 +481,7 @@ def example_ycbcr(example: Example) -> np.ndarray:
     image = example.image
     if not cached and "image" in cache:  # filled just now (a cached_property): emptied
         del cache["image"]
-    return to_ycbcr(fill_background(image, example.mask))
+    return to_ycbcr(fill_background(image, example.mask, nearest))
 
 
 #: Pixels of a level kept around its object past the engine's reach (its dilated mask
@@ -549,7 +566,10 @@ def example_mappings(
     if appearance_pyramid not in APPEARANCE_PYRAMIDS:
         raise ValueError(f"appearance_pyramid must be one of {APPEARANCE_PYRAMIDS}")
     mask = example.mask
-    ycbcr = example_ycbcr(example)
+    # The colours' fill and the depth's continuation past the outline read one nearest
+    # object pixel per pixel: one distance transform for both.
+    nearest = nearest_object_pixels(mask) if mask.any() and not mask.all() else None
+    ycbcr = example_ycbcr(example, nearest)
     if appearance_pyramid == "laplacian":
         appearance = laplacian_pyramid(ycbcr, levels)
     else:
@@ -564,12 +584,12 @@ def example_mappings(
             position=position,
         )
         for guide, bands, level_mask, position in zip(
-            _depth_guides(example.depth, masks, guides),
+            _depth_guides(example.depth, masks, guides, nearest),
             appearance,
             masks,
             level_positions,
             strict=True,
         )
     ]
-    del appearance, masks, level_positions
+    del appearance, masks, level_positions, nearest
     return mappings if crop_radius is None else crop_levels(mappings, crop_radius)
