@@ -151,3 +151,15 @@ def test_the_registrations_relief_detail_is_the_full_size_one_or_none():
     )
     coarse = register_with_detail(query, examples, registration=Registration(detail_size=16.0))
     assert coarse.detail is None
+
+
+def test_the_warp_on_a_grid_is_the_warp_at_its_points():
+    """forward_grid gives forward's very values at every point of a grid of rows and
+    columns (a fitted warp, points past the control grid's box included)."""
+    query, example = ellipsoid(), ellipsoid(centre=(40, 66), radii=(24, 40))
+    warp = register(query, example)
+    ys = np.arange(-3.0, 95.0) * 1.01
+    xs = (np.arange(125.0) + 0.5) * 0.97 - 0.5
+    gy, gx = np.meshgrid(ys, xs, indexing="ij")
+    for grid, points in zip(warp.forward_grid(ys, xs), warp.forward(gy, gx), strict=True):
+        assert np.array_equal(grid, points)

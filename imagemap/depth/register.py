@@ -205,11 +205,52 @@ class Warp:
         shape = np.shape(ys)
         return dy.reshape(shape), dx.reshape(shape)
 
+    def displacement_grid(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`displacement` on the grid of rows ``ys`` (H,) and columns ``xs`` (W,),
+        (H, W) each: the same values, each B-spline weight and control point made once
+        per row and per column instead of once per point."""
+        n, box = self.n, self.box
+        first_y, weights_y = _span(np.asarray(ys), box[0], box[1], n)
+        first_x, weights_x = _span(np.asarray(xs), box[2], box[3], n)
+        shape = (len(first_y), len(first_x))
+        dy, dx = np.zeros(shape), np.zeros(shape)
+        weight, term = np.empty(shape), np.empty(shape)
+        grids = self.coefficients.reshape(2, n, n)
+        for a in range(4):
+            rows_y, rows_x = grids[0, first_y + a], grids[1, first_y + a]  # (H, n)
+            for b in range(4):
+                # The products, sums and their order of displacement(), point by point.
+                np.multiply(weights_y[:, a, None], weights_x[None, :, b], out=weight)
+                dy += np.multiply(weight, rows_y[:, first_x + b], out=term)
+                dx += np.multiply(weight, rows_x[:, first_x + b], out=term)
+        return dy, dx
+
+    def forward_grid(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`forward` of the grid of rows ``ys`` (H,) and columns ``xs`` (W,): the same
+        values, by :meth:`displacement_grid`.
+
+        Examples
+        --------
+        >>> warp = Warp(np.array([4.0, 5.0]), np.array([3.0, 6.0]), np.eye(2),
+        ...             (0.0, 9.0, 0.0, 11.0), np.linspace(-1, 1, 50).reshape(2, 25), 5)
+        >>> ys, xs = np.arange(9.0), np.arange(11.0) * 0.9
+        >>> gy, gx = np.meshgrid(ys, xs, indexing="ij")
+        >>> all(np.array_equal(a, b) for a, b in zip(warp.forward_grid(ys, xs),
+        ...                                          warp.forward(gy, gx)))
+        True
+        """
+        dy, dx = self.displacement_grid(ys, xs)
+        return self._affine_part(np.asarray(ys)[:, None] + dy, np.asarray(xs)[None, :] + dx)
+
     def forward(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Example coordinates (y, x) of query coordinates."""
         dy, dx = self.displacement(ys, xs)
-        oy = np.asarray(ys) + dy - self.query_centre[0]
-        ox = np.asarray(xs) + dx - self.query_centre[1]
+        return self._affine_part(np.asarray(ys) + dy, np.asarray(xs) + dx)
+
+    def _affine_part(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The affine map of displaced query coordinates onto the example."""
+        oy = ys - self.query_centre[0]
+        ox = xs - self.query_centre[1]
         return (
             self.example_centre[0] + self.linear[0, 0] * oy + self.linear[0, 1] * ox,
             self.example_centre[1] + self.linear[1, 0] * oy + self.linear[1, 1] * ox,
@@ -553,10 +594,9 @@ def _with_relief_residual(
     query_detail_map, step = query_detail
     example_detail, example_step = _detail_grid(example_depth, example_depth > 0, registration)
     # The query's grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
-    gy, gx = np.mgrid[0 : query_detail_map.shape[0], 0 : query_detail_map.shape[1]].astype(
-        np.float64
-    )
-    ey, ex = warp.forward((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
+    gy = np.arange(query_detail_map.shape[0], dtype=np.float64)
+    gx = np.arange(query_detail_map.shape[1], dtype=np.float64)
+    ey, ex = warp.forward_grid((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
     landed = ndimage.map_coordinates(
         example_detail, [(ey + 0.5) / example_step - 0.5, (ex + 0.5) / example_step - 0.5],
         order=1, mode="constant", cval=0.0,
