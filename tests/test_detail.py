@@ -582,3 +582,31 @@ def test_silhouette_band_equals_the_distance_transforms(saturation):
         outside = ndimage.distance_transform_edt(~mask)
         expected = np.clip((inside - outside) / saturation, -1, 1).astype(np.float32)
         np.testing.assert_array_equal(silhouette_band(mask, saturation), expected)
+
+
+def test_the_blends_shifted_copies_are_copy_through_clipped():
+    """_copy_channel reads each source from its exemplar's flat values: the values of
+    copy_through shifted by (dy, dx) and clipped to the exemplar, the reference where
+    a pixel has no source; exemplars of different sizes, and a grey one."""
+    from imagemap.core import poisson
+
+    rng = np.random.default_rng(9)
+    exemplars = [rng.random((13, 17, 3)).astype(np.float32), rng.random((9, 6, 3))]
+    source = np.stack(
+        [rng.integers(-1, 2, (11, 14)), rng.integers(0, 9, (11, 14)), rng.integers(0, 6, (11, 14))],
+        axis=-1,
+    ).astype(np.int32)
+    has = source[..., 0] >= 0
+    reference = rng.random((11, 14))
+    groups = poisson._source_groups(exemplars, source)
+    for dy, dx in [(0, 0), (0, 1), (0, -1), (1, 0), (-1, 0)]:
+        for channel in range(3):
+            expected = copy_through([e[..., channel] for e in exemplars], source, dy, dx)
+            found = poisson._copy_channel(groups, has, reference, channel, dy, dx)
+            assert found.dtype == np.float64
+            assert np.array_equal(found, np.where(has, expected, reference))
+    grey = poisson._source_groups([exemplars[0][..., 0]], np.maximum(source, 0) * [0, 1, 1])
+    found = poisson._copy_channel(grey, np.ones((11, 14), bool), reference, 0, 1, 0)
+    assert np.array_equal(
+        found, copy_through([exemplars[0][..., 0]], np.maximum(source, 0) * [0, 1, 1], 1, 0)
+    )

@@ -262,22 +262,37 @@ def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
     channel, float64) where no source.
 
     ``groups``: per exemplar, (exemplar, flat pixel indices, their source y and x)."""
-    h, w = has.shape
-    out = np.zeros(h * w, dtype=np.float32)
+    # The reference's values, then every pixel with a source its exemplar's: the pixels
+    # of the groups are those of ``has``. Each source read from the exemplar's flat
+    # values (one index per pixel: row, column, channel), not by three index arrays:
+    # the same values, a quarter of the time.
+    out = ref.copy()
+    flat_out = out.reshape(-1)
     for exemplar, pixels, sy, sx in groups:
-        eh, ew = exemplar.shape[:2]
-        out[pixels] = exemplar[np.clip(sy + dy, 0, eh - 1), np.clip(sx + dx, 0, ew - 1), channel]
-    return np.where(has, out.reshape(h, w), ref)
+        eh, ew, channels = exemplar.shape
+        big = eh * ew * channels > np.iinfo(np.int32).max
+        index = sy.astype(np.int64) if big else sy.copy()
+        if dy:
+            np.clip(index + dy, 0, eh - 1, out=index)
+        index *= ew
+        index += np.clip(sx + dx, 0, ew - 1) if dx else sx
+        index *= channels
+        index += channel
+        flat_out[pixels] = exemplar.reshape(-1).take(index)
+    return out
 
 
 def _source_groups(exemplars, source):
-    """Per exemplar: (exemplar, flat indices of the pixels copied from it, source y, x)."""
+    """Per exemplar: (exemplar (H, W, C), C-contiguous, flat indices of the pixels copied
+    from it, source y, x)."""
     e = source[..., 0].ravel()
     groups = []
     for k, exemplar in enumerate(exemplars):
         pixels = np.flatnonzero(e == k).astype(np.int32)
+        bands = np.ascontiguousarray(exemplar)
+        bands = bands.reshape(bands.shape[:2] + (-1,))  # (H, W) as one channel
         groups.append(
-            (exemplar, pixels, source[..., 1].ravel()[pixels], source[..., 2].ravel()[pixels])
+            (bands, pixels, source[..., 1].ravel()[pixels], source[..., 2].ravel()[pixels])
         )
     return groups
 
