@@ -610,3 +610,28 @@ def test_the_blends_shifted_copies_are_copy_through_clipped():
     assert np.array_equal(
         found, copy_through([exemplars[0][..., 0]], np.maximum(source, 0) * [0, 1, 1], 1, 0)
     )
+
+
+def test_colour_conversions_are_skimages_without_importing_it():
+    """to_ycbcr and to_rgb hold skimage.color's matrices to the last bit and give its
+    values (float32 and float64 pictures, past [0, 1] too); an integer picture is left to
+    skimage (it rescales it)."""
+    from skimage import color
+    from skimage.color import colorconv
+
+    from imagemap.depth import guides
+
+    assert np.array_equal(guides._YCBCR_FROM_RGB, colorconv.ycbcr_from_rgb)
+    assert np.array_equal(guides._RGB_FROM_YCBCR, colorconv.rgb_from_ycbcr)
+    rng = np.random.default_rng(10)
+    for dtype in (np.float32, np.float64):
+        rgb = (rng.random((guides._ROWS + 3, 9, 3)) * 1.2 - 0.1).astype(dtype)
+        ycbcr = guides.to_ycbcr(rgb)
+        expected = np.concatenate(
+            [color.rgb2ycbcr(rgb[:256]) / 255.0, color.rgb2ycbcr(rgb[256:]) / 255.0]
+        ).astype(np.float32)
+        assert np.array_equal(ycbcr, expected)
+        back = np.clip(color.ycbcr2rgb(ycbcr.astype(np.float64) * 255.0), 0.0, 1.0)
+        assert np.array_equal(guides.to_rgb(ycbcr), back.astype(np.float32))
+    grey = rng.integers(0, 256, (4, 5, 3)).astype(np.uint8)
+    assert np.array_equal(guides.to_ycbcr(grey), (color.rgb2ycbcr(grey) / 255.0).astype(np.float32))

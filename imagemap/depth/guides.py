@@ -24,7 +24,6 @@ from dataclasses import replace
 
 import numpy as np
 from scipy import ndimage
-from skimage import color
 
 from imagemap.core.blend import fill_background, nearest_object_pixels
 from imagemap.core.mapping import Mapping
@@ -435,6 +434,34 @@ def depth_mappings(
 
 
 _ROWS = 256  # rows per block of the colour conversions
+#: skimage.color's BT.601 matrices: ``ycbcr_from_rgb``, and ``rgb_from_ycbcr``, its inverse as
+#: ``scipy.linalg.inv`` makes it (NumPy's inverse differs in the last bits), to the last bit
+#: (a test checks them against skimage's). The conversions then need no ``skimage.color``,
+#: whose import (with ``skimage.util``) is a fresh synthesis's only use of it.
+_YCBCR_FROM_RGB = np.array(
+    [[65.481, 128.553, 24.966], [-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]]
+)
+_RGB_FROM_YCBCR = np.array(
+    [
+        [0.004566210045662101, 1.1808799898470919e-09, 0.006258928969943936],
+        [0.004566210045662101, -0.0015363236860449021, -0.003188110949655707],
+        [0.004566210045662101, 0.007910716233554741, 1.1977497040200258e-08],
+    ]
+)
+
+
+def _rgb2ycbcr(rgb: np.ndarray) -> np.ndarray:
+    """``skimage.color.rgb2ycbcr``: for float32 and float64 pictures its operations, in its
+    order (the same values); other types by skimage itself (it rescales integers)."""
+    if rgb.dtype not in (np.float32, np.float64):
+        from skimage import color  # deferred: start-up (only pictures that are not floats)
+
+        return color.rgb2ycbcr(rgb)
+    arr = rgb @ _YCBCR_FROM_RGB.T.astype(rgb.dtype)
+    arr[..., 0] += 16
+    arr[..., 1] += 128
+    arr[..., 2] += 128
+    return arr
 
 
 def to_ycbcr(rgb: np.ndarray) -> np.ndarray:
@@ -448,12 +475,13 @@ def to_ycbcr(rgb: np.ndarray) -> np.ndarray:
     # In blocks of rows: skimage works in float64 (several full-size copies at 4096^2).
     out = np.empty(rgb.shape, dtype=np.float32)
     for y in range(0, rgb.shape[0], _ROWS):
-        out[y : y + _ROWS] = color.rgb2ycbcr(rgb[y : y + _ROWS]) / 255.0
+        out[y : y + _ROWS] = _rgb2ycbcr(rgb[y : y + _ROWS]) / 255.0
     return out
 
 
 def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`to_ycbcr`, clipped to [0, 1].
+    """Inverse of :func:`to_ycbcr`, clipped to [0, 1] (``skimage.color.ycbcr2rgb``'s
+    operations, in its order).
 
     Examples
     --------
@@ -466,7 +494,10 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
     out = np.empty(ycbcr.shape, dtype=np.float32)
     for y in range(0, ycbcr.shape[0], _ROWS):
         block = ycbcr[y : y + _ROWS].astype(np.float64) * 255.0
-        out[y : y + _ROWS] = np.clip(color.ycbcr2rgb(block), 0.0, 1.0)
+        block[..., 0] -= 16
+        block[..., 1] -= 128
+        block[..., 2] -= 128
+        out[y : y + _ROWS] = np.clip(block @ _RGB_FROM_YCBCR.T.astype(np.float64), 0.0, 1.0)
     return out
 
 

@@ -59,7 +59,6 @@ from typing import Any
 
 import numpy as np
 from scipy import ndimage
-from skimage import color
 
 from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
@@ -741,6 +740,8 @@ class ColorizeResult:
         The image-map's luminance tinted with one colour per example, with the
         borders between regions from different examples drawn dark.
         """
+        from skimage import color  # deferred: start-up (only a provenance picture)
+
         index = self.source[..., 0]
         tint = _PALETTE[index % len(_PALETTE)]
         luma = color.rgb2gray(self.image)[..., None]
