@@ -163,3 +163,27 @@ def test_the_warp_on_a_grid_is_the_warp_at_its_points():
     gy, gx = np.meshgrid(ys, xs, indexing="ij")
     for grid, points in zip(warp.forward_grid(ys, xs), warp.forward(gy, gx), strict=True):
         assert np.array_equal(grid, points)
+
+
+def test_the_displacement_is_the_sum_of_its_sixteen_terms():
+    """Warp.displacement, with its buffers, gives the bytes of the B-spline sum written
+    out: per point, 16 terms (weight_y * weight_x) * coefficient added in order."""
+    from imagemap.depth.register import Warp, _span
+
+    rng = np.random.default_rng(11)
+    n = 5
+    warp = Warp(np.array([30.0, 40.0]), np.array([28.0, 36.0]), np.eye(2),
+                (-3.0, 70.0, -5.0, 90.0), rng.normal(size=(2, n * n)), n)  # fmt: skip
+    ys, xs = rng.uniform(-20, 90, (31, 17)), rng.uniform(-20, 110, (31, 17))
+    first_y, weights_y = _span(ys.ravel(), -3.0, 70.0, n)
+    first_x, weights_x = _span(xs.ravel(), -5.0, 90.0, n)
+    dy, dx = np.zeros(ys.size), np.zeros(ys.size)
+    for a in range(4):
+        for b in range(4):
+            weight = weights_y[:, a] * weights_x[:, b]
+            index = (first_y + a) * n + first_x + b
+            dy = dy + weight * warp.coefficients[0, index]
+            dx = dx + weight * warp.coefficients[1, index]
+    found = warp.displacement(ys, xs)
+    assert np.array_equal(found[0], dy.reshape(ys.shape))
+    assert np.array_equal(found[1], dx.reshape(ys.shape))

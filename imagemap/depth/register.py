@@ -111,26 +111,31 @@ def _moments(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array([ys.mean(), xs.mean()]), np.maximum([ys.std(), xs.std()], 1e-3)
 
 
-def _bspline_weights(t: np.ndarray) -> np.ndarray:
-    """Cubic B-spline weights of the four control points around fractional ``t``."""
+def _bspline_weights(t: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Cubic B-spline weights of the four control points around fractional ``t``, stacked
+    along ``axis`` (each power of ``t`` made once: the same values)."""
+    t2, t3 = t**2, t**3
     return np.stack(
         [
             (1 - t) ** 3 / 6,
-            (3 * t**3 - 6 * t**2 + 4) / 6,
-            (-3 * t**3 + 3 * t**2 + 3 * t + 1) / 6,
-            t**3 / 6,
+            (3 * t3 - 6 * t2 + 4) / 6,
+            (-3 * t3 + 3 * t2 + 3 * t + 1) / 6,
+            t3 / 6,
         ],
-        axis=-1,
+        axis=axis,
     )
 
 
-def _span(coords: np.ndarray, low: float, high: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _span(
+    coords: np.ndarray, low: float, high: float, n: int, axis: int = -1
+) -> tuple[np.ndarray, np.ndarray]:
     """The first of the four control points (of ``n`` over [low, high]) whose cubic
-    B-splines cover each coordinate, (N,) int64, and their weights, (N, 4)."""
+    B-splines cover each coordinate, (N,) int64, and their weights, (N, 4) (``axis`` 0:
+    (4, N))."""
     spacing = max(high - low, 1e-6) / (n - 3)
     u = (np.asarray(coords, dtype=np.float64) - low) / spacing
     first = np.clip(np.floor(u).astype(np.int64), 0, n - 4)
-    return first, _bspline_weights(np.clip(u - first, 0.0, 1.0))
+    return first, _bspline_weights(np.clip(u - first, 0.0, 1.0), axis)
 
 
 def _basis(coords: np.ndarray, low: float, high: float, n: int) -> np.ndarray:
@@ -192,16 +197,22 @@ class Warp:
         B-splines are 0 there), not as a product with the dense (N, n * n) basis: a
         full-resolution grid costs 16 passes over its coordinates, not n * n."""
         n, box = self.n, self.box
-        first_y, weights_y = _span(np.ravel(ys), box[0], box[1], n)
-        first_x, weights_x = _span(np.ravel(xs), box[2], box[3], n)
-        dy = np.zeros(first_y.shape)
-        dx = np.zeros(first_y.shape)
+        # Weights as rows (4, N) and every product and sum into buffers: the same
+        # operations on each point, in the same order, as a sum of 16 terms.
+        first_y, weights_y = _span(np.ravel(ys), box[0], box[1], n, axis=0)
+        first_x, weights_x = _span(np.ravel(xs), box[2], box[3], n, axis=0)
+        size = first_y.shape[0]
+        dy, dx = np.zeros(size), np.zeros(size)
+        weight, term = np.empty(size), np.empty(size)
+        index = np.empty(size, np.int64)
+        along_y, along_x = np.ascontiguousarray(self.coefficients, np.float64)
         for a in range(4):
             row = (first_y + a) * n + first_x
             for b in range(4):
-                weight = weights_y[:, a] * weights_x[:, b]
-                dy += weight * self.coefficients[0, row + b]
-                dx += weight * self.coefficients[1, row + b]
+                np.multiply(weights_y[a], weights_x[b], out=weight)
+                np.add(row, b, out=index)
+                dy += np.multiply(weight, np.take(along_y, index, out=term), out=term)
+                dx += np.multiply(weight, np.take(along_x, index, out=term), out=term)
         shape = np.shape(ys)
         return dy.reshape(shape), dx.reshape(shape)
 
