@@ -135,7 +135,13 @@ def small_features(
         )
     if extent is None:
         extent = completion.feature_extent * np.sqrt(mask.sum())
-    inside = ndimage.binary_erosion(mask, iterations=2)
+    # The dense steps below look only inside the object: they run on its box (the same
+    # values: the mask is empty around it, and so is what they make there).
+    inside = np.zeros(mask.shape, bool)
+    box = _box(mask)
+    if box is not None:
+        inside[box] = ndimage.binary_erosion(mask[box], iterations=2)
+        box = _box(inside)
     colours = np.asarray(exemplar, np.float32)
     if not mask.all() and not filled:
         # The object's own colours continued outside it: its outline is no feature.
@@ -154,24 +160,27 @@ def small_features(
     cell_x = np.minimum((np.arange(colours.shape[1]) * factor).astype(int), host.shape[1] - 1)
     from imagemap.core.kernels import nearest_host_distance  # deferred: start-up (numba)
 
-    distance = nearest_host_distance(
-        np.ascontiguousarray(colours, np.float32),
-        np.ascontiguousarray(host, np.float32),
-        cell_y.astype(np.int64),
-        cell_x.astype(np.int64),
-    )
-    stands_out = distance >= completion.feature_contrast
-    stands_out &= inside
-    stands_out = ndimage.binary_fill_holes(stands_out)
+    stands_out = np.zeros(mask.shape, bool)
+    if box is not None:  # a pixel stands out only inside: its distance, there
+        distance = nearest_host_distance(
+            np.ascontiguousarray(colours[box], np.float32),
+            np.ascontiguousarray(host, np.float32),
+            cell_y[box[0]].astype(np.int64),
+            cell_x[box[1]].astype(np.int64),
+        )
+        here = distance >= completion.feature_contrast
+        here &= inside[box]
+        # A hole touching the box's edge runs on into the empty rest: no hole either way.
+        stands_out[box] = ndimage.binary_fill_holes(here)
+        del distance, here
     labels, n = ndimage.label(stands_out)
     if n == 0:
         return labels.astype(np.int32), 0
     boxes = ndimage.find_objects(labels)
     spans = np.array([0] + [_span(box) for box in boxes])
-    keep = np.zeros(n + 1, bool)
-    for i, box in enumerate(boxes, start=1):
-        # Compact: a stripe or a hairline's band is long; a one-pixel speck is noise.
-        keep[i] = spans[i] <= extent and (labels[box] == i).sum() >= 4
+    # Compact: a stripe or a hairline's band is long; a one-pixel speck is noise.
+    keep = (spans <= extent) & (np.bincount(labels.ravel(), minlength=n + 1) >= 4)
+    keep[0] = False
     # A feature touching a larger part that also stands out (a brow touching the
     # hair) is one component with it, too wide to be a feature. Such components are
     # cut where the colour steps by half the feature contrast between neighbouring
@@ -280,6 +289,14 @@ def _span(box) -> int:
     return max(box[0].stop - box[0].start, box[1].stop - box[1].start)
 
 
+def _box(region: np.ndarray) -> tuple[slice, slice] | None:
+    """The box of a 2-D boolean ``region``'s pixels (None when it has none)."""
+    rows, columns = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
+    if not len(rows):
+        return None
+    return slice(rows[0], rows[-1] + 1), slice(columns[0], columns[-1] + 1)
+
+
 #: Up to this many pixels in the box of the region :func:`_joined_components` labels,
 #: the doubled grid (20 bytes a pixel of the box: 20 MB); above, csgraph, whose memory
 #: follows the region's pixels, not its box, and whose import is nothing beside a large
@@ -367,7 +384,11 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
     joined = []
     for a, b in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1, :], np.s_[1:, :])):
         join = region[a] & region[b]
-        join &= np.sqrt(((colours[a] - colours[b]) ** 2).sum(-1)) < step
+        # The colour step of the pairs inside the region only (as (pairs, C) rows: the
+        # same sums of the same squares per pair as of the whole picture's).
+        pairs = np.nonzero(join)
+        near = np.sqrt(((colours[a][pairs] - colours[b][pairs]) ** 2).sum(-1)) < step
+        join[pairs] = near
         joined.append(join)
     pieces, m = _joined_components(region, *joined)
     del joined
@@ -398,7 +419,14 @@ def _pieces_of_wide(colours, labels, n, keep, region, extent, contrast):
     chosen = (span <= extent) & (sizes >= 4)
     # Pieces with holes (an eye's white around its iris) are filled one by one and
     # take in what they enclose; the solid ones are numbered at once.
-    holed = chosen & (np.rint(_euler_numbers(pieces, m)) < 1)
+    # The pieces' box: every 2 x 2 pattern with a piece in it lies in it, one pixel wider.
+    rows, columns = np.flatnonzero(pieces.any(1)), np.flatnonzero(pieces.any(0))
+    within = (
+        (slice(rows[0], rows[-1] + 1), slice(columns[0], columns[-1] + 1))
+        if len(rows)
+        else (slice(0, 0), slice(0, 0))
+    )
+    holed = chosen & (np.rint(_euler_numbers(pieces[within], m)) < 1)
     solid = chosen & thick & ~holed
     number = np.zeros(m + 1, np.int32)
     number[1:][solid] = n + 1 + np.arange(int(solid.sum()), dtype=np.int32)
