@@ -673,3 +673,14 @@ def test_upsampled_at_step_one_is_the_grid_itself():
         found = register._upsampled(grid, 1.0, grid.shape)
         assert found is not grid and found.dtype == dtype
         assert np.array_equal(found, interpolated)
+
+
+def test_upsampled_on_a_box_is_the_whole_maps_box():
+    from imagemap.depth import register
+
+    rng = np.random.default_rng(12)
+    shape = (register._ROWS + 40, 77)
+    grid = rng.random((shape[0] // 3 + 2, shape[1] // 3 + 2))
+    box = (slice(13, register._ROWS + 31), slice(5, 70))
+    whole = register._upsampled(grid, 3.0, shape)
+    assert np.array_equal(register._upsampled(grid, 3.0, shape, box), whole[box])

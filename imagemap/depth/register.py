@@ -93,17 +93,77 @@ def registration_guide(
     True
     """
     size = max(float(np.sqrt(mask.sum())), 1.0)
-    signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
+    signed = _inside_distance(mask) - ndimage.distance_transform_edt(~mask)
     outline = np.tanh(signed / (OUTLINE_REACH * size))
     deepest = float(depth[mask].max()) if mask.any() else 1.0
     relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
     guide = 0.5 * outline + 0.5 * relief
     if relief_weight and mask.any():
-        smooth = ndimage.gaussian_filter(relief, relief_scale * size)
+        smooth = _smoothed_inside_box(relief, mask, relief_scale * size)
         detail = np.where(mask, relief - smooth, 0.0)
         unit = float(np.percentile(np.abs(detail[mask]), 95)) or 1.0
         guide = guide + relief_weight * np.tanh(detail / unit)
     return guide.astype(np.float32)
+
+
+def _mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
+    """The box of ``mask``'s pixels and ``margin`` pixels around it, within the frame
+    (None when it has none)."""
+    rows, columns = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
+    if not len(rows):
+        return None
+    height, width = mask.shape
+    return (
+        slice(max(rows[0] - margin, 0), min(rows[-1] + 1 + margin, height)),
+        slice(max(columns[0] - margin, 0), min(columns[-1] + 1 + margin, width)),
+    )
+
+
+def _inside_distance(mask: np.ndarray) -> np.ndarray:
+    """``ndimage.distance_transform_edt(mask)``: each object pixel's distance to the
+    background, 0 outside, transformed on the object's box and a pixel around it (the
+    background's pixels there are at least as near as any beyond: the same distances).
+
+    Examples
+    --------
+    >>> mask = np.zeros((9, 12), bool); mask[2:7, 3:10] = True; mask[4, 5] = False
+    >>> bool(np.array_equal(_inside_distance(mask), ndimage.distance_transform_edt(mask)))
+    True
+    """
+    box = _mask_box(mask, 1)
+    out = np.zeros(mask.shape)
+    if box is not None:
+        out[box] = ndimage.distance_transform_edt(mask[box])
+    return out
+
+
+def _smoothed_inside_box(values: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
+    """``ndimage.gaussian_filter(values, sigma)`` on ``mask``'s box, 0 elsewhere, for
+    ``values`` that are 0 outside ``mask``: filtered on the box and the filter's reach
+    around it (beyond which, and in the mirror images of which, all is 0), the same
+    values there.
+
+    Examples
+    --------
+    >>> mask = np.zeros((40, 50), bool); mask[10:25, 12:30] = True
+    >>> values = np.where(mask, np.random.default_rng(0).random((40, 50)), 0.0)
+    >>> box = _mask_box(mask, 0)
+    >>> bool(np.array_equal(_smoothed_inside_box(values, mask, 2.5)[box],
+    ...                     ndimage.gaussian_filter(values, 2.5)[box]))
+    True
+    """
+    reach = int(4.0 * float(sigma) + 0.5)  # gaussian_filter's radius (truncate 4)
+    outer, inner = _mask_box(mask, reach), _mask_box(mask, 0)
+    values = np.asarray(values)
+    out = np.zeros(values.shape, values.dtype)  # gaussian_filter's: the input's
+    if outer is None or inner is None:
+        return out
+    smooth = ndimage.gaussian_filter(values[outer], sigma)
+    within = tuple(
+        slice(i.start - o.start, i.stop - o.start) for i, o in zip(inner, outer, strict=True)
+    )
+    out[inner] = smooth[within]
+    return out
 
 
 def _moments(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -555,24 +615,37 @@ def _smooth_inside(values: np.ndarray, mask: np.ndarray, sigma: float) -> np.nda
     cover = block_means(mask)
     weight = ndimage.gaussian_filter(cover, sigma / block)
     smooth = ndimage.gaussian_filter(total, sigma / block) / np.maximum(weight, 1e-12)
-    full = _upsampled(smooth, block, mask.shape)
+    # Brought back on the object's box only: 0 outside the object anyway.
+    full = np.zeros(mask.shape, smooth.dtype)
+    box = _mask_box(mask, 0)
+    if box is not None:
+        full[box] = _upsampled(smooth, block, mask.shape, box)
     full[~mask] = 0.0
     return full
 
 
-def _upsampled(grid: np.ndarray, step: float, shape: tuple[int, int]) -> np.ndarray:
+def _upsampled(
+    grid: np.ndarray,
+    step: float,
+    shape: tuple[int, int],
+    box: tuple[slice, slice] | None = None,
+) -> np.ndarray:
     """A coarse ``grid`` of ``step`` x ``step`` blocks brought to ``shape`` by bilinear
     interpolation (of the grid's dtype), ``_ROWS`` rows at a time (each point's value is
-    its own: the same as of the whole map's coordinates at once)."""
+    its own: the same as of the whole map's coordinates at once); with ``box``, that box
+    of it alone."""
     height, width = shape
-    if step == 1.0 and grid.shape == shape:
+    if step == 1.0 and grid.shape == shape and box is None:
         # Each point on a grid point: the bilinear interpolation is the grid's value
         # itself (weights 1 and 0), so the same values, copied, without interpolating.
         return grid.copy()
     # Block pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
     ys = (np.arange(height) + 0.5) / step - 0.5
     xs = (np.arange(width) + 0.5) / step - 0.5
-    full = np.empty(shape, dtype=grid.dtype)
+    if box is not None:
+        ys, xs = ys[box[0]], xs[box[1]]
+        height, width = len(ys), len(xs)
+    full = np.empty((height, width), dtype=grid.dtype)
     for y0 in range(0, height, _ROWS):
         gy, gx = np.meshgrid(ys[y0 : y0 + _ROWS], xs, indexing="ij")
         ndimage.map_coordinates(
