@@ -151,3 +151,21 @@ def test_a_shape_that_cannot_tell_its_side_keeps_the_examples_side():
         0,
     )
     assert find_poses(taper[:, ::-1].copy(), [taper])[0].mirrored
+
+
+def test_the_query_grids_of_all_poses_at_once_are_each_poses_own():
+    """_query_grids samples every pose in one interpolation: each row the bytes of that
+    pose's own _sample (a large map's block-averaged image too)."""
+    from imagemap.depth import pose
+
+    yy, xx = np.mgrid[:90, :130]
+    depth = np.where((yy - 45) ** 2 / 900 + (xx - 60) ** 2 / 2500 < 1, 1.0 + 0.01 * xx, 0.0)
+    centre, size, normalized = pose._frame(depth)
+    for grid in (48, 8):
+        image = pose._smoothed(normalized, size, grid, pose.SPAN)
+        poses = [(a, m) for m in (False, True) for a in (-82.5, -3.0, 0.0, 41.25)]
+        found = pose._query_grids(image, centre, size, poses, grid, pose.SPAN)
+        for row, (angle, mirrored) in zip(found, poses, strict=True):
+            linear = np.linalg.inv(pose._linear(angle, mirrored))
+            own = pose._sample(image, centre, size, linear, grid, pose.SPAN)
+            assert np.array_equal(row, own)

@@ -151,14 +151,20 @@ def _smoothed(
 def _sample(smoothed, centre, size, linear, grid, span) -> np.ndarray:
     """The smoothed image at ``centre + size * linear @ u`` (full-resolution pixels) for the
     grid's offsets ``u``, flat."""
-    image, block = smoothed
+    image, _ = smoothed
+    at = _coordinates(smoothed, centre, size, linear, grid, span)
+    return ndimage.map_coordinates(image, at, order=1, mode="constant", cval=0.0).ravel()
+
+
+def _coordinates(smoothed, centre, size, linear, grid, span) -> np.ndarray:
+    """(2, grid, grid): where :func:`_sample` reads the smoothed image (its pixels)."""
+    _, block = smoothed
     u = (np.arange(grid) - (grid - 1) / 2.0) * (span / grid)
     gy, gx = np.meshgrid(u, u, indexing="ij")
     ys = centre[0] + size * (linear[0, 0] * gy + linear[0, 1] * gx)
     xs = centre[1] + size * (linear[1, 0] * gy + linear[1, 1] * gx)
     # Full-resolution coordinate p is block pixel (p + 0.5) / block - 0.5.
-    at = [(ys + 0.5) / block - 0.5, (xs + 0.5) / block - 0.5]
-    return ndimage.map_coordinates(image, at, order=1, mode="constant", cval=0.0).ravel()
+    return np.stack([(ys + 0.5) / block - 0.5, (xs + 0.5) / block - 0.5])
 
 
 def shape_grid(depth: np.ndarray, grid: int = GRID, span: float = SPAN) -> np.ndarray:
@@ -186,9 +192,15 @@ def _linear(angle: float, mirrored: bool) -> np.ndarray:
 def _query_grids(image, centre, size, poses, grid, span) -> np.ndarray:
     """The query sampled for each (angle, mirrored): rows of the shape grid an example
     would show if the query were turned to it (the inverse map of each pose)."""
-    return np.stack(
-        [_sample(image, centre, size, np.linalg.inv(_linear(a, m)), grid, span) for a, m in poses]
-    )
+    # One interpolation for all the poses (each point's value is its own: the same as one
+    # _sample per pose, without a call's overhead 48 times).
+    at = np.stack(
+        [_coordinates(image, centre, size, np.linalg.inv(_linear(a, m)), grid, span)
+         for a, m in poses],
+        axis=1,
+    )  # fmt: skip
+    found = ndimage.map_coordinates(image[0], at, order=1, mode="constant", cval=0.0)
+    return found.reshape(len(poses), grid * grid)
 
 
 def _coarse(depth, example_grids, mirrored, angle_step, grid, span):
@@ -293,16 +305,18 @@ def find_poses(
         for hypothesis in range(distances.shape[1]):
             mirror = bool(hypothesis)
 
-            def cost(a: float, mirror: bool = mirror, target: Any = target) -> float:
-                query = _query_grids(image, centre, size, [(a, mirror)], grid, span)[0]
-                return float(np.mean(np.square(query - target)))
+            def costs(trials, mirror: bool = mirror, target: Any = target) -> list[float]:
+                poses = [(a, mirror) for a in trials]
+                queries = _query_grids(image, centre, size, poses, grid, span)
+                return [float(np.mean(np.square(query - target))) for query in queries]
 
-            # Bisection of the angle within a step of the coarse search's best.
+            # Bisection of the angle within a step of the coarse search's best (both
+            # trials of a step sampled at once: they do not depend on each other).
             angle, value = float(angles[k, hypothesis]), float(distances[k, hypothesis])
             step = angle_step / 2.0
             while step > 0.25:
-                for trial in (angle - step, angle + step):
-                    trial_value = cost(trial)
+                trials = (angle - step, angle + step)
+                for trial, trial_value in zip(trials, costs(trials), strict=True):
                     if trial_value < value:
                         angle, value = trial, trial_value
                 step /= 2.0
