@@ -169,3 +169,28 @@ def test_the_query_grids_of_all_poses_at_once_are_each_poses_own():
             linear = np.linalg.inv(pose._linear(angle, mirrored))
             own = pose._sample(image, centre, size, linear, grid, pose.SPAN)
             assert np.array_equal(row, own)
+
+
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_unposing_without_a_turn_reads_the_rounded_rows_and_columns(mirrored):
+    """A pose that does not turn (moved, scaled, mirrored) brings the map back by its rows
+    and columns: the nearest canonical pixel of every query pixel as the whole grid's
+    Pose.forward rounds it, clipped (colours, sources) or NaN outside (the cost)."""
+    from imagemap.depth.pose import CanonicalFrame, Pose, unpose, unpose_nearest
+
+    rng = np.random.default_rng(13)
+    pose = Pose((40.3, 51.7), (37.0, 44.5), 1.2, 0.0, mirrored)
+    frame = CanonicalFrame(pose, (-3, 2), (70, 90))
+    ycbcr = rng.random((70, 90, 3)).astype(np.float32)
+    source = rng.integers(0, 60, (70, 90, 3)).astype(np.int32)
+    cost = rng.random((70, 90)).astype(np.float32)
+    query_mask = rng.random((80, 100)) < 0.7
+    cy, cx = frame.from_query((80, 100))
+    iy, ix = np.rint(cy).astype(np.int64), np.rint(cx).astype(np.int64)
+    cy_, cx_ = np.clip(iy, 0, 69), np.clip(ix, 0, 89)
+    colours, sources = unpose(frame, query_mask, ycbcr, source, None)
+    assert np.array_equal(sources, source[cy_, cx_])
+    assert np.array_equal(colours, np.where(query_mask[..., None], ycbcr[cy_, cx_], 0.0))
+    inside = (iy >= 0) & (iy < 70) & (ix >= 0) & (ix < 90)
+    expected = np.where(inside, cost[cy_, cx_], np.nan)
+    assert np.array_equal(unpose_nearest(frame, (80, 100), cost), expected, equal_nan=True)

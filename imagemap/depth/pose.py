@@ -534,6 +534,15 @@ def unpose(
         colours = ycbcr
     out = np.zeros((height, width, 3), np.float32)
     out_source = np.zeros((height, width, 3), np.int32)
+    axes = _nearest_axes(frame, (height, width)) if nearest else None
+    if axes is not None:  # no turn: each row and each column its own canonical one
+        iy, ix = np.clip(axes[0], 0, ch - 1), np.clip(axes[1], 0, cw - 1)
+        for y0 in range(0, height, _ROWS):
+            rows = slice(y0, y0 + _ROWS)
+            out_source[rows] = source[iy[rows, None], ix[None, :]]
+            out[rows] = colours[iy[rows, None], ix[None, :]]
+        out[~query_mask] = 0.0
+        return out, out_source
     for y0 in range(0, height, _ROWS):
         ys, xs = np.mgrid[y0 : min(height, y0 + _ROWS), 0:width].astype(np.float64)
         cy, cx = frame.pose.forward(ys, xs)
@@ -569,10 +578,36 @@ def unpose(
     return out, out_source
 
 
+def _nearest_axes(
+    frame: CanonicalFrame, shape: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where the pose does not turn (its matrix diagonal), the canonical row of each of
+    ``shape``'s rows and the canonical column of each of its columns (rounded, not
+    clipped): the other axis's term is a zero, which changes no sum, so these are the
+    rows and columns the whole grid's :meth:`Pose.forward` rounds to. None otherwise."""
+    linear = frame.pose.linear
+    if linear[0, 1] != 0.0 or linear[1, 0] != 0.0:
+        return None
+    ys = np.arange(shape[0], dtype=np.float64)
+    xs = np.arange(shape[1], dtype=np.float64)
+    cy, _ = frame.pose.forward(ys, np.zeros_like(ys))
+    _, cx = frame.pose.forward(np.zeros_like(xs), xs)
+    iy = np.rint(cy - frame.origin[0]).astype(np.int64)
+    ix = np.rint(cx - frame.origin[1]).astype(np.int64)
+    return iy, ix
+
+
 def unpose_nearest(frame: CanonicalFrame, shape: tuple[int, int], values: np.ndarray):
     """A canonical per-pixel array (a cost map) in the query's frame: each query pixel
     takes its nearest canonical pixel's value (NaN outside the canonical frame)."""
     out = np.full(shape, np.nan, dtype=np.float32)
+    axes = _nearest_axes(frame, shape)
+    if axes is not None:  # no turn: the rows and columns inside the canonical frame
+        iy, ix = axes
+        rows = np.flatnonzero((iy >= 0) & (iy < values.shape[0]))
+        columns = np.flatnonzero((ix >= 0) & (ix < values.shape[1]))
+        out[np.ix_(rows, columns)] = values[np.ix_(iy[rows], ix[columns])]
+        return out
     for y0 in range(0, shape[0], _ROWS):  # by blocks of rows: no full-size float64 grids
         ys, xs = np.mgrid[y0 : min(shape[0], y0 + _ROWS), 0 : shape[1]].astype(np.float64)
         cy, cx = frame.pose.forward(ys, xs)
