@@ -635,3 +635,18 @@ def test_colour_conversions_are_skimages_without_importing_it():
         assert np.array_equal(guides.to_rgb(ycbcr), back.astype(np.float32))
     grey = rng.integers(0, 256, (4, 5, 3)).astype(np.uint8)
     assert np.array_equal(guides.to_ycbcr(grey), (color.rgb2ycbcr(grey) / 255.0).astype(np.float32))
+
+
+def test_example_colours_are_the_copy_stages_colours():
+    """The colours the bands make (and keep for the copy stage on small frames) are the
+    bytes of example_ycbcr's, with the nearest object pixels it filled from."""
+    from imagemap.core.blend import nearest_object_pixels
+    from imagemap.depth.guides import example_colours, example_ycbcr
+
+    yy, xx = np.mgrid[0:60, 0:80]
+    depth = np.where((yy - 30) ** 2 / 400 + (xx - 40) ** 2 / 900 < 1, 1.0, 0.0)
+    image = np.random.default_rng(14).random((60, 80, 3)) * (depth > 0)[..., None]
+    example = Example.from_arrays("e", depth.astype(np.float32), image)
+    colours, nearest = example_colours(example)
+    assert np.array_equal(colours, example_ycbcr(example))
+    assert nearest is not None and np.array_equal(nearest, nearest_object_pixels(depth > 0))

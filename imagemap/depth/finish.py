@@ -91,6 +91,9 @@ class SynthesisState:
     engine: EngineResult | None = None
     ycbcr: np.ndarray | None = None  # the voted map, then the map being finished (YCbCr)
     exemplars: list[np.ndarray] | None = None  # the examples' colours the copy reads
+    # The examples' example_ycbcr colours, where a front end kept them from its bands for
+    # the copy stage (small frames), else None: the copy stage makes them.
+    colours: list[np.ndarray] | None = None
     source: np.ndarray | None = None  # (H, W, 3): example, y, x of every pixel
     features: list[tuple[np.ndarray, int]] | None = None  # the examples' small features
     # The relief's detail of the query and of each example (a front end with depth sets
@@ -161,7 +164,10 @@ def _copy(state: SynthesisState, config: DepthConfig) -> SynthesisState:
     # colours are made again rather than kept from the pyramids: full-size arrays held
     # through the synthesis would add to its peak memory, and they cost little to remake.
     engine: EngineResult = state.made("engine")
-    state.exemplars = [example_ycbcr(example) for example in state.chosen]
+    if state.colours is not None:  # kept from the bands: the same colours
+        state.exemplars, state.colours = state.colours, None
+    else:
+        state.exemplars = [example_ycbcr(example) for example in state.chosen]
     copied = state.source = engine.copy_source
     differ = 0 if copied is None else changed_pixels(engine.source, copied)
     engine.source = engine.copy_source = None  # type: ignore[assignment]  # handed over

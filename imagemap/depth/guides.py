@@ -44,6 +44,7 @@ __all__ = [
     "crop_levels",
     "context_levels",
     "depth_mappings",
+    "example_colours",
     "example_mappings",
     "example_ycbcr",
     "level_patch_sizes",
@@ -501,6 +502,16 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
     return out
 
 
+def example_colours(example: Example) -> tuple[np.ndarray, np.ndarray | None]:
+    """An example's :func:`example_ycbcr` and its mask's nearest object pixels
+    (:func:`~imagemap.core.blend.nearest_object_pixels`; None for a mask that is all or
+    nothing): the colours' fill and the depth's continuation past the outline read the
+    same nearest pixels, one distance transform for both."""
+    mask = example.mask
+    nearest = nearest_object_pixels(mask) if mask.any() and not mask.all() else None
+    return example_ycbcr(example, nearest), nearest
+
+
 def example_ycbcr(example: Example, nearest: np.ndarray | None = None) -> np.ndarray:
     """An example's image-map in YCbCr, the background filled with the nearest object colour
     (``nearest``: its mask's :func:`~imagemap.core.blend.nearest_object_pixels`, if made)."""
@@ -589,18 +600,17 @@ def example_mappings(
     guides: Guides = _GUIDES,
     positions: list[np.ndarray] | None = None,
     crop_radius: int | None = None,
+    *,
+    colours: tuple[np.ndarray, np.ndarray | None] | None = None,
 ) -> list[Mapping]:
     """An example's pyramid of mappings: depth bands, YCbCr (Gaussian or Laplacian) levels,
     mask, and (``positions``, per level) where its pixels lie on the query; with
     ``crop_radius`` (the engine's largest window radius) cut to the object
-    (:func:`crop_levels`)."""
+    (:func:`crop_levels`). ``colours``: its :func:`example_colours`, if made."""
     if appearance_pyramid not in APPEARANCE_PYRAMIDS:
         raise ValueError(f"appearance_pyramid must be one of {APPEARANCE_PYRAMIDS}")
     mask = example.mask
-    # The colours' fill and the depth's continuation past the outline read one nearest
-    # object pixel per pixel: one distance transform for both.
-    nearest = nearest_object_pixels(mask) if mask.any() and not mask.all() else None
-    ycbcr = example_ycbcr(example, nearest)
+    ycbcr, nearest = example_colours(example) if colours is None else colours
     if appearance_pyramid == "laplacian":
         appearance = laplacian_pyramid(ycbcr, levels)
     else:

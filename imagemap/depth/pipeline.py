@@ -80,6 +80,7 @@ from imagemap.depth.finish import (
 )
 from imagemap.depth.guides import (
     depth_mappings,
+    example_colours,
     example_mappings,
     example_ycbcr,
     level_plans,
@@ -437,8 +438,13 @@ def _bands(state: State, config: DepthConfig) -> State:
     params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
     radius = max(plan.patch_size for plan in params.level_plans(levels)) // 2
     state.exemplar_levels = []
+    keep = config.finish.copies and all(e.depth.size <= KEEP_COLOURS_PIXELS for e in state.chosen)
+    kept = []
     for index, e in enumerate(state.chosen):
         positions, example_positions[index] = example_positions[index], None
+        colours = example_colours(e)
+        if keep:
+            kept.append(colours[0])
         state.exemplar_levels.append(
             ReleasableLevels(
                 example_mappings(
@@ -448,12 +454,22 @@ def _bands(state: State, config: DepthConfig) -> State:
                     config.guides,
                     positions,
                     crop_radius=radius,
+                    colours=colours,
                 )
             )
         )
-        del positions
+        del positions, colours
+    state.colours = kept if keep else None
     state.changed = f"{len(state.chosen)} examples"
     return state
+
+
+#: Examples' frames up to this many pixels (724 x 724) keep the colours the bands made
+#: (12 bytes a pixel each, held through the synthesis: 6 MB for two at 512^2) for the copy
+#: stage, which otherwise reads each picture again, fills its background (a distance
+#: transform) and converts it (about 20 ms an example at 512^2). Larger frames make them
+#: again: two 1024^2 examples' 25 MB would add to the synthesis' peak.
+KEEP_COLOURS_PIXELS = 2**19
 
 
 def engine_params(config: DepthConfig, mask: np.ndarray, n_examples: int) -> EngineParams:
