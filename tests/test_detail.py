@@ -596,6 +596,7 @@ def test_the_blends_shifted_copies_are_copy_through_clipped():
         [rng.integers(-1, 2, (11, 14)), rng.integers(0, 9, (11, 14)), rng.integers(0, 6, (11, 14))],
         axis=-1,
     ).astype(np.int32)
+    source[0, :5, 1:] = [12, 20]  # past the smaller exemplar: clipped, as copy_through
     has = source[..., 0] >= 0
     reference = rng.random((11, 14))
     groups = poisson._source_groups(exemplars, source)

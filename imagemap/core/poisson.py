@@ -271,11 +271,11 @@ def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
     for exemplar, pixels, sy, sx in groups:
         eh, ew, channels = exemplar.shape
         big = eh * ew * channels > np.iinfo(np.int32).max
-        index = sy.astype(np.int64) if big else sy.copy()
-        if dy:
-            np.clip(index + dy, 0, eh - 1, out=index)
+        index = np.clip(sy + dy, 0, eh - 1)  # clipped as copy_through: any source
+        if big:
+            index = index.astype(np.int64)
         index *= ew
-        index += np.clip(sx + dx, 0, ew - 1) if dx else sx
+        index += np.clip(sx + dx, 0, ew - 1)
         index *= channels
         index += channel
         flat_out[pixels] = exemplar.reshape(-1).take(index)
