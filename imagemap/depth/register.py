@@ -536,8 +536,7 @@ def register_with_detail(
     def one(task: tuple[np.ndarray, float]) -> tuple[Warp, tuple[np.ndarray, int]]:
         example_depth, angle = task
         moving, moving_mask = working(example_depth, example_depth > 0)
-        with threadpool_limits(limits=1, user_api="blas"):  # small matrices: one thread
-            warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
+        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
         if zoom < 1.0:
             # Back to full-resolution pixels: a working pixel centre j is full-resolution
             # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
@@ -554,7 +553,10 @@ def register_with_detail(
             )
         return _with_relief_residual(warp, query_detail, example_depth, registration)
 
-    made = [one(task) for task in zip(example_depths, angles, strict=True)]
+    # Small matrices: one BLAS thread (one limit for all the fits: threadpoolctl finds the
+    # loaded libraries anew at each, 2-10 ms).
+    with threadpool_limits(limits=1, user_api="blas"):
+        made = [one(task) for task in zip(example_depths, angles, strict=True)]
     warps = [warp for warp, _ in made]
     details = [detail for _, detail in made]
     if query_detail[1] != 1 or any(block != 1 for _, block in details):
