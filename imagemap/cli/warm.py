@@ -1,4 +1,4 @@
-"""Start-up of ``imagemap synthesize``: numba imported beside the first stages.
+"""Start-up of ``imagemap synthesize``: numba and the engine's imports beside the first stages.
 
 A synthesis reads its inputs, selects, poses and registers the examples and makes their
 bands before the engine calls its first numba kernel. Importing numba and linking its
@@ -17,8 +17,9 @@ __all__ = ["WARM_MODULES", "warm_kernels"]
 
 #: What the thread imports, in this order (NumPy is imported before it starts): numba,
 #: set up for :func:`imagemap.cli.lean_kernel_loads` (the kernels' cached code linked
-#: without numba's registries), then imagemap's kernels.
-WARM_MODULES = ("numba", "imagemap.core.kernels")
+#: without numba's registries), imagemap's kernels, and SciPy's linear algebra (the
+#: engine's PCA; the first stages no longer import it).
+WARM_MODULES = ("numba", "imagemap.core.kernels", "scipy.linalg")
 
 
 def warm_kernels(
