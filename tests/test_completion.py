@@ -454,24 +454,6 @@ def test_joined_components_are_csgraphs_components_in_its_numbering(monkeypatch)
     assert none == 0 and not labels.any()
 
 
-def test_median_filter_by_partition_is_ndimages_in_blocks_of_rows(monkeypatch):
-    """_median_filter selects the middle value of each mirrored window as
-    ndimage.median_filter does, channel by channel, whatever its blocks of rows."""
-    from scipy import ndimage
-
-    from imagemap.depth import completion
-
-    rng = np.random.default_rng(5)
-    image = rng.random((37, 29, 3)).astype(np.float32)
-    image[5:9, 3:20] = 0.25  # ties
-    for size in (3, 9, 11):
-        expected = np.stack([ndimage.median_filter(image[..., c], size=size) for c in range(3)], -1)
-        assert np.array_equal(completion._median_filter(image, size), expected)
-        monkeypatch.setattr(completion, "MEDIAN_BLOCK_BYTES", 1)  # a row at a time
-        assert np.array_equal(completion._median_filter(image, size), expected)
-        monkeypatch.undo()
-
-
 def test_small_features_of_filled_colours_need_no_second_fill():
     """An example's YCbCr as the copy stage makes it (example_ycbcr: its background the
     nearest object colour) gives the same features with ``filled`` as without."""

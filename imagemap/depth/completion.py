@@ -155,7 +155,8 @@ def small_features(
     factor = min(1.0, completion.host_window / max(extent, 1.0))
     small = ndimage.zoom(colours, (factor, factor, 1), order=1) if factor < 1 else colours
     size = max(int(round(extent * factor)) | 1, 3)
-    host = _median_filter(np.asarray(small, np.float32), size)
+    # Each channel on its own (a window of one in the last axis): the hosts' medians.
+    host = ndimage.median_filter(np.asarray(small, np.float32), size=(size, size, 1))
     cell_y = np.minimum((np.arange(colours.shape[0]) * factor).astype(int), host.shape[0] - 1)
     cell_x = np.minimum((np.arange(colours.shape[1]) * factor).astype(int), host.shape[1] - 1)
     from imagemap.core.kernels import nearest_host_distance  # deferred: start-up (numba)
@@ -218,41 +219,6 @@ def small_features(
     lookup = np.zeros(n + 1, np.int32)
     lookup[keep] = np.arange(1, int(keep.sum()) + 1)
     return lookup[labels], int(keep.sum())
-
-
-#: Bytes of the windows :func:`_median_filter` copies at a time (a block of rows).
-MEDIAN_BLOCK_BYTES = 2**24
-
-
-def _median_filter(image: np.ndarray, size: int) -> np.ndarray:
-    """Each channel of ``image`` (H, W, C) median-filtered over ``size`` x ``size``
-    (odd) windows, mirrored at the edges: ``ndimage.median_filter(image[..., c],
-    size=size)`` per channel, the same values (each the middle one of its window's,
-    selected, not computed), by ``np.partition`` of the windows a block of rows at a
-    time: 8 against 19 ms for the three channels of a 77 x 77 host picture.
-
-    Examples
-    --------
-    >>> from scipy import ndimage
-    >>> image = np.random.default_rng(0).random((13, 11, 2)).astype(np.float32)
-    >>> bool(all(np.array_equal(_median_filter(image, 5)[..., c],
-    ...                         ndimage.median_filter(image[..., c], size=5)) for c in (0, 1)))
-    True
-    """
-    from numpy.lib.stride_tricks import sliding_window_view
-
-    height, width, channels = image.shape
-    r, k = size // 2, size * size
-    # ndimage's "reflect" (the default): d c b a | a b c d | d c b a, NumPy's "symmetric".
-    padded = np.pad(image, [(r, r), (r, r), (0, 0)], mode="symmetric")
-    out = np.empty(image.shape, image.dtype)
-    rows = max(1, MEDIAN_BLOCK_BYTES // (width * channels * k * image.itemsize))
-    for y0 in range(0, height, rows):
-        y1 = min(y0 + rows, height)
-        windows = sliding_window_view(padded[y0 : y1 + 2 * r], (size, size), axis=(0, 1))
-        flat = windows.reshape(y1 - y0, width, channels, k)
-        out[y0:y1] = np.partition(flat, k // 2, axis=-1)[..., k // 2]
-    return out
 
 
 #: Up to this many points :func:`_neighbour_counts` counts from a table of all pairs (8 MB
