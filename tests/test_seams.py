@@ -1,6 +1,7 @@
 """The copy's seams: labels rearranged by alpha-expansion graph cuts (core/seams.place_seams)."""
 
 import numpy as np
+import pytest
 
 from imagemap.core.seams import place_seams
 
@@ -176,12 +177,12 @@ def test_seams_weigh_nothing_where_their_weights_are_zero():
     np.testing.assert_array_equal(ones, merged)
 
 
-def test_one_graph_reset_between_moves_finds_what_a_new_graph_per_move_finds(monkeypatch):
-    """The moves of a solve share one PyMaxflow graph, emptied between them: the labels
-    are those of a new graph per move, over moves of many sizes."""
-    import maxflow
+def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypatch):
+    """The moves' minimum cut (core/flow.grid_cut, numba) gives the labels that PyMaxflow's
+    cut gave (the one before it), over moves of many sizes."""
+    maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
 
-    from imagemap.core import seams
+    from imagemap.core import flow
 
     rng = np.random.default_rng(5)
     exemplars = [rng.random((60, 60, 3)).astype(np.float32) for _ in range(2)]
@@ -194,15 +195,21 @@ def test_one_graph_reset_between_moves_finds_what_a_new_graph_per_move_finds(mon
     source = np.stack([choice % 2, rows + 4 + (choice // 2) % 5, columns + 4 + choice // 10], -1)
     reference = colours(exemplars, source)[0] + 0.1 * rng.standard_normal((48, 48, 3))
     # smoothness 0.3: most copies stay, so that every label has a move
-    shared = place_seams(exemplars, source, reference, smoothness=0.3)
+    numba_cut = place_seams(exemplars, source, reference, smoothness=0.3)
     sizes = []
 
-    def new_graph(self, nodes, edges):
-        sizes.append(nodes)
-        return maxflow.Graph[float](nodes, edges)
+    def pymaxflow_cut(node, cost0, cost1, first, second, capacity):
+        sizes.append(len(cost0))
+        graph = maxflow.Graph[float](len(cost0), len(first))
+        nodes = graph.add_nodes(len(cost0))
+        graph.add_edges(first, second, capacity, np.zeros_like(capacity))
+        low = np.minimum(cost0, cost1)
+        graph.add_grid_tedges(nodes, cost1 - low, cost0 - low)
+        flow_value = graph.maxflow()
+        return graph.get_grid_segments(nodes), flow_value
 
-    monkeypatch.setattr(seams._Graph, "empty", new_graph)
-    fresh = place_seams(exemplars, source, reference, smoothness=0.3)
+    monkeypatch.setattr(flow, "grid_cut", pymaxflow_cut)
+    reference_cut = place_seams(exemplars, source, reference, smoothness=0.3)
     assert len(sizes) >= 20 and max(sizes) > 10 * min(sizes), sizes  # many moves, unlike
-    np.testing.assert_array_equal(shared, fresh)
-    assert (shared != source).any()  # the moves changed labels
+    np.testing.assert_array_equal(numba_cut, reference_cut)
+    assert (numba_cut != source).any()  # the moves changed labels

@@ -2,8 +2,9 @@
 
 The labels of a copy (exemplar and offset per pixel) are chosen again by
 alpha-expansion (Boykov, Veksler & Zabih 2001) on Kwatra et al.'s seam cost (2003,
-"Graphcut textures"), each move one minimum cut (PyMaxflow); the terms of a move are
-a numba kernel (:func:`imagemap.core.kernels.expansion_terms`). The seams left are
+"Graphcut textures"), each move one minimum cut (Boykov & Kolmogorov's max-flow in numba,
+:func:`imagemap.core.flow.grid_cut`); the terms of a move are a numba kernel
+(:func:`imagemap.core.kernels.expansion_terms`). The seams left are
 blended by :func:`imagemap.core.poisson.seamless_copy`.
 
 One module for one job: one solve (the full one and its coarse-to-fine form share the
@@ -43,9 +44,10 @@ def place_seams(
     pixels (Kwatra et al. 2003, "Graphcut textures"). The minimisation is Boykov,
     Veksler & Zabih's alpha-expansion (2001): each label in turn, largest first, may
     take over any set of pixels near where it is used (``spread``), chosen by one
-    minimum cut (PyMaxflow). Unlike pixel-by-pixel moves, a whole fragment can give
-    way to its neighbour's copy at once, so a few large copies replace many small
-    ones and the boundaries between them run where they show the same colours.
+    minimum cut (Boykov & Kolmogorov 2004, :mod:`imagemap.core.flow`). Unlike
+    pixel-by-pixel moves, a whole fragment can give way to its neighbour's copy at
+    once, so a few large copies replace many small ones and the boundaries between
+    them run where they show the same colours.
     Deterministic.
 
     Parameters
@@ -294,7 +296,6 @@ def _solve(
     changed_at = np.zeros((height, width), np.int32)  # move numbers: far below 2^31
     expanded_at: dict[tuple[int, ...], int] = {}
     moves = 0
-    graphs = _Graph()  # one graph for every move, its memory kept
     for _ in range(sweeps):
         alphas, ids, areas, boxes = _label_table(label_e, label_y, label_x, held)
         in_groups = _group_labels(label_e, label_y, label_x, groups, held)
@@ -331,7 +332,6 @@ def _solve(
                 alpha,
                 smoothness,
                 weights,
-                graphs,
             )
             if cut is None:
                 expanded_at[key] = moves
@@ -611,35 +611,12 @@ def _label_table(label_e, label_y, label_x, movable):
     return alphas, ids, areas.astype(np.int64), ndimage.find_objects(ids, max_label=len(keys))
 
 
-class _Graph:
-    """One PyMaxflow graph for all the moves of a solve, emptied (``reset``) between
-    them: its node and arc blocks are allocated once, at the largest move's size, not
-    anew for every move (at 512^2 a move's blocks are about 10 MB, and their first
-    touches were 10-40 ms of a move of 0.1 s). The moves' results are the same: a reset
-    graph holds no trace of the previous move (Boykov & Kolmogorov's ``reset``)."""
-
-    def __init__(self):
-        self._graph = None
-
-    def empty(self, nodes, edges):
-        """The graph, with no nodes or edges, room for ``nodes`` and ``edges`` reserved
-        the first time."""
-        if self._graph is None:
-            import maxflow  # deferred: start-up: only the copy's seams need it
-
-            self._graph = maxflow.Graph[float](nodes, edges)
-        else:
-            self._graph.reset()
-        return self._graph
-
-
-def _expand(
-    exemplars, reference, labels, movable, crop, region, alpha, smoothness, weights, graphs
-):
+def _expand(exemplars, reference, labels, movable, crop, region, alpha, smoothness, weights):
     """One alpha-expansion move over ``region`` (inside ``crop``): its nodes' numbers in
     the crop and whether each takes ``alpha`` (for :func:`imagemap.core.kernels.
-    expansion_apply`), or None where none does. ``graphs``: the solve's :class:`_Graph`."""
-    from imagemap.core import kernels  # deferred: start-up (numba)
+    expansion_apply`), or None where none does. The terms and the minimum cut are numba
+    kernels (:func:`imagemap.core.flow.grid_cut`), run without the GIL."""
+    from imagemap.core import flow, kernels  # deferred: start-up (numba)
 
     label_e, label_y, label_x = labels
     rows, columns = crop
@@ -661,17 +638,9 @@ def _expand(
         _SEAM_FLOOR,
         weights,
     )
-    n = len(cost0)
-    if n == 0:
+    if len(cost0) == 0:
         return None
-    graph = graphs.empty(n, len(first))
-    nodes = graph.add_nodes(n)
-    graph.add_edges(first, second, capacity, np.zeros_like(capacity))
-    low = np.minimum(cost0, cost1)
-    # A node ends on the sink side (takes alpha) by cutting its source edge: cost1.
-    graph.add_grid_tedges(nodes, cost1 - low, cost0 - low)
-    graph.maxflow()
-    takes = graph.get_grid_segments(nodes)
+    takes, _ = flow.grid_cut(node, cost0, cost1, first, second, capacity)
     if not takes.any():
         return None
     return node, takes

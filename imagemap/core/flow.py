@@ -1,0 +1,387 @@
+"""A minimum cut of a move's grid graph, in numba: :func:`grid_cut`.
+
+One module for one job: the maximum flow / minimum cut of the alpha-expansion moves of
+:mod:`imagemap.core.seams` (Boykov & Kolmogorov 2004, "An experimental comparison of
+min-cut/max-flow algorithms for energy minimization in vision"), written for their graphs:
+the free pixels of a crop, each joined to its four neighbours. It runs without the GIL.
+
+The graph: node p's arcs are numbered 4 p + d, d = 0 right, 1 down, 2 left, 3 up (the
+order in which they are searched); the arc opposite to 4 p + d is 4 q + (d ^ 2), q its
+head. Each node's terminal capacity is one number, ``terminal``: > 0 from the source,
+< 0 to the sink (only their difference matters to the cut). The cut: the nodes that can
+still reach the sink in the residual graph after a maximum flow are on the sink side, all
+others on the source side. That set is the same for every maximum flow (it is the
+smallest sink side of a minimum cut), and it is the one PyMaxflow's ``get_grid_segments``
+gives (True: sink side). The arithmetic is float64, as PyMaxflow's ``Graph[float]``; the
+flows are pushed in another order than PyMaxflow's, so the flow may differ from its in the
+last bits, and a cut could only differ where a residual capacity is a rounding error
+(not seen on the seams' moves, ``tests/test_flow.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["grid_cut"]
+
+#: ``parent`` values besides an arc number: in no tree, a tree's root (joined to its
+#: terminal), and an orphan (cut off from its tree during an augmentation).
+_FREE = -1
+_ROOT = -2
+_ORPHAN = -3
+#: Distance of a node from its terminal when that is not known (larger than any path).
+_FAR = 1 << 30
+#: A node's flags in ``info``: in the sink's tree (else the source's, if in one), and in
+#: the queue of active nodes.
+_SINK = 1
+_QUEUED = 2
+#: The augmentations' time stamps are int32: past this many, every stamp is set back to 0
+#: (they only mark which distances are of the current augmentation).
+_STAMP_LIMIT = (1 << 31) - 2
+
+
+@njit(cache=True, nogil=True)
+def grid_arcs(node, first, second, capacity):
+    """The arcs of a move's graph: each node's four neighbours (``heads``, (4 n,) int32,
+    -1: none) and residual capacities (``residual``, (4 n,) float64), from the crop's node
+    map ``node`` ((h, w), -1: no node; numbered in raster order) and the edges first ->
+    second of ``capacity`` (each between 4-neighbours; the reverse arc 0)."""
+    h, w = node.shape
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            if node[i, j] >= 0:
+                n += 1
+    heads = np.full(4 * n, -1, np.int32)
+    residual = np.zeros(4 * n)
+    for i in range(h):
+        for j in range(w):
+            p = node[i, j]
+            if p < 0:
+                continue
+            if j + 1 < w:
+                heads[4 * p] = node[i, j + 1]
+            if i + 1 < h:
+                heads[4 * p + 1] = node[i + 1, j]
+            if j > 0:
+                heads[4 * p + 2] = node[i, j - 1]
+            if i > 0:
+                heads[4 * p + 3] = node[i - 1, j]
+    for m in range(len(first)):
+        p, q = first[m], second[m]
+        for d in range(4):
+            if heads[4 * p + d] == q:
+                residual[4 * p + d] += capacity[m]
+                break
+    return heads, residual
+
+
+@njit(cache=True, nogil=True)
+def _push_neighbours(heads, residual, terminal):
+    """The paths source -> p -> q -> sink of one arc, each pushed once (nodes in order),
+    in place: a flow to start from, which the trees' search would find one augmentation
+    (and one orphan) at a time. The maximum flow, and so the cut, is the same. Returns
+    the flow pushed."""
+    total = 0.0
+    for p in range(len(terminal)):
+        if terminal[p] <= 0.0:
+            continue
+        for d in range(4):
+            a = 4 * p + d
+            q = heads[a]
+            if q < 0 or terminal[q] >= 0.0 or residual[a] <= 0.0:
+                continue
+            pushed = min(terminal[p], residual[a], -terminal[q])
+            terminal[p] -= pushed
+            terminal[q] += pushed
+            residual[a] -= pushed
+            residual[4 * q + (d ^ 2)] += pushed
+            total += pushed
+            if terminal[p] == 0.0:
+                break
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _origin(start, info, heads, now):
+    """The number of arcs from ``start`` up its tree to its terminal, or ``_FAR`` where the
+    path ends at an orphan; the nodes on a path found are stamped ``now`` with their
+    distances (a later walk stops at them)."""
+    steps = 0
+    j = start
+    while True:
+        if info[4 * j + 1] == now:
+            steps += info[4 * j + 2]
+            break
+        arc = info[4 * j]
+        steps += 1
+        if arc == _ROOT:
+            info[4 * j + 1] = now
+            info[4 * j + 2] = 1
+            break
+        if arc < 0:
+            return _FAR
+        j = heads[arc]
+    d = steps
+    j = start
+    while info[4 * j + 1] != now:
+        info[4 * j + 1] = now
+        info[4 * j + 2] = d
+        d -= 1
+        j = heads[info[4 * j]]
+    return steps
+
+
+@njit(cache=True, nogil=True)
+def max_flow(heads, residual, terminal):
+    """Boykov & Kolmogorov's maximum flow on the arcs of :func:`grid_arcs`, in place:
+    ``residual`` and ``terminal`` (> 0: residual capacity from the source, < 0: to the
+    sink) become the residual graph's. Returns the flow and ``sink_side``, (n,) bool: the
+    nodes that can still reach the sink.
+
+    Two search trees grow from the terminals over arcs with residual capacity (active
+    nodes taken first in, first out; a node that joined the trees is searched again at
+    once); where they meet, the path's bottleneck is pushed through it; the nodes whose
+    arc to their parent saturated (orphans, the ones nearest the terminals first) take
+    the neighbour of their tree whose path reaches the terminal in the fewest arcs
+    (distances kept per augmentation by a time stamp), or leave the tree, orphaning their
+    children. No active node left: the sink's tree is every node that reaches the sink.
+    A node's parent, stamp, distance and flags are side by side in ``info`` (4 int32 a
+    node: one cache line holds four nodes').
+    """
+    n = len(terminal)
+    info = np.zeros(4 * n, np.int32)  # parent arc, time stamp, distance, flags
+    queue = np.empty(n + 1, np.int32)  # a ring: each node in it at most once
+    head = 0
+    tail = 0
+    for p in range(n):
+        if terminal[p] != 0.0:
+            info[4 * p] = _ROOT
+            info[4 * p + 2] = 1
+            info[4 * p + 3] = (_SINK if terminal[p] < 0.0 else 0) | _QUEUED
+            queue[tail] = p
+            tail += 1
+        else:
+            info[4 * p] = _FREE
+    orphans = np.empty(n + 1, np.int32)  # a ring as well: each node an orphan once at a time
+    now = 0
+    flow = 0.0
+    current = -1
+    while True:
+        if current < 0:
+            if head == tail:
+                break
+            i = queue[head]
+            head = head + 1 if head < n else 0
+            info[4 * i + 3] &= ~_QUEUED
+            if info[4 * i] == _FREE:
+                continue
+        else:
+            i = current
+        current = -1
+        # Growth: the first arc that joins i's tree to the other one.
+        meet = -1  # the arc from the source tree's node to the sink tree's
+        ts_i = info[4 * i + 1]
+        d_i = info[4 * i + 2]
+        if not (info[4 * i + 3] & _SINK):
+            for d in range(4):
+                a = 4 * i + d
+                j = heads[a]
+                if j < 0 or residual[a] <= 0.0:
+                    continue
+                pj = info[4 * j]
+                fj = info[4 * j + 3]
+                if pj == _FREE:
+                    info[4 * j] = 4 * j + (d ^ 2)
+                    info[4 * j + 1] = ts_i
+                    info[4 * j + 2] = d_i + 1
+                    if not (fj & _QUEUED):
+                        info[4 * j + 3] = _QUEUED
+                        queue[tail] = j
+                        tail = tail + 1 if tail < n else 0
+                    else:
+                        info[4 * j + 3] = _QUEUED
+                elif fj & _SINK:
+                    meet = a
+                    break
+                elif info[4 * j + 1] <= ts_i and info[4 * j + 2] > d_i:
+                    info[4 * j] = 4 * j + (d ^ 2)
+                    info[4 * j + 1] = ts_i
+                    info[4 * j + 2] = d_i + 1
+        else:
+            for d in range(4):
+                a = 4 * i + d
+                j = heads[a]
+                if j < 0:
+                    continue
+                back = 4 * j + (d ^ 2)
+                if residual[back] <= 0.0:
+                    continue
+                pj = info[4 * j]
+                fj = info[4 * j + 3]
+                if pj == _FREE:
+                    info[4 * j] = back
+                    info[4 * j + 1] = ts_i
+                    info[4 * j + 2] = d_i + 1
+                    if not (fj & _QUEUED):
+                        info[4 * j + 3] = _SINK | _QUEUED
+                        queue[tail] = j
+                        tail = tail + 1 if tail < n else 0
+                    else:
+                        info[4 * j + 3] = _SINK | _QUEUED
+                elif not (fj & _SINK):
+                    meet = back
+                    break
+                elif info[4 * j + 1] <= ts_i and info[4 * j + 2] > d_i:
+                    info[4 * j] = back
+                    info[4 * j + 1] = ts_i
+                    info[4 * j + 2] = d_i + 1
+        if meet < 0:
+            continue
+        current = i  # it may join the trees again: searched once more, first
+        now += 1
+        if now == _STAMP_LIMIT:
+            for p in range(n):
+                info[4 * p + 1] = 0
+            now = 1
+        # Augmentation: the bottleneck of source -> root ... meet ... root -> sink.
+        t = heads[meet]
+        s = heads[4 * t + ((meet & 3) ^ 2)]
+        bottleneck = residual[meet]
+        j = s
+        while info[4 * j] != _ROOT:
+            a = info[4 * j]
+            back = 4 * heads[a] + ((a & 3) ^ 2)
+            if residual[back] < bottleneck:
+                bottleneck = residual[back]
+            j = heads[a]
+        if terminal[j] < bottleneck:
+            bottleneck = terminal[j]
+        j = t
+        while info[4 * j] != _ROOT:
+            a = info[4 * j]
+            if residual[a] < bottleneck:
+                bottleneck = residual[a]
+            j = heads[a]
+        if -terminal[j] < bottleneck:
+            bottleneck = -terminal[j]
+        residual[meet] -= bottleneck
+        residual[4 * t + ((meet & 3) ^ 2)] += bottleneck
+        n_orphans = 0
+        j = s
+        while info[4 * j] != _ROOT:
+            a = info[4 * j]
+            following = heads[a]
+            back = 4 * following + ((a & 3) ^ 2)
+            residual[a] += bottleneck
+            residual[back] -= bottleneck
+            if residual[back] == 0.0:
+                info[4 * j] = _ORPHAN
+                orphans[n_orphans] = j
+                n_orphans += 1
+            j = following
+        terminal[j] -= bottleneck
+        if terminal[j] == 0.0:
+            info[4 * j] = _ORPHAN
+            orphans[n_orphans] = j
+            n_orphans += 1
+        j = t
+        while info[4 * j] != _ROOT:
+            a = info[4 * j]
+            following = heads[a]
+            back = 4 * following + ((a & 3) ^ 2)
+            residual[back] += bottleneck
+            residual[a] -= bottleneck
+            if residual[a] == 0.0:
+                info[4 * j] = _ORPHAN
+                orphans[n_orphans] = j
+                n_orphans += 1
+            j = following
+        terminal[j] += bottleneck
+        if terminal[j] == 0.0:
+            info[4 * j] = _ORPHAN
+            orphans[n_orphans] = j
+            n_orphans += 1
+        flow += bottleneck
+        # Adoption, the orphans nearest the terminals first (a child's old parent may
+        # then be back in the tree when the child looks for one).
+        for k in range(n_orphans // 2):
+            tmp = orphans[k]
+            orphans[k] = orphans[n_orphans - 1 - k]
+            orphans[n_orphans - 1 - k] = tmp
+        first = 0
+        last = n_orphans  # orphans[first:last], as a ring of n + 1
+        while first != last:
+            o = orphans[first]
+            first = first + 1 if first < n else 0
+            in_sink = info[4 * o + 3] & _SINK
+            best = -1
+            best_distance = _FAR
+            for d in range(4):
+                a = 4 * o + d
+                j = heads[a]
+                if j < 0:
+                    continue
+                if in_sink:
+                    if residual[a] <= 0.0:
+                        continue
+                elif residual[4 * j + (d ^ 2)] <= 0.0:
+                    continue
+                if info[4 * j] == _FREE or (info[4 * j + 3] & _SINK) != in_sink:
+                    continue
+                steps = _origin(j, info, heads, now)
+                if steps < best_distance:
+                    best = a
+                    best_distance = steps
+            if best >= 0:
+                info[4 * o] = best
+                info[4 * o + 1] = now
+                info[4 * o + 2] = best_distance + 1
+                continue
+            info[4 * o] = _FREE
+            for d in range(4):
+                a = 4 * o + d
+                j = heads[a]
+                if j < 0:
+                    continue
+                pj = info[4 * j]
+                fj = info[4 * j + 3]
+                if pj == _FREE or (fj & _SINK) != in_sink:
+                    continue
+                reaches = residual[a] > 0.0 if in_sink else residual[4 * j + (d ^ 2)] > 0.0
+                if reaches and not (fj & _QUEUED):
+                    info[4 * j + 3] = fj | _QUEUED
+                    queue[tail] = j
+                    tail = tail + 1 if tail < n else 0
+                if pj >= 0 and heads[pj] == o:
+                    info[4 * j] = _ORPHAN
+                    orphans[last] = j
+                    last = last + 1 if last < n else 0
+        if info[4 * i] == _FREE:
+            current = -1
+    sink_side = np.zeros(n, np.bool_)
+    for p in range(n):
+        sink_side[p] = (info[4 * p + 3] & _SINK) != 0 and info[4 * p] != _FREE
+    return flow, sink_side
+
+
+@njit(cache=True, nogil=True)
+def grid_cut(node, cost0, cost1, first, second, capacity):
+    """The minimum cut of one alpha-expansion move (the terms of
+    :func:`imagemap.core.kernels.expansion_terms`): whether each node takes alpha (pays
+    ``cost1`` rather than ``cost0``; edges first -> second of ``capacity``, paid when
+    first keeps its label and second takes it), and the flow (the cut's cost less the
+    sum of the nodes' smaller unary costs). The nodes on the cut's sink side take alpha,
+    as with PyMaxflow's ``add_grid_tedges(nodes, cost1 - low, cost0 - low)``,
+    ``maxflow()`` and ``get_grid_segments``, ``low`` the smaller of the two costs.
+    """
+    heads, residual = grid_arcs(node, first, second, capacity)
+    n = len(cost0)
+    terminal = np.empty(n)
+    for p in range(n):
+        low = min(cost0[p], cost1[p])
+        terminal[p] = (cost1[p] - low) - (cost0[p] - low)
+    pushed = _push_neighbours(heads, residual, terminal)
+    flow, takes = max_flow(heads, residual, terminal)
+    return takes, flow + pushed

@@ -1,0 +1,121 @@
+"""The seams' minimum cut in numba (core/flow.grid_cut) against PyMaxflow and scipy."""
+
+import numpy as np
+import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import maximum_flow
+
+from imagemap.core.flow import grid_cut
+
+maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
+
+#: Flows compared with PyMaxflow's within this relative gap: both sum float64 pushes, in
+#: different orders.
+FLOW_RTOL = 1e-9
+
+
+def random_move(rng, height, width, density, levels=None):
+    """A move's terms as :func:`imagemap.core.kernels.expansion_terms` gives them: the
+    nodes of a crop (``density`` of its pixels, raster order), unary costs, and one edge
+    first -> second to each right and lower neighbour node (a fifth of them 0). With
+    ``levels``, every value is a multiple of 1 / levels (ties)."""
+    present = rng.random((height, width)) < density
+    node = np.full((height, width), -1, np.int64)
+    node[present] = np.arange(present.sum())
+    right = present[:, :-1] & present[:, 1:]
+    down = present[:-1] & present[1:]
+    # in expansion_terms' order: by first node, its lower edge then its right one
+    first = np.concatenate([node[:-1][down], node[:, :-1][right]])
+    second = np.concatenate([node[1:][down], node[:, 1:][right]])
+    order = np.lexsort((second, first))
+    first, second = first[order], second[order]
+    n = len(first)
+    cost0, cost1 = 3.0 * rng.random(present.sum()), 3.0 * rng.random(present.sum())
+    capacity = np.where(rng.random(n) < 0.2, 0.0, 2.0 * rng.random(n))
+    if levels is not None:
+        cost0, cost1, capacity = (np.round(v * levels) / levels for v in (cost0, cost1, capacity))
+    return node, cost0, cost1, first, second, capacity
+
+
+def pymaxflow_cut(node, cost0, cost1, first, second, capacity):
+    """The cut as core/seams made it with PyMaxflow (before the numba cut)."""
+    graph = maxflow.Graph[float](len(cost0), len(first))
+    nodes = graph.add_nodes(len(cost0))
+    graph.add_edges(first, second, capacity, np.zeros_like(capacity))
+    low = np.minimum(cost0, cost1)
+    graph.add_grid_tedges(nodes, cost1 - low, cost0 - low)
+    flow = graph.maxflow()
+    return graph.get_grid_segments(nodes), flow
+
+
+@pytest.mark.parametrize("levels", [None, 1, 4])  # real values; many ties; some
+def test_the_cut_and_flow_are_pymaxflows_on_random_moves(levels):
+    rng = np.random.default_rng(7)
+    compared = 0
+    for size in [(1, 1), (1, 9), (7, 1)] + [tuple(rng.integers(2, 14, 2)) for _ in range(60)]:
+        move = random_move(rng, *size, density=rng.uniform(0.3, 1.0), levels=levels)
+        if len(move[1]) == 0:
+            continue
+        expected, expected_flow = pymaxflow_cut(*move)
+        takes, flow = grid_cut(*move)
+        np.testing.assert_array_equal(takes, expected)
+        assert flow == pytest.approx(expected_flow, rel=FLOW_RTOL, abs=1e-12)
+        compared += 1
+    assert compared > 50
+
+
+def test_large_moves_with_long_augmenting_paths_match_pymaxflow():
+    """Weak unary terms and strong edges: paths run far across the crop, and orphans are
+    adopted and freed many times."""
+    rng = np.random.default_rng(3)
+    for levels in (None, 2):
+        node, cost0, cost1, first, second, capacity = random_move(rng, 48, 40, 0.9, levels)
+        cost0 *= 0.1
+        cost1 *= 0.1
+        expected, expected_flow = pymaxflow_cut(node, cost0, cost1, first, second, capacity)
+        takes, flow = grid_cut(node, cost0, cost1, first, second, capacity)
+        assert 0.05 < expected.mean() < 0.95  # a cut through the middle, not one side
+        np.testing.assert_array_equal(takes, expected)
+        assert flow == pytest.approx(expected_flow, rel=FLOW_RTOL)
+
+
+def test_the_flow_is_scipys_maximum_flow_on_integer_capacities():
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        node, cost0, cost1, first, second, capacity = random_move(
+            rng, *rng.integers(2, 16, 2), density=0.8
+        )
+        cost0, cost1, capacity = (np.floor(8 * v) for v in (cost0, cost1, capacity))
+        n = len(cost0)
+        low = np.minimum(cost0, cost1)
+        source, sink = n, n + 1
+        tails = np.concatenate([first, np.full(n, source), np.arange(n)])
+        heads = np.concatenate([second, np.arange(n), np.full(n, sink)])
+        caps = np.concatenate([capacity, cost1 - low, cost0 - low]).astype(np.int32)
+        keep = caps > 0
+        graph = csr_matrix((caps[keep], (tails[keep], heads[keep])), shape=(n + 2, n + 2))
+        expected = maximum_flow(graph, source, sink).flow_value
+        _, flow = grid_cut(node, cost0, cost1, first, second, capacity)
+        assert flow == expected
+
+
+def test_of_the_minimum_cuts_the_sink_side_is_the_smallest():
+    """source -> a (1), a -> b (1), b -> sink (1): cutting any one of the three arcs is a
+    minimum cut; only b's arc to the sink leaves a node that reaches the sink, none."""
+    node = np.array([[0, 1]])
+    # a: keeping costs 0, taking 1 (an arc from the source); b: keeping costs 1 (to the sink)
+    takes, flow = grid_cut(
+        node, np.array([0.0, 1.0]), np.array([1.0, 0.0]), np.array([0]), np.array([1]), np.ones(1)
+    )
+    assert flow == 1.0
+    assert takes.tolist() == [False, False]
+    # with 2 to the sink b keeps reaching it, and a, through the unsaturated arc, does not
+    takes, flow = grid_cut(
+        node, np.array([0.0, 2.0]), np.array([1.0, 0.0]), np.array([0]), np.array([1]), np.ones(1)
+    )
+    assert flow == 1.0
+    assert takes.tolist() == [False, True]
+    # nodes without terminal arcs or edges stay on the source side
+    none = np.zeros(0, np.int64)
+    takes, flow = grid_cut(np.array([[0, -1, 1]]), np.ones(2), np.ones(2), none, none, np.zeros(0))
+    assert flow == 0.0 and takes.tolist() == [False, False]
