@@ -177,13 +177,8 @@ def test_seams_weigh_nothing_where_their_weights_are_zero():
     np.testing.assert_array_equal(ones, merged)
 
 
-def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypatch):
-    """The moves' minimum cut (core/flow.grid_cut, numba) gives the labels that PyMaxflow's
-    cut gave (the one before it), over moves of many sizes."""
-    maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
-
-    from imagemap.core import flow
-
+def many_labels():
+    """Exemplars, a source map of 40 labels of many areas and a reference near it."""
     rng = np.random.default_rng(5)
     exemplars = [rng.random((60, 60, 3)).astype(np.float32) for _ in range(2)]
     rows, columns = np.indices((48, 48))
@@ -194,6 +189,17 @@ def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypa
     choice = rng.integers(0, 40, size=block.max() + 1)[block]
     source = np.stack([choice % 2, rows + 4 + (choice // 2) % 5, columns + 4 + choice // 10], -1)
     reference = colours(exemplars, source)[0] + 0.1 * rng.standard_normal((48, 48, 3))
+    return exemplars, source, reference
+
+
+def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypatch):
+    """The moves' minimum cut (core/flow.grid_cut, numba) gives the labels that PyMaxflow's
+    cut gave (the one before it), over moves of many sizes."""
+    maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
+
+    from imagemap.core import flow
+
+    exemplars, source, reference = many_labels()
     # smoothness 0.3: most copies stay, so that every label has a move
     numba_cut = place_seams(exemplars, source, reference, smoothness=0.3)
     sizes = []
@@ -213,3 +219,40 @@ def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypa
     assert len(sizes) >= 20 and max(sizes) > 10 * min(sizes), sizes  # many moves, unlike
     np.testing.assert_array_equal(numba_cut, reference_cut)
     assert (numba_cut != source).any()  # the moves changed labels
+
+
+def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
+    """Independent moves (crops more than a pixel apart) run two at a time on two threads:
+    the labels are those of the moves one at a time, and pairs did run."""
+    from imagemap.core import kernels, seams
+
+    # 64 tiles of 12 px a side, each its own label: with a short reach, the crops of
+    # many moves in turn are far apart.
+    rng = np.random.default_rng(2)
+    exemplars = [rng.random((120, 120, 3)).astype(np.float32) for _ in range(2)]
+    rows, columns = np.indices((96, 96))
+    tile = (rows // 12) * 8 + columns // 12
+    offsets_of = rng.integers(0, 24, size=(64, 2))
+    offsets = offsets_of[tile]
+    source = np.stack([tile % 2, rows + offsets[..., 0], columns + offsets[..., 1]], -1)
+    # The reference shows each 2x2 group of tiles copied whole by one of its tiles' labels.
+    group = (rows // 24) * 16 + (columns // 24) * 2
+    target = np.stack(
+        [group % 2, rows + offsets_of[group][..., 0], columns + offsets_of[group][..., 1]], -1
+    )
+    reference = colours(exemplars, target)[0] + 0.05 * rng.standard_normal((96, 96, 3))
+    pairs = []
+    side_thread = seams._side_thread
+
+    def counted():
+        pairs.append(1)
+        return side_thread()
+
+    monkeypatch.setattr(seams, "_side_thread", counted)
+    monkeypatch.setattr(kernels, "n_threads", lambda: 2)
+    paired = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
+    assert len(pairs) >= 5
+    monkeypatch.setattr(kernels, "n_threads", lambda: 1)
+    in_turn = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
+    np.testing.assert_array_equal(paired, in_turn)
+    assert (paired != source).any(axis=-1).mean() > 0.2  # the moves changed many labels

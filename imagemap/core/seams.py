@@ -13,6 +13,9 @@ move loop, the terms and the cost bookkeeping, so they stay together).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from scipy import ndimage
 
@@ -290,71 +293,18 @@ def _solve(
         if weights is None
         else np.ascontiguousarray(weights, dtype=np.float32)
     )
-    # The move after which each pixel last changed, and each label's last move: a
-    # label's move is not repeated while nothing in or around its crop has changed
-    # since (it would find the same cut), unless that move spread it.
-    changed_at = np.zeros((height, width), np.int32)  # move numbers: far below 2^31
-    expanded_at: dict[tuple[int, ...], int] = {}
-    moves = 0
+    moves = _Moves(
+        (packed, shapes, inside),
+        reference,
+        (label_e, label_y, label_x),
+        (movable, held, free, groups),
+        smoothness,
+        spread,
+        weights,
+    )
     for _ in range(sweeps):
-        alphas, ids, areas, boxes = _label_table(label_e, label_y, label_x, held)
-        in_groups = _group_labels(label_e, label_y, label_x, groups, held)
-        for k in np.argsort(-areas, kind="stable"):  # largest first, ties in label order
-            if areas[k] == 0:  # taken over by the others' moves
-                continue
-            alpha = alphas[k]
-            # The boxes are from the start of the sweep: a label only ever loses
-            # pixels to the others' moves, so its box still holds it.
-            reach = int(np.ceil(spread * np.sqrt(areas[k])))
-            box_rows, box_columns = boxes[k]
-            rows = slice(max(box_rows.start - reach, 0), min(box_rows.stop + reach, height))
-            columns = slice(max(box_columns.start - reach, 0), min(box_columns.stop + reach, width))
-            key = tuple(int(v) for v in alpha)
-            around = changed_at[
-                max(rows.start - 1, 0) : rows.stop + 1, max(columns.start - 1, 0) : columns.stop + 1
-            ]
-            if key in expanded_at and around.max() <= expanded_at[key]:
-                continue
-            region = ndimage.maximum_filter(ids[rows, columns] == k + 1, size=2 * reach + 1)
-            if free is not None:
-                region &= free[rows, columns]
-            moves += 1
-            if groups is not None:  # a group's pixels only take its own labels
-                grouped = groups[rows, columns]
-                region &= (grouped == 0) | np.isin(grouped, in_groups.get(key, ()))
-            cut = _expand(
-                (packed, shapes, inside),
-                reference,
-                (label_e, label_y, label_x),
-                movable,
-                (rows, columns),
-                region,
-                alpha,
-                smoothness,
-                weights,
-            )
-            if cut is None:
-                expanded_at[key] = moves
-                continue
-            # it spread: its next move reaches further
-            expanded_at[key] = moves - 1
-            node, takes = cut
-            lost = np.zeros(len(areas), np.int64)
-            areas[k] += kernels.expansion_apply(
-                node,
-                takes,
-                (label_e, label_y, label_x),
-                ids,
-                changed_at,
-                rows.start,
-                columns.start,
-                alpha,
-                k + 1,
-                moves,
-                lost,
-            )
-            areas -= lost
-    del ids, changed_at, held
+        moves.sweep(paired=kernels.n_threads() >= 2)
+    del moves, held
     # Written into the int32 map a channel at a time: no (H, W, 3) int64 stack beside it.
     placed = np.empty((height, width, 3), np.int32)
     placed[..., 0] = label_e
@@ -363,6 +313,169 @@ def _solve(
     placed[..., 2] = label_x
     placed[..., 2] += xx
     return placed
+
+
+class _Moves:
+    """The alpha-expansion moves of one solve (:func:`_solve`), sweep by sweep, on its
+    labels (label_e, label_y, label_x, changed in place).
+
+    Each label in turn, largest first, may take over the pixels of its move's region: those
+    within its reach (``spread`` times the square root of its area) of its pixels. A
+    label's move is not repeated while nothing in or around its crop has changed since its
+    last move (it would find the same cut), unless that move spread it: kept are the move
+    after which each pixel last changed (``changed_at``) and each label's last move.
+
+    Two moves run at once (each move's kernels release the GIL) where the second is the
+    next one due and the crops are more than a pixel apart (:func:`_apart`): neither reads
+    what the other writes, so the pair finds what the two moves in turn find, and their
+    cuts are applied in turn, numbered in turn.
+    """
+
+    def __init__(self, exemplars, reference, labels, masks, smoothness, spread, weights):
+        self.exemplars, self.reference, self.labels = exemplars, reference, labels
+        self.movable, self.held, self.free, self.groups = masks
+        self.smoothness, self.spread, self.weights = smoothness, spread, weights
+        self.height, self.width = labels[0].shape
+        self.changed_at = np.zeros((self.height, self.width), np.int32)  # moves: < 2^31
+        self.expanded_at: dict[tuple[int, ...], int] = {}
+        self.count = 0  # moves made
+
+    def sweep(self, paired):
+        """One pass over the labels in use, largest first (ties in label order); with
+        ``paired``, independent moves two at a time."""
+        label_e, label_y, label_x = self.labels
+        self.alphas, self.ids, self.areas, self.boxes = _label_table(
+            label_e, label_y, label_x, self.held
+        )
+        self.in_groups = _group_labels(label_e, label_y, label_x, self.groups, self.held)
+        order = np.argsort(-self.areas, kind="stable")
+        position = 0
+        while position < len(order):
+            crop = self._crop(order[position])
+            move = None if crop is None else self._planned(order[position], crop)
+            position += 1
+            if move is None:
+                continue
+            # The next move due, if it can run beside this one: the labels passed over on
+            # the way are passed over in turn too (this move changes nothing they read).
+            partner, scan = None, position
+            while paired and scan < len(order):
+                other = self._crop(order[scan])
+                if other is not None and not _apart(crop, other):
+                    break
+                partner = None if other is None else self._planned(order[scan], other)
+                scan += 1
+                if partner is not None:
+                    break
+            if partner is None:
+                self._apply(move, self._cut(move))
+                continue
+            position = scan
+            beside = _side_thread().submit(self._cut, move)
+            second = self._cut(partner)
+            self._apply(move, beside.result())
+            self._apply(partner, second)
+        del self.ids  # (H, W) int32: rebuilt by the next sweep
+
+    def _crop(self, k):
+        """Label k's move's crop (rows, columns) and reach, or None where the label has
+        no pixel left (taken over by the others' moves)."""
+        if self.areas[k] == 0:
+            return None
+        # The boxes are from the start of the sweep: a label only ever loses pixels to
+        # the others' moves, so its box still holds it.
+        reach = int(np.ceil(self.spread * np.sqrt(self.areas[k])))
+        box_rows, box_columns = self.boxes[k]
+        rows = slice(max(box_rows.start - reach, 0), min(box_rows.stop + reach, self.height))
+        columns = slice(
+            max(box_columns.start - reach, 0), min(box_columns.stop + reach, self.width)
+        )
+        return rows, columns, reach
+
+    def _planned(self, k, crop):
+        """Label k's move (k, its key, crop and region), or None where it is not
+        repeated."""
+        rows, columns, reach = crop
+        key = tuple(int(v) for v in self.alphas[k])
+        around = self.changed_at[
+            max(rows.start - 1, 0) : rows.stop + 1, max(columns.start - 1, 0) : columns.stop + 1
+        ]
+        if key in self.expanded_at and around.max() <= self.expanded_at[key]:
+            return None
+        region = ndimage.maximum_filter(self.ids[rows, columns] == k + 1, size=2 * reach + 1)
+        if self.free is not None:
+            region &= self.free[rows, columns]
+        if self.groups is not None:  # a group's pixels only take its own labels
+            grouped = self.groups[rows, columns]
+            region &= (grouped == 0) | np.isin(grouped, self.in_groups.get(key, ()))
+        return k, key, (rows, columns), region
+
+    def _cut(self, move):
+        """:func:`_expand` of a planned move (reads the labels, writes nothing)."""
+        k, _, crop, region = move
+        return _expand(
+            self.exemplars,
+            self.reference,
+            self.labels,
+            self.movable,
+            crop,
+            region,
+            self.alphas[k],
+            self.smoothness,
+            self.weights,
+        )
+
+    def _apply(self, move, cut):
+        """A move's cut written into the labels, as the next move made."""
+        from imagemap.core import kernels  # deferred: start-up (numba)
+
+        k, key, (rows, columns), _ = move
+        self.count += 1
+        if cut is None:
+            self.expanded_at[key] = self.count
+            return
+        # it spread: its next move reaches further
+        self.expanded_at[key] = self.count - 1
+        node, takes = cut
+        lost = np.zeros(len(self.areas), np.int64)
+        self.areas[k] += kernels.expansion_apply(
+            node,
+            takes,
+            self.labels,
+            self.ids,
+            self.changed_at,
+            rows.start,
+            columns.start,
+            self.alphas[k],
+            k + 1,
+            self.count,
+            lost,
+        )
+        self.areas -= lost
+
+
+def _apart(crop, other):
+    """Whether two moves' crops ((rows, columns, reach)) are more than a pixel apart: a
+    move writes labels only in its crop and reads them in its crop and one pixel around."""
+    (rows, columns, _), (other_rows, other_columns, _) = crop, other
+    return (
+        rows.stop < other_rows.start
+        or other_rows.stop < rows.start
+        or columns.stop < other_columns.start
+        or other_columns.stop < columns.start
+    )
+
+
+_SIDE_THREADS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _side_thread() -> ThreadPoolExecutor:
+    """One thread of the process's own for the first move of a pair (not the kernels'
+    pool: a solve called from one of its threads would wait on itself)."""
+    pool = _SIDE_THREADS.get(os.getpid())  # per process: a forked child has no threads
+    if pool is None:
+        pool = _SIDE_THREADS[os.getpid()] = ThreadPoolExecutor(1, thread_name_prefix="seams")
+    return pool
 
 
 def _coarse_to_fine(
