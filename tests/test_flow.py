@@ -1,11 +1,13 @@
 """The seams' minimum cut in numba (core/flow.grid_cut) against PyMaxflow and scipy."""
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_flow
 
-from imagemap.core.flow import grid_cut
+from imagemap.core.flow import grid_cut, grid_cut_halved
 
 maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
 
@@ -119,3 +121,25 @@ def test_of_the_minimum_cuts_the_sink_side_is_the_smallest():
     none = np.zeros(0, np.int64)
     takes, flow = grid_cut(np.array([[0, -1, 1]]), np.ones(2), np.ones(2), none, none, np.zeros(0))
     assert flow == 0.0 and takes.tolist() == [False, False]
+
+
+def test_the_cut_in_halves_is_pymaxflows_and_the_same_on_one_thread_or_two():
+    """The halves' flows (on two threads or in turn), then the whole graph's: PyMaxflow's
+    cut and flow where the values are exact in binary (ties decided exactly); the same
+    floats with or without the second thread also where they are not (0.1 steps)."""
+    rng = np.random.default_rng(13)
+    with ThreadPoolExecutor(1) as beside:
+        cases = [((48, 40), None, 0.125), ((48, 40), 2, 0.125), ((30, 31), 4, 1)]
+        for size, levels, scale in cases:
+            node, cost0, cost1, first, second, capacity = random_move(rng, *size, 0.9, levels)
+            move = node, scale * cost0, scale * cost1, first, second, capacity
+            expected, expected_flow = pymaxflow_cut(*move)
+            takes, flow = grid_cut_halved(*move, beside)
+            np.testing.assert_array_equal(takes, expected)
+            assert flow == pytest.approx(expected_flow, rel=FLOW_RTOL)
+        move = random_move(rng, 48, 40, 0.9, 2)
+        move = (move[0], 0.1 * move[1], 0.1 * move[2]) + move[3:]
+        takes, flow = grid_cut_halved(*move, beside)
+        alone, flow_alone = grid_cut_halved(*move)
+        np.testing.assert_array_equal(takes, alone)
+        assert flow == flow_alone

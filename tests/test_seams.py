@@ -222,9 +222,10 @@ def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypa
 
 
 def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
-    """Independent moves (crops more than a pixel apart) run two at a time on two threads:
-    the labels are those of the moves one at a time, and pairs did run."""
-    from imagemap.core import kernels, seams
+    """Independent moves (crops more than a pixel apart) run two at a time on two threads,
+    and a large move alone is cut on both (core/flow.grid_cut_halved): the labels are
+    those of the moves one at a time on one thread, and pairs and halved cuts did run."""
+    from imagemap.core import flow, kernels, seams
 
     # 64 tiles of 12 px a side, each its own label: with a short reach, the crops of
     # many moves in turn are far apart.
@@ -250,8 +251,19 @@ def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
 
     monkeypatch.setattr(seams, "_side_thread", counted)
     monkeypatch.setattr(kernels, "n_threads", lambda: 2)
+    # moves of any size in pairs, and the larger ones alone cut on two threads
+    monkeypatch.setattr(seams, "_PAIRED_PIXELS", 0)
+    monkeypatch.setattr(seams, "_HALVED_NODES", 300)
+    halved = []
+    cut_halved = flow.grid_cut_halved
+
+    def counted_halved(*args):
+        halved.append(len(args[1]))
+        return cut_halved(*args)
+
+    monkeypatch.setattr(flow, "grid_cut_halved", counted_halved)
     paired = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
-    assert len(pairs) >= 5
+    assert len(pairs) >= 5 and len(halved) >= 5
     monkeypatch.setattr(kernels, "n_threads", lambda: 1)
     in_turn = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
     np.testing.assert_array_equal(paired, in_turn)

@@ -14,8 +14,10 @@ others on the source side. That set is the same for every maximum flow (it is th
 smallest sink side of a minimum cut), and it is the one PyMaxflow's ``get_grid_segments``
 gives (True: sink side). The arithmetic is float64, as PyMaxflow's ``Graph[float]``; the
 flows are pushed in another order than PyMaxflow's, so the flow may differ from its in the
-last bits, and a cut could only differ where a residual capacity is a rounding error
-(not seen on the seams' moves, ``tests/test_flow.py``).
+last bits, and where two cuts cost the same (a tie that exact arithmetic would leave a
+residual capacity of exactly 0 at) rounding may pick the other one, of the same cost up
+to rounding: not seen on the seams' moves (every cut of the 512^2 and 200x150 dumps is
+PyMaxflow's), seen on random moves whose ties are inexact sums (0.1 steps).
 """
 
 from __future__ import annotations
@@ -367,6 +369,22 @@ def max_flow(heads, residual, terminal):
 
 
 @njit(cache=True, nogil=True)
+def grid_graph(node, cost0, cost1, first, second, capacity):
+    """A move's graph for :func:`max_flow`: its arcs (:func:`grid_arcs`), each node's
+    terminal capacity (cost1 - low from the source, cost0 - low to the sink, ``low`` the
+    smaller cost) and the flow already pushed on the paths of one arc
+    (:func:`_push_neighbours`)."""
+    heads, residual = grid_arcs(node, first, second, capacity)
+    n = len(cost0)
+    terminal = np.empty(n)
+    for p in range(n):
+        low = min(cost0[p], cost1[p])
+        terminal[p] = (cost1[p] - low) - (cost0[p] - low)
+    pushed = _push_neighbours(heads, residual, terminal)
+    return heads, residual, terminal, pushed
+
+
+@njit(cache=True, nogil=True)
 def grid_cut(node, cost0, cost1, first, second, capacity):
     """The minimum cut of one alpha-expansion move (the terms of
     :func:`imagemap.core.kernels.expansion_terms`): whether each node takes alpha (pays
@@ -376,12 +394,44 @@ def grid_cut(node, cost0, cost1, first, second, capacity):
     as with PyMaxflow's ``add_grid_tedges(nodes, cost1 - low, cost0 - low)``,
     ``maxflow()`` and ``get_grid_segments``, ``low`` the smaller of the two costs.
     """
-    heads, residual = grid_arcs(node, first, second, capacity)
-    n = len(cost0)
-    terminal = np.empty(n)
-    for p in range(n):
-        low = min(cost0[p], cost1[p])
-        terminal[p] = (cost1[p] - low) - (cost0[p] - low)
-    pushed = _push_neighbours(heads, residual, terminal)
+    heads, residual, terminal, pushed = grid_graph(node, cost0, cost1, first, second, capacity)
     flow, takes = max_flow(heads, residual, terminal)
     return takes, flow + pushed
+
+
+@njit(cache=True, nogil=True)
+def _halves(heads, middle):
+    """The arcs of the nodes before ``middle`` and of those from it (numbered from 0),
+    each half's arcs into the other left out (-1)."""
+    before = heads[: 4 * middle].copy()
+    for a in range(len(before)):
+        if before[a] >= middle:
+            before[a] = -1
+    after = heads[4 * middle :].copy()
+    for a in range(len(after)):
+        after[a] = after[a] - middle if after[a] >= middle else -1
+    return before, after
+
+
+def grid_cut_halved(node, cost0, cost1, first, second, capacity, beside=None):
+    """:func:`grid_cut` in three parts: the maximum flows of the first half of the nodes
+    (rows above the crop's middle; on ``beside``'s thread, an executor, if given) and of
+    the second (on this one), each within its half (the arcs between the halves left out;
+    the halves' arrays are disjoint), then the maximum flow of the whole graph from the
+    sum of theirs (a flow of the whole graph: only paths across the middle are left to
+    find). A maximum flow found from any flow is a maximum flow, and the cut, the nodes
+    that reach the sink after it, is the same; up to rounding: where two cuts cost the
+    same, float64 rounding may decide between them, as with any other order of pushes
+    (:mod:`imagemap.core.flow`). The same floats with or without ``beside``.
+
+    ``beside`` must not be the thread calling this (it would wait on itself).
+    """
+    heads, residual, terminal, pushed = grid_graph(node, cost0, cost1, first, second, capacity)
+    middle = len(terminal) // 2
+    before, after = _halves(heads, middle)
+    parts = (before, residual[: 4 * middle], terminal[:middle])
+    first_half = None if beside is None else beside.submit(max_flow, *parts)
+    flow_after, _ = max_flow(after, residual[4 * middle :], terminal[middle:])
+    flow_before, _ = max_flow(*parts) if first_half is None else first_half.result()
+    flow, takes = max_flow(heads, residual, terminal)
+    return takes, flow + flow_before + flow_after + pushed
