@@ -1,4 +1,5 @@
-"""A minimum cut of a move's grid graph, in numba: :func:`grid_cut`.
+"""A minimum cut of a move's grid graph, in numba: :func:`grid_cut` (and
+:func:`grid_cut_halved`, its halves on two threads).
 
 One module for one job: the maximum flow / minimum cut of the alpha-expansion moves of
 :mod:`imagemap.core.seams` (Boykov & Kolmogorov 2004, "An experimental comparison of
@@ -25,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["grid_cut"]
+__all__ = ["grid_cut", "grid_cut_halved"]
 
 #: ``parent`` values besides an arc number: in no tree, a tree's root (joined to its
 #: terminal), and an orphan (cut off from its tree during an augmentation).
