@@ -26,10 +26,14 @@ import argparse
 import gc
 import importlib
 import sys
+from typing import TYPE_CHECKING
 
 import imagemap
 from imagemap.core.choices import APPEARANCE_PYRAMIDS, BACKENDS
 from imagemap.errors import InputError
+
+if TYPE_CHECKING:  # annotations only: the parser imports no threading
+    import threading
 
 # The preset and method names below are restated, not imported: their modules make
 # dataclasses (about 15 ms of every start, `imagemap synthesize --help` included). A test
@@ -365,7 +369,7 @@ class lean_start:
     def __init__(self, on: bool) -> None:
         self.on = on
         self.skip = skip_optional_imports(on)
-        self.thread = None  # the warm-up's thread, once started
+        self.thread: threading.Thread | None = None  # the warm-up's thread, once started
 
     def __enter__(self) -> lean_start:
         self.skip.__enter__()
