@@ -93,7 +93,11 @@ _MEMORY_FACTOR = 0.8
 # CPU at 1024^2, 2048^2 and 4096^2 (the last two above the search size). Both time constants
 # scaled by 0.85 from 7.5e-7 and 1.0e-6: 11.7 / 20.0 / 44.9 s (wall +11 %, +15 %, -9 %; CPU
 # -7 %, +3 %, -11 %).
-_SECONDS_PER_FEATURE = 6.4e-7
+# Refitted after the sixth round (2026-11-29: the stages around the engine, the seams' own
+# max-flow), quiet machine (load 1.0-1.1): 8.5 / 15.1 s and 48.2 / 39.3 s (two runs) of wall
+# time at 1024^2, 2048^2 and 4096^2, against 11.8 / 20.1 / 45.0 s estimated (1.38, 1.33 over).
+# 6.4e-7 scaled by 0.75: 8.9 / 17.2 / 42.1 s (+5 %, +14 %, -13 % / +7 %).
+_SECONDS_PER_FEATURE = 4.8e-7
 _SECONDS_OVERHEAD = 0.3
 
 # Above the search size (pyramid.search_size), the full-size finish: bytes per query pixel
