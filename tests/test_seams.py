@@ -268,3 +268,23 @@ def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
     in_turn = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
     np.testing.assert_array_equal(paired, in_turn)
     assert (paired != source).any(axis=-1).mean() > 0.2  # the moves changed many labels
+
+
+def test_two_moves_pair_only_with_a_pixel_between_their_crops():
+    """seams._apart: a move writes labels in its crop and reads one pixel around it, so
+    two moves may run at once only with at least one pixel between their crops (known
+    answers: touching crops, one pixel between, overlapping, apart along one axis)."""
+    from imagemap.core.seams import _apart
+
+    def crop(r0, r1, c0, c1):
+        return slice(r0, r1), slice(c0, c1), 1
+
+    base = crop(0, 10, 0, 10)  # rows and columns 0..9
+    assert not _apart(base, crop(10, 20, 0, 10))  # rows 9 and 10 touch
+    assert not _apart(base, crop(0, 10, 10, 20))  # columns 9 and 10 touch
+    assert not _apart(base, crop(10, 20, 10, 20))  # corners 9,9 and 10,10 touch diagonally
+    assert not _apart(base, crop(5, 15, 5, 15))  # overlap
+    assert _apart(base, crop(11, 20, 0, 10))  # row 10 between: neither writes what the other reads
+    assert _apart(base, crop(0, 10, 11, 20))
+    assert _apart(crop(11, 20, 11, 20), base)  # either order
+    assert _apart(base, crop(11, 20, 5, 15))  # apart in rows, overlapping in columns
