@@ -284,26 +284,25 @@ def test_a_kernel_loaded_lean_gives_the_python_functions_answer():
         assert not registries
 
 
-def test_the_programs_lean_start_refuses_bad_input_and_links_kernels_lean(tmp_path):
+def test_the_programs_lean_start_waits_for_numba(tmp_path):
     # `imagemap synthesize` as the program (main() without argv) starts lean
-    # (cli.lean_start): numba imported on a thread beside the first stages; a run
-    # stopped by bad input still ends with its error (code 2) while that thread works,
-    # and once it has run the kernels load lean (on the numba checked), the optional
-    # imports still skipped.
+    # (cli.lean_start): a run stopped by bad input before the engine imports no numba,
+    # and once numba is imported its kernels load lean (on the numba checked), the hook
+    # gone and the optional imports still skipped.
     code = (
         "import os, sys\n"
         "os.chdir({root!r})\n"  # no .numba_config.yaml here
         "from imagemap.cli import LEAN_LOAD_NUMBA, lean_start, main\n"
         "sys.argv = ['imagemap', 'synthesize', {missing!r}, '--db', {db!r}, '-o', {out!r}]\n"
-        "refused = main() == 2\n"
+        "refused = main() == 2 and 'numba' not in sys.modules\n"
         "with lean_start(True) as start:\n"
-        "    start.thread.join()\n"
+        "    waiting = start.hook in sys.meta_path\n"
         "    import numba\n"
         "    from numba.core import caching\n"
         "    lean = getattr(caching.Cache.load_overload, 'imagemap_lean', False)\n"
         "checked = '.'.join(numba.__version__.split('.')[:2]) in LEAN_LOAD_NUMBA\n"
         "skipped = not {{'yaml', 'charset_normalizer'}} & set(sys.modules)\n"
-        "print(refused, 'imagemap.core.kernels' in sys.modules, lean == checked, skipped)\n"
+        "print(refused, waiting, lean == checked, start.hook not in sys.meta_path, skipped)\n"
     ).format(
         root=str(ROOT / "imagemap"),
         missing=str(tmp_path / "missing_depth.png"),
@@ -311,17 +310,16 @@ def test_the_programs_lean_start_refuses_bad_input_and_links_kernels_lean(tmp_pa
         out=str(tmp_path / "out.png"),
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    result = subprocess.run(
+    out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
-    )
-    assert result.stdout.split()[-4:] == ["True"] * 4
-    assert "missing_depth.png" in result.stderr
+    ).stdout.split()
+    assert out[-5:] == ["True"] * 5
 
 
-def test_the_program_warms_its_kernels_on_a_thread_and_writes_the_same_map(tmp_path):
-    # `imagemap synthesize` as its own process imports numba and the kernels on a thread
-    # beside the first stages (cli.warm): the map is byte for byte the in-process call's,
-    # which has no such thread.
+def test_the_program_writes_the_map_of_the_in_process_call(tmp_path):
+    # `imagemap synthesize` as its own process starts lean (cli.lean_start: optional
+    # imports skipped, unused modules lazy, kernels linked lean): the map is byte for byte
+    # the in-process call's, which changes none of that.
     import numpy as np
 
     from imagemap.cli import main as imagemap_main

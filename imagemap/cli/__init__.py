@@ -26,14 +26,10 @@ import argparse
 import gc
 import importlib
 import sys
-from typing import TYPE_CHECKING
 
 import imagemap
 from imagemap.core.choices import APPEARANCE_PYRAMIDS, BACKENDS
 from imagemap.errors import InputError
-
-if TYPE_CHECKING:  # annotations only: the parser imports no threading
-    import threading
 
 # The preset and method names below are restated, not imported: their modules make
 # dataclasses (about 15 ms of every start, `imagemap synthesize --help` included). A test
@@ -345,19 +341,50 @@ def lean_kernel_loads() -> bool:
     return True
 
 
+class _AfterImport:
+    """A finder on ``sys.meta_path`` that runs ``then()`` once, right after the module
+    ``name`` is first imported (it wraps that module's loader, then leaves the path)."""
+
+    def __init__(self, name: str, then) -> None:
+        self.name, self.then = name, then
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname != self.name:
+            return None
+        self.remove()
+        from importlib.util import find_spec  # deferred: start-up (only when numba comes)
+
+        spec = find_spec(fullname)
+        loader = getattr(spec, "loader", None)
+        if loader is None or not hasattr(loader, "exec_module"):
+            return spec
+        run = loader.exec_module
+
+        def exec_module(module) -> None:
+            run(module)
+            self.then()
+
+        loader.exec_module = exec_module
+        return spec
+
+    def remove(self) -> None:
+        if self in sys.meta_path:
+            sys.meta_path.remove(self)
+
+
 class lean_start:
-    """The start-up of ``imagemap synthesize`` in its own process.
+    """The start-up of ``imagemap synthesize`` in its own process: two tweaks, one reason.
 
     The program runs one command and then ends, so it may set what an importing library
     must not: while this is active (``on``), the optional imports no part of a synthesis
     uses are reported missing and the unused modules made lazy
-    (:class:`skip_optional_imports`), and numba is imported on a thread of its own beside
-    the first stages (:func:`imagemap.cli.warm.warm_kernels`), imagemap's kernels then
-    linked from numba's cache without numba's registry refresh
-    (:func:`lean_kernel_loads`). Both are for the depth maps and the meshes alike (the
-    mesh route's outputs checked the same bytes both ways in fresh processes).
-    Afterwards the optional imports import as before; the lean kernel loads stay (the
-    process ends).
+    (:class:`skip_optional_imports`), and imagemap's kernels are linked from numba's cache
+    without numba's registry refresh
+    (:func:`lean_kernel_loads`, installed as soon as numba is imported: a command that
+    stops at bad input before the engine is imported does not pay for numba's import).
+    Both are for the depth maps and the meshes alike (the mesh route's outputs checked the
+    same bytes both ways in fresh processes). Afterwards the optional imports import as
+    before; the lean kernel loads stay (the process ends).
 
     Parameters
     ----------
@@ -367,19 +394,23 @@ class lean_start:
     """
 
     def __init__(self, on: bool) -> None:
-        self.on = on
         self.skip = skip_optional_imports(on)
-        self.thread: threading.Thread | None = None  # the warm-up's thread, once started
+        self.hook: _AfterImport | None = None
+        if on:
+            if "numba" in sys.modules:
+                lean_kernel_loads()
+            else:
+                self.hook = _AfterImport("numba", lean_kernel_loads)
 
     def __enter__(self) -> lean_start:
         self.skip.__enter__()
-        if self.on:
-            from imagemap.cli.warm import warm_kernels  # deferred: start-up (one command's)
-
-            self.thread = warm_kernels(link=lean_kernel_loads)
+        if self.hook is not None:
+            sys.meta_path.insert(0, self.hook)
         return self
 
     def __exit__(self, *exc) -> None:
+        if self.hook is not None:
+            self.hook.remove()
         self.skip.__exit__(*exc)
 
 
