@@ -264,6 +264,7 @@ def test_an_edit_to_the_rendering_code_renders_the_examples_anew(tmp_path, monke
     import shutil
 
     import imagemap.scene.examples as examples_module
+    from imagemap.cache import source_digest
 
     coloured_sphere(tmp_path / "ball.glb", RED)
     example = MeshExample("ball", tmp_path / "ball.glb", size=(40, 30), cache_dir=tmp_path)
@@ -276,6 +277,7 @@ def test_an_edit_to_the_rendering_code_renders_the_examples_anew(tmp_path, monke
     assert example.cache_path() == installed
     with open(copy / "scene" / "views.py", "a") as views:
         views.write("# an edit\n")
+    source_digest.cache_clear()  # as a new process: the digest is read once per process
     assert example.cache_path() != installed
 
 

@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import hashlib
 import logging
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -60,7 +59,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage, sparse
 
-import imagemap.mesh.padding as padding_code
+from imagemap.cache import cache_dir, source_digest
 from imagemap.core.blend import copy_through, fill_background
 from imagemap.core.engine import ReleasableLevels, synthesize
 from imagemap.core.finecopy import fine_positions
@@ -615,22 +614,24 @@ def _keep_to_used(used, source, at, index, sy, sx, heights, widths):
         sy.flat[moved], sx.flat[moved] = own_y.flat[moved], own_x.flat[moved]
 
 
+#: The code that pads (this module and :mod:`imagemap.mesh.padding`): its source is part of
+#: a padded texture's cache key, so an edit to either makes the paddings anew.
+PADDING_SOURCES = ("mesh/uvspace.py", "mesh/padding.py")
+
+
 def _padded_cache_dir() -> Path:
     """Where the examples' padded textures are cached: ``padded/`` in the library's cache
     (``$IMAGEMAP_CACHE``, default ``~/.cache/imagemap``; the examples' renders are in
     ``meshes/`` there)."""
-    root = os.environ.get("IMAGEMAP_CACHE")
-    return (Path(root) if root else Path.home() / ".cache" / "imagemap") / "padded"
+    return cache_dir() / "padded"
 
 
 def _padded_key(arrays: Sequence[np.ndarray], size: int, reach: int) -> str:
     """The cache key of an example's padded texture: a digest of what the padding reads
     (its vertices, faces, UVs and texture: their dtype, shape and bytes), the size, the
-    reach and the code that pads (this module's and :mod:`imagemap.mesh.padding`'s source:
-    an edit to either makes the paddings anew, with no version number to remember)."""
-    digest = hashlib.sha256()
-    for module in (__file__, padding_code.__file__):
-        digest.update(Path(module).read_bytes())
+    reach and the code that pads (:data:`PADDING_SOURCES`' source: an edit to either makes
+    the paddings anew, with no version number to remember)."""
+    digest = hashlib.sha256(source_digest(PADDING_SOURCES).encode())
     for array in arrays:
         array = np.ascontiguousarray(array)
         digest.update(f"{array.dtype.str}{array.shape}|".encode())

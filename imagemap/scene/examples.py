@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-import imagemap
+from imagemap.cache import PACKAGE, source_digest
+from imagemap.cache import cache_dir as library_cache_dir
 from imagemap.example import Example
 from imagemap.io import InputError, read_npz, write_npz
 from imagemap.materials import NEUTRAL, atlas_normals_to_view
@@ -35,6 +36,7 @@ __all__ = ["RENDER_SOURCES", "MeshExample", "maps_seen", "mesh_examples", "rende
 #: with no version number to remember (a test checks the list against the code a render
 #: runs).
 RENDER_SOURCES = (
+    "cache.py",  # the key itself: a wrong one would reuse a stale render
     "scene/examples.py",
     "scene/views.py",
     "scene/raycast.py",
@@ -43,7 +45,7 @@ RENDER_SOURCES = (
     "tangents.py",
 )
 #: The package folder the sources are read from.
-_PACKAGE = Path(__file__).resolve().parents[1]
+_PACKAGE = PACKAGE
 
 
 def render_digest() -> str:
@@ -55,19 +57,7 @@ def render_digest() -> str:
     >>> len(render_digest())
     24
     """
-    digest = hashlib.sha256()
-    try:
-        for name in RENDER_SOURCES:
-            digest.update(name.encode())
-            digest.update((_PACKAGE / name).read_bytes())
-    except OSError:
-        return f"version {imagemap.__version__}"
-    return digest.hexdigest()[:24]
-
-
-def _default_cache() -> Path:
-    root = os.environ.get("IMAGEMAP_CACHE")
-    return Path(root) if root else Path.home() / ".cache" / "imagemap"
+    return source_digest(RENDER_SOURCES, _PACKAGE)[:24]
 
 
 class MeshExample(Example):
@@ -93,7 +83,7 @@ class MeshExample(Example):
         self.view = view
         self.size = (int(size[0]), int(size[1]))
         self.margin = margin
-        self.cache_dir = Path(cache_dir) if cache_dir is not None else _default_cache()
+        self.cache_dir = Path(cache_dir) if cache_dir is not None else library_cache_dir()
 
     def at_view(self, view: View, size: tuple[int, int] | None = None) -> MeshExample:
         """The same mesh rendered from another view (and size)."""
