@@ -135,9 +135,15 @@ try:  # as `imagemap synthesize`: optional imports skipped, kernels linked lean
     from imagemap.cli import lean_kernel_loads, skip_optional_imports
 except ImportError:  # a checkout from before them
     lean_kernel_loads, skip_optional_imports = None, None
+try:  # ... and the rest of its start (SciPy's docstrings left as they are)
+    from imagemap.cli import lean_start
+except ImportError:  # a checkout from before it
+    lean_start = None
 plan = json.load(open(sys.argv[1]))
 with warnings.catch_warnings(), (
-    skip_optional_imports(True) if skip_optional_imports else contextlib.nullcontext()
+    lean_start(True) if lean_start
+    else skip_optional_imports(True) if skip_optional_imports
+    else contextlib.nullcontext()
 ):
     warnings.simplefilter("ignore")  # deprecated aliases (numpy.core...) imported by name
     for name in plan["modules"]:

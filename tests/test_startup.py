@@ -296,13 +296,13 @@ def test_the_programs_lean_start_waits_for_numba(tmp_path):
         "sys.argv = ['imagemap', 'synthesize', {missing!r}, '--db', {db!r}, '-o', {out!r}]\n"
         "refused = main() == 2 and 'numba' not in sys.modules\n"
         "with lean_start(True) as start:\n"
-        "    waiting = start.hook in sys.meta_path\n"
+        "    waiting = start.hooks[0] in sys.meta_path\n"
         "    import numba\n"
         "    from numba.core import caching\n"
         "    lean = getattr(caching.Cache.load_overload, 'imagemap_lean', False)\n"
         "checked = '.'.join(numba.__version__.split('.')[:2]) in LEAN_LOAD_NUMBA\n"
         "skipped = not {{'yaml', 'charset_normalizer'}} & set(sys.modules)\n"
-        "print(refused, waiting, lean == checked, start.hook not in sys.meta_path, skipped)\n"
+        "print(refused, waiting, lean == checked, start.hooks[0] not in sys.meta_path, skipped)\n"
     ).format(
         root=str(ROOT / "imagemap"),
         missing=str(tmp_path / "missing_depth.png"),
@@ -342,3 +342,74 @@ def test_the_program_writes_the_map_of_the_in_process_call(tmp_path):
     )
     assert imagemap_main([*argv, "-o", str(tmp_path / "call.png")]) == 0
     assert (tmp_path / "program.png").read_bytes() == (tmp_path / "call.png").read_bytes()
+
+
+_SCIPY_DOCS_PROBE = """
+import ast, hashlib, inspect, json, sys
+import numpy as np
+import scipy._lib._docscrape as docscrape
+from imagemap.cli import LEAN_DOCS_SCIPY, lean_start
+
+parses = [0]
+parse = docscrape.FunctionDoc.__init__
+def counted(self, *args, **kwargs):
+    parses[0] += 1
+    return parse(self, *args, **kwargs)
+docscrape.FunctionDoc.__init__ = counted
+
+with lean_start({on}):
+    import scipy.fft, scipy.linalg, scipy.ndimage, scipy.special
+    import scipy._lib._array_api as array_api
+imported = parses[0]
+@array_api.xp_capabilities()
+def later():
+    '''A function SciPy decorates after the start.'''
+source = ast.parse(open(scipy.linalg._basic.__file__).read())
+solve_own = next(ast.get_docstring(node) for node in ast.walk(source)
+                 if isinstance(node, ast.FunctionDef) and node.name == "solve_triangular")
+table = array_api.xp_capabilities_table
+rng = np.random.default_rng(0)
+image, matrix = rng.random((40, 30)), rng.random((5, 5)) + 5 * np.eye(5)
+outputs = (scipy.ndimage.gaussian_filter(image, 2.0), scipy.ndimage.median_filter(image, 5),
+           scipy.linalg.solve(matrix, np.arange(5.0)), scipy.fft.dctn(image, norm="ortho"),
+           scipy.special.erf(image))
+print(json.dumps({{
+    "checked": ".".join(scipy.__version__.split(".")[:2]) in LEAN_DOCS_SCIPY,
+    "parses": imported,
+    "notes": sum("Array API Standard" in (f.__doc__ or "") for f in table if f is not later),
+    "table": sorted(f"{{getattr(f, '__module__', '')}}.{{f.__name__}}" for f in table),
+    "gaussian_filter": scipy.ndimage.gaussian_filter in table,
+    "solve_own": inspect.cleandoc(scipy.linalg.solve_triangular.__doc__) == solve_own,
+    "later_note": "Array API Standard Support" in later.__doc__,
+    "outputs": hashlib.sha256(b"".join(o.tobytes() for o in outputs)).hexdigest(),
+}}))
+"""
+
+
+def test_a_synthesis_leaves_scipys_docstrings_as_they_are():
+    # SciPy 1.17's decorators parse and re-render the docstring of each function they
+    # decorate at import (numpydoc's FunctionDoc: an array-API note, a batch note).
+    # `imagemap synthesize` (cli.lean_start) lets them keep their own docstrings: no
+    # parse, the capabilities table filled all the same, the same results; afterwards
+    # SciPy's notes come back. Without it SciPy is untouched.
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    runs = {}
+    for on in (True, False):
+        out = subprocess.run(
+            [sys.executable, "-c", _SCIPY_DOCS_PROBE.format(on=on)],
+            capture_output=True,
+            text=True,
+            check=True,
+            env=env,
+        ).stdout
+        runs[on] = json.loads(out.splitlines()[-1])
+    lean, standard = runs[True], runs[False]
+    assert standard["parses"] > 250 and standard["notes"] == len(standard["table"]) - 1 > 200
+    assert not standard["solve_own"] and standard["later_note"]
+    assert lean["table"] == standard["table"] and lean["gaussian_filter"]
+    assert lean["outputs"] == standard["outputs"]
+    assert lean["later_note"]  # restored after the start
+    if lean["checked"]:
+        assert lean["parses"] == 0 and lean["notes"] == 0 and lean["solve_own"]
+    else:
+        assert lean["parses"] == standard["parses"]

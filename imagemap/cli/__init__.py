@@ -372,19 +372,76 @@ class _AfterImport:
             sys.meta_path.remove(self)
 
 
+#: SciPy versions (major.minor) on which :func:`own_scipy_docstrings` was checked: every
+#: decorated function of a synthesis's SciPy modules keeps its own docstring, SciPy's
+#: capabilities table is filled as before and the same bytes out
+#: (``benchmarks/identity.py``). Elsewhere SciPy renders its notes as it does.
+LEAN_DOCS_SCIPY = ("1.17",)
+
+#: The SciPy modules whose decorators parse and re-render, at import, the docstring of
+#: every function they decorate with numpydoc's ``FunctionDoc`` (imported there by name):
+#: ``_array_api.xp_capabilities`` appends an array-API support note (213 functions in a
+#: 200x150 synthesis's ``scipy.ndimage``, ``scipy.special``, ``scipy.fft``), ``_util``'s
+#: batching and ``rng`` decorators a batch note (71, ``scipy.linalg``). 284 parses, about
+#: 0.1 s of CPU of every synthesis's imports, for docstrings no part of it reads.
+SCIPY_DOCSTRING_MODULES = ("scipy._lib._util", "scipy._lib._array_api")
+
+
+class _OwnDocstring:
+    """A stand-in for numpydoc's ``FunctionDoc`` in :data:`SCIPY_DOCSTRING_MODULES`'
+    decorators: it parses nothing, drops the sections they add to, and renders as the
+    function's own docstring (after a first line, which the decorators strip as the
+    signature; they also strip the docstring's leading blank space, which
+    ``inspect.cleandoc`` strips anyway, and a missing docstring becomes empty)."""
+
+    def __init__(self, func) -> None:
+        self.text = getattr(func, "__doc__", None) or ""
+
+    def __getitem__(self, section: str) -> list:
+        return []  # a fresh list: what a decorator appends to it goes nowhere
+
+    def __str__(self) -> str:
+        return "\n" + self.text
+
+
+def own_scipy_docstrings(name: str) -> None:
+    """Let the SciPy module ``name`` (of :data:`SCIPY_DOCSTRING_MODULES`, imported just
+    now, before any module that uses its decorators) decorate functions without
+    re-rendering their docstrings (:class:`_OwnDocstring`), on the SciPy versions of
+    :data:`LEAN_DOCS_SCIPY`. The decorators' other work (the capabilities table, the
+    batching wrappers) is unchanged. Undone by :func:`scipy_docstrings_restored`."""
+    scipy = sys.modules.get("scipy")
+    version = ".".join(str(getattr(scipy, "__version__", "")).split(".")[:2])
+    module = sys.modules.get(name)
+    if version in LEAN_DOCS_SCIPY and hasattr(module, "FunctionDoc"):
+        module.FunctionDoc = _OwnDocstring  # type: ignore[union-attr]
+
+
+def scipy_docstrings_restored() -> None:
+    """Give :data:`SCIPY_DOCSTRING_MODULES` their ``FunctionDoc`` back: functions SciPy
+    decorates from now on get its notes (those decorated meanwhile keep their own)."""
+    for name in SCIPY_DOCSTRING_MODULES:
+        module = sys.modules.get(name)
+        if getattr(module, "FunctionDoc", None) is _OwnDocstring:
+            module.FunctionDoc = sys.modules["scipy._lib._docscrape"].FunctionDoc  # type: ignore[union-attr]
+
+
 class lean_start:
-    """The start-up of ``imagemap synthesize`` in its own process: two tweaks, one reason.
+    """The start-up of ``imagemap synthesize`` in its own process: three tweaks, one reason.
 
     The program runs one command and then ends, so it may set what an importing library
     must not: while this is active (``on``), the optional imports no part of a synthesis
     uses are reported missing and the unused modules made lazy
-    (:class:`skip_optional_imports`), and imagemap's kernels are linked from numba's cache
-    without numba's registry refresh
+    (:class:`skip_optional_imports`); SciPy's decorators leave the docstrings of the
+    functions they decorate as they are (:func:`own_scipy_docstrings`, installed as
+    each of :data:`SCIPY_DOCSTRING_MODULES` is imported); and imagemap's kernels are
+    linked from numba's cache without numba's registry refresh
     (:func:`lean_kernel_loads`, installed as soon as numba is imported: a command that
     stops at bad input before the engine is imported does not pay for numba's import).
-    Both are for the depth maps and the meshes alike (the mesh route's outputs checked the
+    They are for the depth maps and the meshes alike (the mesh route's outputs checked the
     same bytes both ways in fresh processes). Afterwards the optional imports import as
-    before; the lean kernel loads stay (the process ends).
+    before and SciPy renders its docstrings again; the lean kernel loads stay (the process
+    ends).
 
     Parameters
     ----------
@@ -395,22 +452,28 @@ class lean_start:
 
     def __init__(self, on: bool) -> None:
         self.skip = skip_optional_imports(on)
-        self.hook: _AfterImport | None = None
+        self.hooks: list[_AfterImport] = []
         if on:
             if "numba" in sys.modules:
                 lean_kernel_loads()
             else:
-                self.hook = _AfterImport("numba", lean_kernel_loads)
+                self.hooks.append(_AfterImport("numba", lean_kernel_loads))
+            # A module imported already has decorated its functions: nothing to skip.
+            self.hooks += [
+                _AfterImport(name, lambda name=name: own_scipy_docstrings(name))
+                for name in SCIPY_DOCSTRING_MODULES
+                if name not in sys.modules
+            ]
 
     def __enter__(self) -> lean_start:
         self.skip.__enter__()
-        if self.hook is not None:
-            sys.meta_path.insert(0, self.hook)
+        sys.meta_path[:0] = self.hooks
         return self
 
     def __exit__(self, *exc) -> None:
-        if self.hook is not None:
-            self.hook.remove()
+        for hook in self.hooks:
+            hook.remove()
+        scipy_docstrings_restored()
         self.skip.__exit__(*exc)
 
 
