@@ -235,8 +235,10 @@ def test_a_folder_of_pictures_does_not_import_the_mesh_modules(tmp_path):
 def test_a_synthesis_skips_the_optional_imports_no_part_of_it_uses():
     # numba looks for PyYAML: `imagemap synthesize` reports it missing while it imports.
     # SciPy's array-API layer reads every NumPy attribute, numpy.testing and numpy.f2py
-    # among them: they are lazy, so their code (f2py's Fortran parser, which looked for
-    # charset_normalizer; numpy.testing's unittest) never runs, yet they work when used.
+    # among them, and numba imports importlib.metadata for its extensions: they are lazy,
+    # so their code (f2py's Fortran parser, which looked for charset_normalizer;
+    # numpy.testing's unittest; importlib.metadata's email) never runs, yet they work
+    # when used.
     code = (
         "import os; os.chdir({!r})\n"  # no .numba_config.yaml here
         "from imagemap.cli import skip_optional_imports\n"
@@ -247,13 +249,17 @@ def test_a_synthesis_skips_the_optional_imports_no_part_of_it_uses():
         "print(unused)\n"
     ).format(str(ROOT / "imagemap"))
     loaded = _modules_after(code, top_level=False)
-    assert {"numba", "scipy.ndimage", "numpy.testing", "numpy.f2py"} <= loaded
+    lazy = {"numpy.testing", "numpy.f2py", "importlib.metadata"}
+    assert {"numba", "scipy.ndimage"} | lazy <= loaded
     assert not {n for n in loaded if n.startswith(("yaml", "charset_normalizer", "unittest"))}
-    assert not {n for n in loaded if n.startswith(("numpy.f2py.", "numpy.testing."))}
+    assert not {n for n in loaded if n.startswith(tuple(f"{name}." for name in lazy))}
+    assert "email" not in loaded
     used = _modules_after(
-        code + "import numpy.testing\nnumpy.testing.assert_equal(1, 1)", top_level=False
+        code + "import numpy.testing\nnumpy.testing.assert_equal(1, 1)\n"
+        "import importlib.metadata\nprint(importlib.metadata.version('numpy'))",
+        top_level=False,
     )
-    assert "numpy.testing._private.utils" in used
+    assert {"numpy.testing._private.utils", "importlib.metadata._meta"} <= used
 
 
 def test_a_kernel_loaded_lean_gives_the_python_functions_answer():
@@ -271,17 +277,24 @@ def test_a_kernel_loaded_lean_gives_the_python_functions_answer():
         "cells = np.array([0, 0, 0, 1, 1], np.int64), np.array([0, 0, 1, 1, 2, 2], np.int64)\n"
         "got, want = kernel(colours, host, *cells), kernel.py_func(colours, host, *cells)\n"
         "import sys\n"
+        "from numba.core import entrypoints\n"
         "hit = kernel.stats.cache_hits.most_common(1) != []\n"
-        "print(lean, np.array_equal(got, want), hit, 'numba.misc.cffiimpl' in sys.modules)\n"
+        "registries = 'numba.misc.cffiimpl' in sys.modules\n"
+        "scanned = entrypoints._already_initialized\n"
+        "import numba\n"
+        "other = numba.njit(lambda x: x + 1)(1) == 2 and entrypoints._already_initialized\n"
+        "print(lean, np.array_equal(got, want), hit, registries, scanned, other)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
     ).stdout.split()
-    lean, same, from_cache, registries = (word == "True" for word in out[-4:])
+    lean, same, from_cache, registries, scanned, other = (word == "True" for word in out[-6:])
     assert same
+    assert other  # another function's first call: numba's extensions loaded, as always
     if lean and from_cache:
         assert not registries
+        assert not scanned  # imagemap's kernel from the cache: no extension scan
 
 
 def test_the_programs_lean_start_waits_for_numba(tmp_path):

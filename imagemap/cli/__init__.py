@@ -216,15 +216,18 @@ SKIPPED_OPTIONAL_IMPORTS = ("yaml",)
 #: Modules that the libraries a synthesis imports load whole although no part of a
 #: synthesis uses them: SciPy's array-API layer (imported with ``scipy.ndimage``) copies
 #: every NumPy attribute, which imports ``numpy.testing`` (with ``unittest``) and
-#: ``numpy.f2py`` (with its Fortran parser, which looked for ``charset_normalizer``).
-#: While ``imagemap synthesize`` runs in its own process they are made lazy
+#: ``numpy.f2py`` (with its Fortran parser, which looked for ``charset_normalizer``);
+#: numba imports ``importlib.metadata`` (with ``email``, ``socket``, ``zipfile``: about
+#: 0.02 s of CPU) for its extensions' entry points, which imagemap's kernels linked from
+#: the cache do not look up (:func:`lean_kernel_loads`; numba's own path reads it as
+#: before). While ``imagemap synthesize`` runs in its own process they are made lazy
 #: (:class:`importlib.util.LazyLoader`): the module object is in place at once and its
 #: code runs on the first attribute read, which a synthesis never makes. Not here:
 #: ``numpy.ma`` (``np.median`` reads it) and ``scipy.special`` / ``scipy.fft`` (the
 #: Poisson blend's DCTs import both). Only imagemap's kernel threads run beside the
 #: main thread, and they read none of these (the lazy load is thread-safe only from
 #: Python 3.12 on).
-LAZY_MODULES = ("numpy.testing", "numpy.f2py")
+LAZY_MODULES = ("numpy.testing", "numpy.f2py", "importlib.metadata")
 
 
 def _defer_module(name: str) -> None:
@@ -306,8 +309,13 @@ def lean_kernel_loads() -> bool:
     of imagemap's (its function in an ``imagemap.`` module) is loaded after only the
     runtime it links against is set up (``rtsys.initialize``, which numba's refresh
     does first); any other function, a kernel not in the cache (numba's compiler
-    refreshes itself) or a load that fails takes numba's own path. Set by the program
-    for ``imagemap synthesize`` (it owns the process; :class:`lean_start`), not on import.
+    refreshes itself) or a load that fails takes numba's own path. Before a first call
+    numba also runs its extensions' entry points (``entrypoints.init_all``: a scan of
+    every installed package's metadata, about 0.01 s, and the import of
+    ``importlib.metadata``); a kernel of imagemap's linked from the cache does not need
+    them, and one not in the cache runs them before numba compiles it, as numba would.
+    Set by the program for ``imagemap synthesize`` (it owns the process;
+    :class:`lean_start`), not on import.
 
     Returns
     -------
@@ -316,7 +324,7 @@ def lean_kernel_loads() -> bool:
         :data:`LEAN_LOAD_NUMBA`).
     """
     import numba  # deferred: start-up (only a synthesis loads kernels)
-    from numba.core import caching  # deferred: start-up (as above)
+    from numba.core import caching, dispatcher, entrypoints  # deferred: start-up (as above)
     from numba.core.runtime import rtsys  # deferred: start-up (as above)
 
     if ".".join(numba.__version__.split(".")[:2]) not in LEAN_LOAD_NUMBA:
@@ -332,12 +340,25 @@ def lean_kernel_loads() -> bool:
         try:
             rtsys.initialize(target_context)
             with self._guard_against_spurious_io_errors():
-                return self._load_overload(sig, target_context)
+                overload = self._load_overload(sig, target_context)
         except Exception:  # numba's own load, with its refresh, decides
             return standard(self, sig, target_context)
+        if overload is None:  # not in the cache: numba compiles, its extensions loaded first
+            entrypoints.init_all()
+        return overload
 
     load_overload.imagemap_lean = True  # type: ignore[attr-defined]
     caching.Cache.load_overload = load_overload  # type: ignore[method-assign]
+    # numba's stubs do not declare the hook (numba 0.68: _DispatcherBase's, before a first call)
+    run_entry_points = dispatcher.Dispatcher._compilation_chain_init_hook  # type: ignore[attr-defined]
+
+    def compilation_chain_init_hook(self):
+        module = getattr(getattr(self, "py_func", None), "__module__", None) or ""
+        cached = isinstance(getattr(self, "_cache", None), caching.Cache)
+        if not (cached and module.startswith("imagemap.")):
+            run_entry_points(self)
+
+    dispatcher.Dispatcher._compilation_chain_init_hook = compilation_chain_init_hook  # type: ignore[attr-defined]
     return True
 
 
