@@ -405,10 +405,12 @@ def _feature_blocks(n: int, products: list[int]) -> list[tuple[int, int]]:
     ``_PART_ROWS`` rows where every part's products (``products``: multiply-adds per
     row of each) stay above ``_SMALL_PRODUCT`` (into fewer parts where they would not;
     a block whose halves would not stays whole). The threads then hold a part's
-    scratch each, not a whole block's. A row's product is the same in a part as in the
-    whole block (OpenBLAS's products sum each row alike at any number of rows above the
-    small-matrix kernels'), and a row takes the small-matrix kernels only where its
-    whole block does: the same bytes as whole blocks.
+    scratch each, not a whole block's. The blocks are the same at any thread count, so
+    the bytes are too. On the Intel CPUs measured a row's product is also the same in a
+    part as in the whole block (OpenBLAS's products sum each row alike at any number of
+    rows above the small-matrix kernels', and a row takes those kernels only where its
+    whole block does); on AMD EPYC's OpenBLAS kernels the sums follow the row count, so
+    the bytes there are these parts' (equal to the whole blocks' to float32 rounding).
 
     Examples
     --------

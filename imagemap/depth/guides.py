@@ -436,9 +436,11 @@ def depth_mappings(
 
 _ROWS = 256  # rows per block of the colour conversions
 #: skimage.color's BT.601 matrices: ``ycbcr_from_rgb``, and ``rgb_from_ycbcr``, its inverse as
-#: ``scipy.linalg.inv`` makes it (NumPy's inverse differs in the last bits), to the last bit
-#: (a test checks them against skimage's). The conversions then need no ``skimage.color``,
-#: whose import (with ``skimage.util``) is a fresh synthesis's only use of it.
+#: ``scipy.linalg.inv`` makes it on Intel CPUs (NumPy's inverse differs in the last bits),
+#: held here so that the maps' bytes do not follow the CPU's LAPACK kernels (on AMD EPYC
+#: skimage's own inverse differs by 5e-20 in two near-zero entries; the conversions' float32
+#: values are the same: a test checks them against skimage's). The conversions then need no
+#: ``skimage.color``, whose import (with ``skimage.util``) is a fresh synthesis's only use.
 _YCBCR_FROM_RGB = np.array(
     [[65.481, 128.553, 24.966], [-37.797, -74.203, 112.0], [112.0, -93.786, -18.214]]
 )
