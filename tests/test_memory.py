@@ -695,3 +695,35 @@ def test_upsampled_on_a_box_is_the_whole_maps_box():
     box = (slice(13, register._ROWS + 31), slice(5, 70))
     whole = register._upsampled(grid, 3.0, shape)
     assert np.array_equal(register._upsampled(grid, 3.0, shape, box), whole[box])
+
+
+@pytest.mark.parametrize("angle, scale, mirrored", [(23.0, 1.3, False), (-71.5, 0.8, True)])
+def test_resampled_depth_in_row_blocks_equals_the_whole_grids_formula(
+    monkeypatch, angle, scale, mirrored
+):
+    """resample_depth a few rows at a time, from the nearest object pixels' indices
+    alone, gives the bytes of the whole grid's interpolation (the distances made too)."""
+    from scipy import ndimage
+
+    from imagemap.depth import pose as posing
+
+    yy, xx = np.mgrid[:70, :90]
+    depth = np.where(((yy - 33) / 20.0) ** 2 + ((xx - 41) / 31.0) ** 2 < 1, 1 + xx / 90.0, 0)
+    depth = depth.astype(np.float32)
+    found = posing.Pose((33.0, 41.0), (40.0, 52.0), scale, angle, mirrored)
+    frame = posing.canonical_frame(depth > 0, found, margin=6.0, align=4)
+    mask = depth > 0
+    _, (iy, ix) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    filled = depth[iy, ix].astype(np.float32)
+    qy, qx = frame.to_query()
+    values = ndimage.map_coordinates(filled, [qy, qx], order=1, mode="nearest")
+    inside = ndimage.map_coordinates(mask.astype(np.float32), [qy, qx], order=1, cval=0.0)
+    expected = np.where(inside > 0.5, values, 0.0).astype(np.float32)
+    monkeypatch.setattr(posing, "_ROWS", 7)  # uneven blocks: the frame is not a multiple
+    assert frame.shape[0] % 7 != 0 and frame.shape[0] > 3 * 7
+    resampled = posing.resample_depth(depth, frame)
+    assert resampled.dtype == np.float32 and 0 < (resampled > 0).sum() < resampled.size
+    assert np.array_equal(resampled, expected)
+    rows = slice(14, 21)
+    part_y, part_x = frame.to_query(rows)
+    assert np.array_equal(part_y, qy[rows]) and np.array_equal(part_x, qx[rows])

@@ -364,7 +364,9 @@ def _fine(state: State, config: DepthConfig) -> State:
     missing = source[..., 0] < 0
     if missing.any():
         reach = ndimage.binary_dilation(small_mask, iterations=2) & missing
-        _, (iy, ix) = ndimage.distance_transform_edt(missing, return_indices=True)
+        iy, ix = ndimage.distance_transform_edt(
+            missing, return_distances=False, return_indices=True
+        )
         source[reach] = source[iy[reach], ix[reach]]
     state.source = fine_source(source, factor, shape, [e.shape for e in state.chosen])
     del source
@@ -615,7 +617,9 @@ def _warp_copy(state: State, config: DepthConfig) -> State:
     height, width = example.mask.shape
     iy = np.clip(np.rint(ey), 0, height - 1).astype(np.int64)
     ix = np.clip(np.rint(ex), 0, width - 1).astype(np.int64)
-    _, (ny, nx) = ndimage.distance_transform_edt(~example.mask, return_indices=True)
+    ny, nx = ndimage.distance_transform_edt(
+        ~example.mask, return_distances=False, return_indices=True
+    )  # the indices only: SciPy's distances are three more (2, H, W) arrays
     source = np.stack([np.zeros_like(iy), ny[iy, ix], nx[iy, ix]], axis=-1).astype(np.int32)
     state.exemplars = [example_ycbcr(example)]
     state.source = source

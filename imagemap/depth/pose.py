@@ -355,9 +355,11 @@ class CanonicalFrame:
     origin: tuple[int, int]
     shape: tuple[int, int]
 
-    def to_query(self) -> tuple[np.ndarray, np.ndarray]:
-        """Query coordinates (y, x) of every canonical pixel, (H_c, W_c) each."""
-        ys, xs = np.mgrid[0 : self.shape[0], 0 : self.shape[1]].astype(np.float64)
+    def to_query(self, rows: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Query coordinates (y, x) of every canonical pixel, (H_c, W_c) each; with
+        ``rows``, of those rows only (the same values as the whole grid's)."""
+        start, stop, _ = (rows or slice(None)).indices(self.shape[0])
+        ys, xs = np.mgrid[start:stop, 0 : self.shape[1]].astype(np.float64)
         return self.pose.inverse(ys + self.origin[0], xs + self.origin[1])
 
     def from_query(self, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -413,17 +415,33 @@ def canonical_frame(mask: np.ndarray, pose: Pose, margin: float, align: int = 1)
     return CanonicalFrame(pose=pose, origin=(y0, x0), shape=(y1 - y0, x1 - x0))
 
 
+#: Rows of a frame resampled at a time (the canonical frame's in :func:`resample_depth`,
+#: the query's in :func:`unpose`): bounded float64 temporaries at 4096^2.
+_ROWS = 512
+
+
 def resample_depth(depth: np.ndarray, frame: CanonicalFrame) -> np.ndarray:
     """The query's depth on the canonical grid: interpolated inside its object (the
     background continued from it first, so the outline is not averaged with 0), 0 outside.
     """
     mask = depth > 0
-    _, (iy, ix) = ndimage.distance_transform_edt(~mask, return_indices=True)
-    filled = depth[iy, ix].astype(np.float32)
-    qy, qx = frame.to_query()
-    values = ndimage.map_coordinates(filled, [qy, qx], order=1, mode="nearest")
-    inside = ndimage.map_coordinates(mask.astype(np.float32), [qy, qx], order=1, cval=0.0)
-    return np.where(inside > 0.5, values, 0.0).astype(np.float32)
+    # The nearest object pixel's indices only: the distances (SciPy makes them in float64
+    # from three more (2, H, W) arrays) were most of the pose stage's peak at 4096^2.
+    iy, ix = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
+    filled = depth[iy, ix].astype(np.float32, copy=False)
+    del iy, ix
+    inside_mask = mask.astype(np.float32)
+    del mask
+    # A block of the canonical frame's rows at a time: no full-size float64 coordinates
+    # (four of them, and SciPy's stacked copy of each pair).
+    out = np.empty(frame.shape, np.float32)
+    for y0 in range(0, frame.shape[0], _ROWS):
+        rows = slice(y0, y0 + _ROWS)
+        qy, qx = frame.to_query(rows)
+        values = ndimage.map_coordinates(filled, [qy, qx], order=1, mode="nearest")
+        inside = ndimage.map_coordinates(inside_mask, [qy, qx], order=1, cval=0.0)
+        out[rows] = np.where(inside > 0.5, values, 0.0)
+    return out
 
 
 @dataclass
@@ -488,8 +506,6 @@ def _read_uncached(example: Any, name: str) -> Any:
 #: interpolated (twice the example's size would show 2 x 2 blocks); a smaller one
 #: low-passed first (skipped pixels would alias).
 COPY_RANGE = 1.5
-#: Rows of the query's frame brought back at a time (bounded temporaries at 4096^2).
-_ROWS = 512
 
 
 def unpose(
