@@ -584,12 +584,16 @@ def test_silhouette_band_equals_the_distance_transforms(saturation):
         np.testing.assert_array_equal(silhouette_band(mask, saturation), expected)
 
 
-def test_the_blends_shifted_copies_are_copy_through_clipped():
+@pytest.mark.parametrize("piece", [None, 5])
+def test_the_blends_shifted_copies_are_copy_through_clipped(monkeypatch, piece):
     """_copy_channel reads each source from its exemplar's flat values: the values of
     copy_through shifted by (dy, dx) and clipped to the exemplar, the reference where
-    a pixel has no source; exemplars of different sizes, and a grey one."""
+    a pixel has no source; exemplars of different sizes, and a grey one; whole groups or
+    a few pixels at a time."""
     from imagemap.core import poisson
 
+    if piece is not None:
+        monkeypatch.setattr(poisson, "_PIECE", piece)
     rng = np.random.default_rng(9)
     exemplars = [rng.random((13, 17, 3)).astype(np.float32), rng.random((9, 6, 3))]
     source = np.stack(
@@ -611,6 +615,34 @@ def test_the_blends_shifted_copies_are_copy_through_clipped():
     assert np.array_equal(
         found, copy_through([exemplars[0][..., 0]], np.maximum(source, 0) * [0, 1, 1], 1, 0)
     )
+
+
+def test_the_blend_written_over_its_reference_is_the_same_map():
+    """seamless_copy(out=reference) reads each channel of the reference before writing
+    it: the same bytes as a fresh result, edges kept and an object's outline too."""
+    rng = np.random.default_rng(5)
+    exemplars = [rng.random((40, 50, 3)).astype(np.float32), rng.random((30, 44, 3))]
+    source = np.stack(
+        [
+            rng.integers(-1, 2, (36, 41)),
+            rng.integers(0, 30, (36, 41)),
+            rng.integers(0, 44, (36, 41)),
+        ],
+        axis=-1,
+    ).astype(np.int32)
+    source[8:20, 5:30, 0] = 0  # a coherent block: copied gradients to keep
+    source[8:20, 5:30, 1:] = np.stack(np.mgrid[3:15, 10:35], axis=-1)
+    mask = np.zeros((36, 41), bool)
+    mask[4:30, 3:38] = True
+    reference = rng.random((36, 41, 3)).astype(np.float32)
+    options = dict(scale=5.0, edge_support=0.3, mask=mask)
+    expected = seamless_copy(exemplars, source, reference, **options)
+    given = reference.copy()
+    found = seamless_copy(exemplars, source, given, out=given, **options)
+    assert found is given and not np.array_equal(found, reference)
+    assert np.array_equal(found, expected)
+    with pytest.raises(ValueError, match="out"):
+        seamless_copy(exemplars, source, reference, out=reference.astype(np.float64))
 
 
 def test_colour_conversions_are_skimages_without_importing_it():

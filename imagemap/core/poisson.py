@@ -51,6 +51,7 @@ def seamless_copy(
     edge_contrast: float = 2.0,
     edge_floor: float = 0.05,
     mask: np.ndarray | None = None,
+    out: np.ndarray | None = None,
 ) -> np.ndarray:
     """Copy exemplar pixels through a source map, blending the seams in the gradient domain.
 
@@ -105,10 +106,15 @@ def seamless_copy(
         The object. Across its outline the target difference is the reference's
         own step: the outline is not a seam to blend across, so colours copied
         beside the object (its margin) do not bleed into it.
+    out : ndarray, (H, W, C) float32, optional
+        Where to write the result: it may be ``reference`` itself (each channel of the
+        reference is read before that channel is written), which saves the result's
+        allocation on a large map's peak.
 
     Returns
     -------
     ndarray, (H, W, C) float32
+        ``out`` when given.
     """
     from imagemap.core.solver import (
         trim_heap as _trim_heap,
@@ -139,24 +145,31 @@ def seamless_copy(
     # One channel at a time (a third of the memory of all at once), and within a channel
     # one side's gradient at a time; the reference is made float64 a channel at a time.
     # Only the choice of the stronger gradient across a seam couples the channels (it
-    # compares their summed squares), so a first pass sums those squares.
-    norms = [np.zeros((h, w - 1)), np.zeros((h, w - 1)), np.zeros((h - 1, w)), np.zeros((h - 1, w))]
-    for channel in range(n_channels):
-        ref = reference[..., channel].astype(np.float64)
-        for norm, difference in zip(norms, _side_gradients(groups, has, ref, channel), strict=True):
-            norm += np.square(difference, out=difference)
-        del difference
-    right_wins = norms[0] >= norms[1]
-    down_wins = norms[2] >= norms[3]
-    strongest = None
-    if edge_support > 0:  # the sides are chosen: each direction's stronger side, in place
-        strongest = (
-            np.maximum(norms[0], norms[1], out=norms[0]),
-            np.maximum(norms[2], norms[3], out=norms[2]),
-        )
-    del norms
+    # compares their summed squares), so a first pass sums those squares, one direction
+    # at a time: two full-size float64 sums held, not four (each channel's copy is made
+    # once per direction).
+    wins, strongest = [], []
+    for axis in (1, 0):
+        shape = (h, w - 1) if axis == 1 else (h - 1, w)
+        ahead, behind = np.zeros(shape), np.zeros(shape)
+        for channel in range(n_channels):
+            ref = reference[..., channel].astype(np.float64)
+            sides = _side_gradients(groups, has, ref, channel, (axis,))
+            del ref
+            for norm in (ahead, behind):
+                difference = next(sides)
+                norm += np.square(difference, out=difference)
+                # Freed before the next side's copy is made (a zip over the sides held
+                # it until then: a full-size float64 array more at the blend's peak).
+                del difference
+            del sides
+        wins.append(ahead >= behind)
+        if edge_support > 0:  # the sides are chosen: the stronger side's sum, in place
+            strongest.append(np.maximum(ahead, behind, out=ahead))
+        del ahead, behind
+    right_wins, down_wins = wins
     edges = None
-    if strongest is not None:
+    if strongest:
         edges = _supported_edges(
             groups,
             has,
@@ -172,7 +185,10 @@ def seamless_copy(
     # -L is diagonal in the DCT-II basis: eigenvalues (2 - 2cos(pi u / H)) + (2 - 2cos(pi v / W)).
     eig_y = 2.0 - 2.0 * np.cos(np.pi * np.arange(h) / h)
     eig_x = 2.0 - 2.0 * np.cos(np.pi * np.arange(w) / w)
-    out = np.empty((h, w, n_channels), dtype=np.float32)
+    if out is None:
+        out = np.empty((h, w, n_channels), dtype=np.float32)
+    elif out.shape != reference.shape or out.dtype != np.float32:
+        raise ValueError(f"out {out.shape} {out.dtype}: not float32 of the reference's shape")
     for channel in range(n_channels):
         ref = reference[..., channel].astype(np.float64)
         gradients = _side_gradients(groups, has, ref, channel)
@@ -265,21 +281,31 @@ def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
     # The reference's values, then every pixel with a source its exemplar's: the pixels
     # of the groups are those of ``has``. Each source read from the exemplar's flat
     # values (one index per pixel: row, column, channel), not by three index arrays:
-    # the same values, a quarter of the time.
+    # the same values, a quarter of the time. The indices are made as intp (np.take
+    # converts any other to a whole intp copy), a piece of the group at a time.
     out = ref.copy()
     flat_out = out.reshape(-1)
     for exemplar, pixels, sy, sx in groups:
         eh, ew, channels = exemplar.shape
-        big = eh * ew * channels > np.iinfo(np.int32).max
-        index = np.clip(sy + dy, 0, eh - 1)  # clipped as copy_through: any source
-        if big:
-            index = index.astype(np.int64)
-        index *= ew
-        index += np.clip(sx + dx, 0, ew - 1)
-        index *= channels
-        index += channel
-        flat_out[pixels] = exemplar.reshape(-1).take(index)
+        flat = exemplar.reshape(-1)
+        for start in range(0, len(pixels), _PIECE):
+            piece = slice(start, start + _PIECE)
+            index = sy[piece].astype(np.intp)
+            index += dy
+            np.clip(index, 0, eh - 1, out=index)  # clipped as copy_through: any source
+            index *= ew
+            index += np.clip(sx[piece] + dx, 0, ew - 1)
+            index *= channels
+            index += channel
+            flat_out[pixels[piece]] = flat.take(index)
     return out
+
+
+#: Pixels of a group read at a time by :func:`_copy_channel`: its temporaries (the intp
+#: indices, the values) were whole groups, most of the frame, about two float64 frames
+#: beside the blend's peak at 4096^2; a piece of 2^20 keeps them at 8 MB (the take's
+#: own time per pixel is the same).
+_PIECE = 2**20
 
 
 def _source_groups(exemplars, source):
@@ -297,19 +323,22 @@ def _source_groups(exemplars, source):
     return groups
 
 
-def _side_gradients(groups, has, ref, channel):
+def _side_gradients(groups, has, ref, channel, axes=(1, 0)):
     """Per channel, one at a time (a generator: the caller frees each before the next is
-    made): the horizontal gradient by the left pixel's source and by the right pixel's,
-    then the vertical one by the upper and by the lower pixel's source."""
+    made), along each of ``axes`` (1: horizontal pairs, 0: vertical): the horizontal
+    gradient by the left pixel's source and by the right pixel's, the vertical one by the
+    upper and by the lower pixel's source."""
     copy = _copy_channel(groups, has, ref, channel)
-    right = _copy_channel(groups, has, ref, channel, 0, 1)[:, :-1]
-    yield np.subtract(right, copy[:, :-1], out=right)
-    del right
-    left = _copy_channel(groups, has, ref, channel, 0, -1)[:, 1:]
-    yield np.subtract(copy[:, 1:], left, out=left)
-    del left
-    down = _copy_channel(groups, has, ref, channel, 1, 0)[:-1]
-    yield np.subtract(down, copy[:-1], out=down)
-    del down
-    up = _copy_channel(groups, has, ref, channel, -1, 0)[1:]
-    yield np.subtract(copy[1:], up, out=up)
+    if 1 in axes:
+        right = _copy_channel(groups, has, ref, channel, 0, 1)[:, :-1]
+        yield np.subtract(right, copy[:, :-1], out=right)
+        del right
+        left = _copy_channel(groups, has, ref, channel, 0, -1)[:, 1:]
+        yield np.subtract(copy[:, 1:], left, out=left)
+        del left
+    if 0 in axes:
+        down = _copy_channel(groups, has, ref, channel, 1, 0)[:-1]
+        yield np.subtract(down, copy[:-1], out=down)
+        del down
+        up = _copy_channel(groups, has, ref, channel, -1, 0)[1:]
+        yield np.subtract(copy[1:], up, out=up)

@@ -260,15 +260,20 @@ def _outside(state: SynthesisState, config: DepthConfig) -> SynthesisState:
 def _blend(state: SynthesisState, config: DepthConfig) -> SynthesisState:
     size = float(np.sqrt(state.mask.sum()))
     scale = max(config.finish.blend_scale * size, 1.0)
+    reference = state.made("ycbcr")
+    writable = reference.dtype == np.float32 and reference.flags.writeable
     state.ycbcr = seamless_copy(
         state.made("exemplars"),
         state.made("source"),
-        state.made("ycbcr"),
+        reference,
         scale=scale,
         edge_support=config.finish.edge_support,
         edge_contrast=config.finish.edge_contrast,
         edge_floor=config.finish.edge_floor,
         mask=state.mask,
+        # The blended map written over the map being finished (no later stage reads it):
+        # not a second full-size float32 map beside the solve, the finish's peak.
+        out=reference if writable else None,
     )
     state.exemplars = None
     state.changed = f"seams blended at scale {scale:.1f} px"
