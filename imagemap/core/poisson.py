@@ -245,7 +245,7 @@ def _supported_edges(groups, has, source, reference, support, strongest, contras
         terms = [np.zeros(e[ahead].shape, np.float32) for _ in range(3)]  # step.span, span², step²
         for channel in range(reference.shape[2]):
             ref = reference[..., channel]
-            copy = _copy_channel(groups, has, ref.astype(np.float64), channel)
+            copy = _copy_channel(groups, has, ref, channel)  # float64 from the float32
             step = np.subtract(copy[ahead], copy[behind], dtype=np.float32)
             del copy
             # The reference's change from the pixel before the pair to the one after it:
@@ -275,7 +275,7 @@ def _along(axis: int, part: slice) -> tuple[slice, slice]:
 
 def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
     """One channel of :func:`copy_through` shifted by (dy, dx); ``ref`` (the reference's
-    channel, float64) where no source.
+    channel, any float type: the copy is float64) where no source.
 
     ``groups``: per exemplar, (exemplar, flat pixel indices, their source y and x)."""
     # The reference's values, then every pixel with a source its exemplar's: the pixels
@@ -283,7 +283,7 @@ def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
     # values (one index per pixel: row, column, channel), not by three index arrays:
     # the same values, a quarter of the time. The indices are made as intp (np.take
     # converts any other to a whole intp copy), a piece of the group at a time.
-    out = ref.copy()
+    out = np.array(ref, dtype=np.float64, order="C")  # one copy, not a float64 one and its copy
     flat_out = out.reshape(-1)
     for exemplar, pixels, sy, sx in groups:
         eh, ew, channels = exemplar.shape
