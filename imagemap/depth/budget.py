@@ -112,7 +112,11 @@ _SECONDS_OVERHEAD = 0.3
 # overhead above and the database's cached depths dropped (colorize_estimate), 2026-11-29,
 # benchmarks/memory.py, load 5-6: 1024^2 188 MB added / 224 estimated, 2048^2 381 / 416,
 # 4096^2 1297 / 1471 (+19 %, +9 %, +13 %).
-_FULL_PIXEL_BYTES = 80
+# #44 item 3, the 4096^2 peak round: the blend holds about three full-size float64 arrays
+# less (poisson.seamless_copy), the pose resamples by blocks of rows; benchmarks/memory.py,
+# 2026-11-29, load 4.5-5: 2048^2 387 MB added, 4096^2 1193 (the fine stage's 1166 beside
+# it); 80 -> 70 bytes a query pixel gives 376 / 1303 MB (-3 %, +9 %; 80 gave +8 %, +23 %).
+_FULL_PIXEL_BYTES = 70
 _FULL_EXAMPLE_PIXEL_BYTES = 12
 _SECONDS_PER_FULL_PIXEL = 0.85e-6  # refitted with _SECONDS_PER_FEATURE above
 
