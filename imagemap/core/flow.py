@@ -146,13 +146,13 @@ def max_flow(heads, residual, terminal):
     Two search trees grow from the terminals over arcs with residual capacity (active
     nodes taken first in, first out; a node that joined the trees is searched again at
     once; a node already in the tree keeps its parent: BK's reparenting of a node found
-    nearer its root was dropped, 7-9 % fewer CPU seconds, the same number of augmentations
-    to within 1 %); where they meet, the path's bottleneck is pushed through it (its arcs
-    kept as found, not looked up again on the way back); the nodes whose
-    arc to their parent saturated (orphans, the ones nearest the terminals first) take
-    the neighbour of their tree whose path reaches the terminal in the fewest arcs
-    (distances kept per augmentation by a time stamp), or leave the tree, orphaning their
-    children. No active node left: the sink's tree is every node that reaches the sink.
+    nearer its root was dropped, as many augmentations and orphans to within 1 % and 5 %
+    fewer CPU seconds, docs/performance.md); where they meet, the path's bottleneck is
+    pushed through it (its arcs kept as found, not looked up again on the way back); the
+    nodes whose arc to their parent saturated (orphans, the ones nearest the terminals
+    first) take the neighbour of their tree whose path reaches the terminal in the fewest
+    arcs (distances kept per augmentation by a time stamp), or leave the tree, orphaning
+    their children. No active node left: the sink's tree is every node that reaches the sink.
     A node's parent, stamp, distance and flags are side by side in ``info`` (4 int32 a
     node: one cache line holds four nodes').
     """
