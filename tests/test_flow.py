@@ -5,9 +5,9 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import maximum_flow
+from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
-from imagemap.core.flow import grid_cut, grid_cut_halved
+from imagemap.core.flow import grid_arcs, grid_cut, grid_cut_halved, grid_graph, max_flow
 
 maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
 
@@ -143,3 +143,43 @@ def test_the_cut_in_halves_is_pymaxflows_and_the_same_on_one_thread_or_two():
         alone, flow_alone = grid_cut_halved(*move)
         np.testing.assert_array_equal(takes, alone)
         assert flow == flow_alone
+
+
+def test_the_residual_graph_is_a_maximum_flows_and_the_cut_its_sink_reach():
+    """max_flow's residual graph, checked arc by arc: a flow (each arc pair's capacity kept,
+    no arc over its capacity, every node's inflow its outflow, the terminals not past 0),
+    no path left from the source to the sink, and ``sink_side`` exactly the nodes that
+    reach the sink in it (a breadth-first search of scipy's)."""
+    rng = np.random.default_rng(17)
+    for size, density, weak in [((48, 40), 0.9, 0.1), ((30, 31), 0.7, 1.0), ((9, 60), 1.0, 0.3)]:
+        node, cost0, cost1, first, second, capacity = random_move(rng, *size, density)
+        cost0, cost1 = weak * cost0, weak * cost1
+        heads, capacities = grid_arcs(node, first, second, capacity)
+        low = np.minimum(cost0, cost1)
+        start = (cost1 - low) - (cost0 - low)
+        heads, residual, terminal, pushed = grid_graph(node, cost0, cost1, first, second, capacity)
+        flow, sink_side = max_flow(heads, residual, terminal)
+        n = len(start)
+        arcs = np.flatnonzero(heads >= 0)
+        opposite = 4 * heads[arcs] + ((arcs & 3) ^ 2)
+        assert (residual >= 0.0).all()
+        total = capacities[arcs] + capacities[opposite]
+        np.testing.assert_allclose(residual[arcs] + residual[opposite], total, atol=1e-9)
+        through = capacities - residual  # the flow on each arc (< 0: against it)
+        outflow = np.zeros(n)
+        np.add.at(outflow, arcs >> 2, through[arcs])
+        np.testing.assert_allclose(start - terminal, outflow, atol=1e-9)
+        assert (terminal[start > 0] >= 0.0).all() and (terminal[start < 0] <= 0.0).all()
+        from_source = (start - terminal)[start > 0].sum()
+        assert flow + pushed == pytest.approx(from_source, rel=1e-12)
+        assert 0.05 < sink_side.mean() < 0.95
+        # Who reaches the sink: a search from it over the residual arcs reversed.
+        open_arcs = arcs[residual[arcs] > 0.0]
+        drains = np.flatnonzero(terminal < 0.0)
+        tails = np.concatenate([heads[open_arcs], np.full(len(drains), n)])
+        tips = np.concatenate([open_arcs >> 2, drains])
+        reverse = csr_matrix((np.ones(len(tails)), (tails, tips)), shape=(n + 1, n + 1))
+        reach = np.zeros(n + 1, bool)
+        reach[breadth_first_order(reverse, n, return_predecessors=False)] = True
+        np.testing.assert_array_equal(sink_side, reach[:n])
+        assert not (reach[:n] & (terminal > 0.0)).any()  # no augmenting path left
