@@ -162,7 +162,7 @@ def max_flow(heads, residual, terminal):
     nodes').
     """
     n = len(terminal)
-    info = np.zeros(4 * n, np.int32)  # parent arc, time stamp, distance, flags
+    info = np.zeros(4 * n, np.int32)  # parent node, time stamp, distance, flags
     queue = np.empty(n + 1, np.int32)  # a ring: each node in it at most once
     head = 0
     tail = 0
@@ -247,7 +247,7 @@ def max_flow(heads, residual, terminal):
             now = 1
         # Augmentation: the bottleneck of source -> root ... meet ... root -> sink.
         t = heads[meet]
-        s = heads[4 * t + ((meet & 3) ^ 2)]
+        s = meet >> 2  # the arc's own node
         bottleneck = residual[meet]
         n_source = 0
         j = s
