@@ -195,7 +195,8 @@ def many_labels():
 def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypatch):
     """The moves' minimum cut (core/flow.grid_cut, numba) gives the labels that PyMaxflow's
     cut gave (the one before it), over moves of many sizes."""
-    maxflow = pytest.importorskip("maxflow")  # the reference (the test extra installs it)
+    pytest.importorskip("maxflow")  # the reference (the test extra installs it)
+    from test_flow import pymaxflow_cut  # after the skip: test_flow needs maxflow
 
     from imagemap.core import flow
 
@@ -204,17 +205,11 @@ def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypa
     numba_cut = place_seams(exemplars, source, reference, smoothness=0.3)
     sizes = []
 
-    def pymaxflow_cut(node, cost0, cost1, first, second, capacity):
+    def recorded_cut(node, cost0, cost1, first, second, capacity):
         sizes.append(len(cost0))
-        graph = maxflow.Graph[float](len(cost0), len(first))
-        nodes = graph.add_nodes(len(cost0))
-        graph.add_edges(first, second, capacity, np.zeros_like(capacity))
-        low = np.minimum(cost0, cost1)
-        graph.add_grid_tedges(nodes, cost1 - low, cost0 - low)
-        flow_value = graph.maxflow()
-        return graph.get_grid_segments(nodes), flow_value
+        return pymaxflow_cut(node, cost0, cost1, first, second, capacity)
 
-    monkeypatch.setattr(flow, "grid_cut", pymaxflow_cut)
+    monkeypatch.setattr(flow, "grid_cut", recorded_cut)
     reference_cut = place_seams(exemplars, source, reference, smoothness=0.3)
     assert len(sizes) >= 20 and max(sizes) > 10 * min(sizes), sizes  # many moves, unlike
     np.testing.assert_array_equal(numba_cut, reference_cut)
