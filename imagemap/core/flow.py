@@ -140,6 +140,15 @@ def _origin(start, info, now):
     return steps
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _orphan(info, orphans, n_orphans, node):
+    """Cut ``node`` off from its tree (its arc to its parent, or its terminal's, saturated)
+    and list it as the ``n_orphans``-th orphan of the augmentation; the new count."""
+    info[4 * node] = _ORPHAN
+    orphans[n_orphans] = node
+    return n_orphans + 1
+
+
 @njit(cache=True, nogil=True)
 def max_flow(heads, residual, terminal):
     """Boykov & Kolmogorov's maximum flow on the arcs of :func:`grid_arcs`, in place:
@@ -284,30 +293,20 @@ def max_flow(heads, residual, terminal):
             residual[a] += bottleneck
             residual[back] -= bottleneck
             if residual[back] == 0.0:
-                j = a >> 2
-                info[4 * j] = _ORPHAN
-                orphans[n_orphans] = j
-                n_orphans += 1
+                n_orphans = _orphan(info, orphans, n_orphans, a >> 2)
         terminal[root_s] -= bottleneck
         if terminal[root_s] == 0.0:
-            info[4 * root_s] = _ORPHAN
-            orphans[n_orphans] = root_s
-            n_orphans += 1
+            n_orphans = _orphan(info, orphans, n_orphans, root_s)
         for k in range(n_source, n_sink):
             a = path[k]
             back = 4 * heads[a] + ((a & 3) ^ 2)
             residual[back] += bottleneck
             residual[a] -= bottleneck
             if residual[a] == 0.0:
-                j = a >> 2
-                info[4 * j] = _ORPHAN
-                orphans[n_orphans] = j
-                n_orphans += 1
+                n_orphans = _orphan(info, orphans, n_orphans, a >> 2)
         terminal[root_t] += bottleneck
         if terminal[root_t] == 0.0:
-            info[4 * root_t] = _ORPHAN
-            orphans[n_orphans] = root_t
-            n_orphans += 1
+            n_orphans = _orphan(info, orphans, n_orphans, root_t)
         flow += bottleneck
         # Adoption, the orphans nearest the terminals first (a child's old parent may
         # then be back in the tree when the child looks for one).
