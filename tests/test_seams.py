@@ -216,6 +216,35 @@ def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypa
     assert (numba_cut != source).any()  # the moves changed labels
 
 
+def test_the_data_costs_kept_between_moves_are_those_of_the_labels_left(monkeypatch):
+    """The moves keep each pixel's data cost of its own label (kernels.expansion_data),
+    updated where a cut changes labels: after the solve they are exactly what
+    expansion_data finds afresh from the labels left, and the squared distance of the
+    copied colour to the reference, written out here."""
+    from imagemap.core import kernels, seams
+
+    exemplars, source, reference = many_labels()
+    made = []
+
+    class Recorded(seams._Moves):
+        def __init__(self, *args):
+            super().__init__(*args)
+            made.append(self)
+
+    monkeypatch.setattr(seams, "_Moves", Recorded)
+    placed = place_seams(exemplars, source, reference, smoothness=0.3)
+    (moves,) = made
+    assert (placed != source).any(axis=-1).mean() > 0.1  # many cuts applied
+    packed, shapes, _ = moves.exemplars
+    afresh = kernels.expansion_data(packed, shapes, moves.reference, moves.labels, moves.movable)
+    np.testing.assert_array_equal(moves.data_now, afresh)
+    copied, valid = colours(exemplars, placed)
+    assert valid.all()
+    np.testing.assert_allclose(
+        moves.data_now, ((copied - reference) ** 2).sum(-1), rtol=1e-5, atol=1e-6
+    )
+
+
 def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
     """Independent moves (crops more than a pixel apart) run two at a time on two threads,
     and a large move alone is cut on both (core/flow.grid_cut_halved): the labels are

@@ -336,6 +336,13 @@ class _Moves:
         self.movable, self.held, self.free, self.groups = masks
         self.smoothness, self.spread, self.weights = smoothness, spread, weights
         self.height, self.width = labels[0].shape
+        from imagemap.core import kernels  # deferred: start-up (numba)
+
+        packed, shapes, _ = exemplars
+        # Each pixel's data cost of its own label, updated where a cut changes labels: the
+        # terms read it instead of gathering it again at every move (12-14 moves a pixel
+        # at 512^2).
+        self.data_now = kernels.expansion_data(packed, shapes, reference, labels, self.movable)
         self.changed_at = np.zeros((self.height, self.width), np.int32)  # moves: < 2^31
         self.expanded_at: dict[tuple[int, ...], int] = {}
         self.count = 0  # moves made
@@ -425,6 +432,7 @@ class _Moves:
             self.alphas[k],
             self.smoothness,
             self.weights,
+            self.data_now,
             beside,
         )
 
@@ -447,6 +455,7 @@ class _Moves:
             self.labels,
             self.ids,
             self.changed_at,
+            (*self.exemplars[:2], self.reference, self.data_now),
             rows.start,
             columns.start,
             self.alphas[k],
@@ -739,13 +748,25 @@ _PAIRED_PIXELS = 5_000
 
 
 def _expand(
-    exemplars, reference, labels, movable, crop, region, alpha, smoothness, weights, beside=None
+    exemplars,
+    reference,
+    labels,
+    movable,
+    crop,
+    region,
+    alpha,
+    smoothness,
+    weights,
+    data_now,
+    beside=None,
 ):
     """One alpha-expansion move over ``region`` (inside ``crop``): its nodes' numbers in
     the crop and whether each takes ``alpha`` (for :func:`imagemap.core.kernels.
     expansion_apply`), or None where none does. The terms and the minimum cut are numba
     kernels (:func:`imagemap.core.flow.grid_cut`), run without the GIL; a large move's
-    cut is in halves, on ``beside``'s thread too where given (an idle executor)."""
+    cut is in halves, on ``beside``'s thread too where given (an idle executor).
+    ``data_now`` (H, W): each pixel's data cost of its own label
+    (:func:`imagemap.core.kernels.expansion_data`)."""
     from imagemap.core import flow, kernels  # deferred: start-up (numba)
 
     label_e, label_y, label_x = labels
@@ -767,6 +788,7 @@ def _expand(
         float(smoothness),
         _SEAM_FLOOR,
         weights,
+        data_now,
     )
     if len(cost0) == 0:
         return None
