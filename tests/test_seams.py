@@ -245,53 +245,6 @@ def test_the_data_costs_kept_between_moves_are_those_of_the_labels_left(monkeypa
     )
 
 
-def test_a_moves_terms_in_halves_on_two_threads_are_those_of_one_pass(monkeypatch):
-    """seams._terms with an idle executor: the costs of the crop's upper rows on its
-    thread, the lower ones' on this one; every array (node map, costs, edges) is the one
-    pass's, bit for bit, with pairs of one label and of two across the parts' border."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from imagemap.core import kernels, seams
-
-    exemplars, source, reference = many_labels()
-    packed, shapes = seams._packed([e.astype(np.float32) for e in exemplars])
-    inside = np.ones(packed.shape[:3], bool)
-    rows, columns = np.indices(source.shape[:2])
-    labels = tuple(
-        np.ascontiguousarray(values, dtype=np.int32)
-        for values in (source[..., 0], source[..., 1] - rows, source[..., 2] - columns)
-    )
-    movable = np.ones(source.shape[:2], bool)
-    movable[30:34, 8:12] = False  # fixed neighbours too
-    reference = reference.astype(np.float32)
-    weights = np.random.default_rng(1).random(source.shape[:2]).astype(np.float32)
-    data_now = kernels.expansion_data(packed, shapes, reference, labels, movable)
-    # rows of 3-px blocks (left) and of 1-px ones (right) around the nodes' middle row
-    crop = (slice(20, 48), slice(2, 46))
-    region = np.ones((28, 44), bool)
-    region[:6, :6] = False
-    alpha = np.array([labels[0][30, 30], labels[1][30, 30], labels[2][30, 30]], np.int64)
-    move = ((packed, shapes, inside), reference, labels, movable, crop, region, alpha, 0.3)
-    monkeypatch.setattr(seams, "_HALVED_NODES", 0)
-    one_pass = seams._terms(*move, weights, data_now, None)
-    with ThreadPoolExecutor(1) as pool:
-        halves = seams._terms(*move, weights, data_now, pool)
-    node, first, second = one_pass[0], one_pass[3], one_pass[4]
-    n = len(one_pass[1])
-    assert n > 1000 and len(first) > 1500
-    # pairs across the parts' border (as _terms splits: the first row from the middle
-    # node on), of one label and of two
-    places = np.argwhere(node >= 0)  # by node number: numbered in raster order
-    row_first = np.concatenate([[0], np.cumsum((node >= 0).sum(axis=1))])
-    middle = np.searchsorted(row_first, n // 2)
-    border = (places[first, 0] == middle - 1) & (places[second, 0] == middle)
-    keys = np.stack([values[crop][node >= 0] for values in labels], -1)
-    same = (keys[first[border]] == keys[second[border]]).all(axis=-1)
-    assert same.any() and (~same).any()
-    for made, expected in zip(halves, one_pass, strict=True):
-        np.testing.assert_array_equal(made, expected)
-
-
 def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
     """Independent moves (crops more than a pixel apart) run two at a time on two threads,
     and a large move alone is cut on both (core/flow.grid_cut_halved): the labels are

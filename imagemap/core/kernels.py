@@ -947,7 +947,7 @@ def _data(exemplars, shapes, reference, e, oy, ox, y, x):
 @njit(cache=True, nogil=True)
 def expansion_data(exemplars, shapes, reference, labels, mask):
     """Each pixel's data cost of its own label (:func:`_data`; (H, W) float64, 0 outside
-    ``mask``): kept by the seams' moves between moves (:func:`expansion_costs` reads it,
+    ``mask``): kept by the seams' moves between moves (:func:`expansion_terms` reads it,
     :func:`expansion_apply` updates it where a cut changes labels), so that it is not
     gathered again at every move. The terms' own expression, so the same floats."""
     label_e, label_y, label_x = labels
@@ -963,33 +963,52 @@ def expansion_data(exemplars, shapes, reference, labels, mask):
 
 
 @njit(cache=True, nogil=True)
-def expansion_nodes(exemplars, shapes, inside, labels, mask, region, y0, x0, alpha):
-    """The nodes of one alpha-expansion move (Boykov, Veksler & Zabih 2001), the first
-    part of its graph (:func:`expansion_costs` the second).
+def expansion_terms(
+    exemplars,
+    shapes,
+    inside,
+    reference,
+    label_e,
+    label_y,
+    label_x,
+    mask,
+    region,
+    y0,
+    x0,
+    alpha,
+    smooth,
+    floor,
+    weights,
+    data_now,
+):
+    """The graph of one alpha-expansion move (Boykov, Veksler & Zabih 2001).
 
     Every object pixel has a label: an exemplar and an offset (source = pixel +
     offset). In the move, each *free* pixel (inside ``region``, a crop whose corner
     is (y0, x0), not labelled ``alpha`` yet, with ``alpha``'s source inside its
     exemplar's object, ``inside``) keeps its label (x = 0) or takes ``alpha``
-    (x = 1); all other pixels keep theirs.
+    (x = 1); all other pixels keep theirs. Costs: the squared distance of the
+    copied colour to ``reference``, plus ``smooth`` times the seam costs
+    (:func:`_seam`), each seam's also times the mean of its two pixels' ``weights``
+    ((H, W)); ``data_now`` (H, W) holds each pixel's data cost of its own label
+    (:func:`expansion_data`). A pair of free neighbours
+    p, q costs E(xp, xq) = a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with
+    a = seam(lp, lq), b = seam(lp, alpha), c = seam(alpha, lq); b + c >= a as the seam
+    cost is a distance, so the move is a minimum cut (Kolmogorov & Zabih 2004).
 
     Returns
     -------
-    node : (h, w) int64, the free pixels' node numbers, in raster order (-1: fixed)
-    row_first : (h + 1,) int64, the number of the first node of each row of the crop
-        (the last: the nodes' count)
-    to_alpha : (n,) each free pixel's gap between its own source's colour and alpha's:
-        between two free neighbours with one label (most pairs) both of the move's seams
-        are made of these two gaps, which would otherwise be gathered again for every pair
+    node : (h, w) int64, the free pixels' node numbers (-1: fixed)
+    cost0, cost1 : (n,) the unary costs of keeping the label and of taking alpha
+    first, second, capacity : (m,) edges first -> second, paid when first keeps its
+        label and second takes alpha
     """
-    label_e, label_y, label_x = labels
     h, w = region.shape
+    height, width = mask.shape
     ae, ay, ax = alpha[0], alpha[1], alpha[2]
     node = np.full((h, w), -1, np.int64)
-    row_first = np.empty(h + 1, np.int64)
     n = 0
     for i in range(h):
-        row_first[i] = n
         for j in range(w):
             y, x = y0 + i, x0 + j
             if not (region[i, j] and mask[y, x]):
@@ -1003,7 +1022,9 @@ def expansion_nodes(exemplars, shapes, inside, labels, mask, region, y0, x0, alp
                 continue
             node[i, j] = n
             n += 1
-    row_first[h] = n
+    # Each free pixel's gap between its own source's colour and alpha's: between two
+    # free neighbours with one label (most pairs) both of the move's seams are made of
+    # these two gaps, which would otherwise be gathered again for every pair.
     to_alpha = np.empty(n)
     for i in range(h):
         for j in range(w):
@@ -1020,76 +1041,13 @@ def expansion_nodes(exemplars, shapes, inside, labels, mask, region, y0, x0, alp
                     y + ay,
                     x + ax,
                 )
-    return node, row_first, to_alpha
-
-
-@njit(cache=True, nogil=True)
-def expansion_costs(
-    exemplars,
-    shapes,
-    reference,
-    labels,
-    mask,
-    node,
-    to_alpha,
-    rows,
-    y0,
-    x0,
-    alpha,
-    smooth,
-    floor,
-    weights,
-    data_now,
-    costs,
-    edges,
-):
-    """The costs of one alpha-expansion move's nodes (:func:`expansion_nodes`) in the
-    crop's rows ``rows`` ((r0, r1)), and their edges; returns the number of edges written.
-
-    Costs: the squared distance of the copied colour to ``reference``, plus ``smooth``
-    times the seam costs (:func:`_seam`), each seam's also times the mean of its two
-    pixels' ``weights`` ((H, W)); ``data_now`` (H, W) holds each pixel's data cost of its
-    own label (:func:`expansion_data`). A pair of free neighbours p, q costs E(xp, xq) =
-    a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with a = seam(lp, lq), b = seam(lp,
-    alpha), c = seam(alpha, lq); b + c >= a as the seam cost is a distance, so the move is
-    a minimum cut (Kolmogorov & Zabih 2004). Written: ``costs`` (cost0, cost1: (n,) the
-    unary costs of keeping the label and of taking alpha, zeros before) at the rows'
-    nodes only, and from the start of ``edges`` (first, second, capacity: at least 2 a
-    node of the rows) the edges first -> second, paid when first keeps its label and
-    second takes alpha, by first node, its lower edge then its right one.
-
-    Parts of the rows in turn, or at once on two threads (they write apart), give the
-    floats of one part of every row: each node's costs are summed in the same order (its
-    upper neighbour's pair, its left one's, its own terms), a part's first row taking its
-    upper neighbours' pairs from the row above it.
-    """
-    label_e, label_y, label_x = labels
-    cost0, cost1 = costs
-    first, second, capacity = edges
-    r0, r1 = rows
-    h, w = node.shape
-    height, width = mask.shape
-    ae, ay, ax = alpha[0], alpha[1], alpha[2]
-    if r0 > 0:  # the pairs of the row above (another part's) with this part's first row
-        i = r0 - 1
-        for j in range(w):
-            p = node[i, j]
-            q = node[i + 1, j]
-            if p < 0 or q < 0:
-                continue
-            y, x = y0 + i, x0 + j
-            ny = y + 1
-            pair = smooth * (0.5 * (weights[y, x] + weights[ny, x]))
-            e, oy, ox = label_e[y, x], label_y[y, x], label_x[y, x]
-            f, fy, fx = label_e[ny, x], label_y[ny, x], label_x[ny, x]
-            if e == f and oy == fy and ox == fx:
-                cost1[q] -= pair * (floor + to_alpha[p] + to_alpha[q])
-            else:
-                cost1[q] -= pair * _seam(
-                    exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, x, floor
-                )
+    cost0 = np.zeros(n)
+    cost1 = np.zeros(n)
+    first = np.empty(2 * n, np.int64)
+    second = np.empty(2 * n, np.int64)
+    capacity = np.empty(2 * n)
     m = 0
-    for i in range(r0, r1):
+    for i in range(h):
         for j in range(w):
             p = node[i, j]
             if p < 0:
@@ -1107,7 +1065,6 @@ def expansion_costs(
                 pair = smooth * (0.5 * (weights[y, x] + weights[ny, nx]))
                 ci, cj = ny - y0, nx - x0
                 q = node[ci, cj] if 0 <= ci < h and 0 <= cj < w else -1
-                mine = ci < r1  # q's costs are this part's to write
                 if q < 0:  # a fixed neighbour keeps its label: a unary term
                     cost0[p] += pair * _seam(
                         exemplars, shapes, e, oy, ox, f, fy, fx, y, x, ny, nx, floor
@@ -1120,8 +1077,7 @@ def expansion_costs(
                     # same (the same two gaps)
                     b = pair * (floor + to_alpha[p] + to_alpha[q])
                     cost1[p] += b
-                    if mine:
-                        cost1[q] -= b
+                    cost1[q] -= b
                     first[m] = p
                     second[m] = q
                     capacity[m] = b + b  # both seams' gaps are >= 0: no rounding guard
@@ -1132,18 +1088,17 @@ def expansion_costs(
                     c = pair * _seam(exemplars, shapes, ae, ay, ax, f, fy, fx, y, x, ny, nx, floor)
                     cost0[p] += a
                     cost1[p] += c
-                    if mine:
-                        cost1[q] -= c
+                    cost1[q] -= c
                     first[m] = p
                     second[m] = q
                     capacity[m] = max(b + c - a, 0.0)  # >= 0 but for rounding
                     m += 1
-    return m
+    return node, cost0, cost1, first[:m], second[:m], capacity[:m]
 
 
 @njit(cache=True, nogil=True)
 def expansion_apply(node, takes, labels, ids, changed_at, costs, y0, x0, alpha, number, move, lost):
-    """Apply one alpha-expansion move's cut (:func:`expansion_nodes`' ``node``, (h, w),
+    """Apply one alpha-expansion move's cut (:func:`expansion_terms`' ``node``, (h, w),
     and ``takes``, (n,) bool: the nodes that take ``alpha``), in one pass over the crop
     whose corner is (y0, x0): each such pixel gets ``alpha`` in ``labels`` (label_e,
     label_y, label_x), ``number`` in ``ids``, ``move`` in ``changed_at`` and alpha's data

@@ -3,9 +3,9 @@
 The labels of a copy (exemplar and offset per pixel) are chosen again by
 alpha-expansion (Boykov, Veksler & Zabih 2001) on Kwatra et al.'s seam cost (2003,
 "Graphcut textures"), each move one minimum cut (Boykov & Kolmogorov's max-flow in numba,
-:func:`imagemap.core.flow.grid_cut`); the terms of a move are numba kernels
-(:func:`imagemap.core.kernels.expansion_nodes` and ``expansion_costs``). The seams left
-are blended by :func:`imagemap.core.poisson.seamless_copy`.
+:func:`imagemap.core.flow.grid_cut`); the terms of a move are a numba kernel
+(:func:`imagemap.core.kernels.expansion_terms`). The seams left are
+blended by :func:`imagemap.core.poisson.seamless_copy`.
 
 One module for one job: one solve (the full one and its coarse-to-fine form share the
 move loop, the terms and the cost bookkeeping, so they stay together).
@@ -740,9 +740,7 @@ def _label_table(label_e, label_y, label_x, movable):
 #: (:func:`imagemap.core.flow.grid_cut_halved`), the halves on two threads where the
 #: second is free (with one thread in turn: the same floats at any thread count): below it
 #: the hand-over and the last pass over the whole graph cost more than half a move saves
-#: (at 512^2, 30 of a call's ~97 moves, 82 % of its nodes). Where the second thread is
-#: free, such a move's terms are found in halves of the crop's rows as well (:func:`_terms`,
-#: one hand-over; with one thread in one pass: the same floats).
+#: (at 512^2, 30 of a call's ~97 moves, 82 % of its nodes).
 _HALVED_NODES = 10_000
 #: Two moves run at once only where both regions have this many pixels: a hand-over to
 #: the side thread costs milliseconds on a busy machine, more than a small move.
@@ -764,25 +762,33 @@ def _expand(
 ):
     """One alpha-expansion move over ``region`` (inside ``crop``): its nodes' numbers in
     the crop and whether each takes ``alpha`` (for :func:`imagemap.core.kernels.
-    expansion_apply`), or None where none does. The terms (:func:`_terms`) and the
-    minimum cut (:func:`imagemap.core.flow.grid_cut`) are numba kernels, run without the
-    GIL; a large move's terms and cut are in halves, on ``beside``'s thread too where
-    given (an idle executor). ``data_now`` (H, W): each pixel's data cost of its own label
+    expansion_apply`), or None where none does. The terms and the minimum cut are numba
+    kernels (:func:`imagemap.core.flow.grid_cut`), run without the GIL; a large move's
+    cut is in halves, on ``beside``'s thread too where given (an idle executor).
+    ``data_now`` (H, W): each pixel's data cost of its own label
     (:func:`imagemap.core.kernels.expansion_data`)."""
-    from imagemap.core import flow  # deferred: start-up (numba)
+    from imagemap.core import flow, kernels  # deferred: start-up (numba)
 
-    node, cost0, cost1, first, second, capacity = _terms(
-        exemplars,
+    label_e, label_y, label_x = labels
+    rows, columns = crop
+    packed, shapes, inside = exemplars
+    node, cost0, cost1, first, second, capacity = kernels.expansion_terms(
+        packed,
+        shapes,
+        inside,
         reference,
-        labels,
+        label_e,
+        label_y,
+        label_x,
         movable,
-        crop,
         region,
+        rows.start,
+        columns.start,
         alpha,
-        smoothness,
+        float(smoothness),
+        _SEAM_FLOOR,
         weights,
         data_now,
-        beside,
     )
     if len(cost0) == 0:
         return None
@@ -793,61 +799,6 @@ def _expand(
     if not takes.any():
         return None
     return node, takes
-
-
-def _terms(
-    exemplars,
-    reference,
-    labels,
-    movable,
-    crop,
-    region,
-    alpha,
-    smoothness,
-    weights,
-    data_now,
-    beside,
-):
-    """The graph of a move (:func:`imagemap.core.kernels.expansion_nodes`, then
-    :func:`~imagemap.core.kernels.expansion_costs`): node map, cost0, cost1, first,
-    second, capacity. With ``beside`` (an idle executor) and ``_HALVED_NODES`` nodes or
-    more, the costs of the crop's upper rows are found on its thread, the lower ones' on
-    this one: the same floats as in one pass (the kernel sums each cost in one order)."""
-    from imagemap.core import kernels  # deferred: start-up (numba)
-
-    rows, columns = crop
-    packed, shapes, inside = exemplars
-    node, row_first, to_alpha = kernels.expansion_nodes(
-        packed, shapes, inside, labels, movable, region, rows.start, columns.start, alpha
-    )
-    n = len(to_alpha)
-    costs = (np.zeros(n), np.zeros(n))
-    edges = (np.empty(2 * n, np.int64), np.empty(2 * n, np.int64), np.empty(2 * n))
-    fixed = (packed, shapes, reference, labels, movable, node, to_alpha)
-    after = (rows.start, columns.start, alpha, float(smoothness), _SEAM_FLOOR, weights, data_now)
-    height = node.shape[0]
-    if beside is None or n < _HALVED_NODES:
-        m = kernels.expansion_costs(*fixed, (0, height), *after, costs, edges)
-        return (node, *costs, *(edge[:m] for edge in edges))
-    middle = int(np.searchsorted(row_first, n // 2))  # the first row of the lower half
-    split = 2 * int(row_first[middle])  # the upper rows' edges: at most 2 a node
-    upper = beside.submit(
-        kernels.expansion_costs,
-        *fixed,
-        (0, middle),
-        *after,
-        costs,
-        tuple(edge[:split] for edge in edges),
-    )
-    m_lower = kernels.expansion_costs(
-        *fixed, (middle, height), *after, costs, tuple(edge[split:] for edge in edges)
-    )
-    m_upper = upper.result()
-    return (
-        node,
-        *costs,
-        *(np.concatenate([edge[:m_upper], edge[split : split + m_lower]]) for edge in edges),
-    )
 
 
 def _packed(exemplars):
