@@ -217,11 +217,12 @@ def test_the_numba_cut_gives_pymaxflows_labels_over_moves_of_many_sizes(monkeypa
 
 
 def test_the_data_costs_kept_between_moves_are_those_of_the_labels_left(monkeypatch):
-    """The moves keep each pixel's data cost of its own label (kernels.expansion_data),
-    updated where a cut changes labels: after the solve they are exactly what
-    expansion_data finds afresh from the labels left, and the squared distance of the
-    copied colour to the reference, written out here."""
-    from imagemap.core import kernels, seams
+    """The moves keep each pixel's data cost of its own label (NaN until a move's terms
+    gather it, and again where a cut changes the label): after the solve, every one known
+    is the squared distance of the pixel's copied colour to the reference, bit for bit
+    (float32 differences, squared in float32, summed in float64 channel by channel, as
+    the kernel does)."""
+    from imagemap.core import seams
 
     exemplars, source, reference = many_labels()
     made = []
@@ -234,15 +235,17 @@ def test_the_data_costs_kept_between_moves_are_those_of_the_labels_left(monkeypa
     monkeypatch.setattr(seams, "_Moves", Recorded)
     placed = place_seams(exemplars, source, reference, smoothness=0.3)
     (moves,) = made
-    assert (placed != source).any(axis=-1).mean() > 0.1  # many cuts applied
-    packed, shapes, _ = moves.exemplars
-    afresh = kernels.expansion_data(packed, shapes, moves.reference, moves.labels, moves.movable)
-    np.testing.assert_array_equal(moves.data_now, afresh)
-    copied, valid = colours(exemplars, placed)
+    changed = (placed != source).any(axis=-1)
+    assert changed.mean() > 0.1  # many cuts applied
+    known = ~np.isnan(moves.data_now)
+    assert known.mean() > 0.5 and (known & changed).any()  # kept across changes too
+    copied, valid = colours([e.astype(np.float32) for e in exemplars], placed)
     assert valid.all()
-    np.testing.assert_allclose(
-        moves.data_now, ((copied - reference) ** 2).sum(-1), rtol=1e-5, atol=1e-6
-    )
+    gap = copied.astype(np.float32) - moves.reference
+    expected = np.zeros(gap.shape[:2])
+    for channel in range(gap.shape[2]):
+        expected += (gap[..., channel] * gap[..., channel]).astype(np.float64)
+    np.testing.assert_array_equal(moves.data_now[known], expected[known])
 
 
 def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):

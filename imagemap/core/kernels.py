@@ -945,24 +945,6 @@ def _data(exemplars, shapes, reference, e, oy, ox, y, x):
 
 
 @njit(cache=True, nogil=True)
-def expansion_data(exemplars, shapes, reference, labels, mask):
-    """Each pixel's data cost of its own label (:func:`_data`; (H, W) float64, 0 outside
-    ``mask``): kept by the seams' moves between moves (:func:`expansion_terms` reads it,
-    :func:`expansion_apply` updates it where a cut changes labels), so that it is not
-    gathered again at every move. The terms' own expression, so the same floats."""
-    label_e, label_y, label_x = labels
-    height, width = mask.shape
-    out = np.zeros((height, width))
-    for y in range(height):
-        for x in range(width):
-            if mask[y, x]:
-                out[y, x] = _data(
-                    exemplars, shapes, reference, label_e[y, x], label_y[y, x], label_x[y, x], y, x
-                )
-    return out
-
-
-@njit(cache=True, nogil=True)
 def expansion_terms(
     exemplars,
     shapes,
@@ -990,8 +972,10 @@ def expansion_terms(
     (x = 1); all other pixels keep theirs. Costs: the squared distance of the
     copied colour to ``reference``, plus ``smooth`` times the seam costs
     (:func:`_seam`), each seam's also times the mean of its two pixels' ``weights``
-    ((H, W)); ``data_now`` (H, W) holds each pixel's data cost of its own label
-    (:func:`expansion_data`). A pair of free neighbours
+    ((H, W)). ``data_now`` (H, W) keeps each pixel's data cost of its own label between
+    moves (NaN: not known yet; gathered here once, then read; :func:`expansion_apply`
+    forgets it where a cut changes the label): it only changes where a move changed
+    labels, and a pixel is a node of 12-14 moves at 512^2. A pair of free neighbours
     p, q costs E(xp, xq) = a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with
     a = seam(lp, lq), b = seam(lp, alpha), c = seam(alpha, lq); b + c >= a as the seam
     cost is a distance, so the move is a minimum cut (Kolmogorov & Zabih 2004).
@@ -1054,7 +1038,11 @@ def expansion_terms(
                 continue
             y, x = y0 + i, x0 + j
             e, oy, ox = label_e[y, x], label_y[y, x], label_x[y, x]
-            cost0[p] += data_now[y, x]
+            own = data_now[y, x]
+            if own != own:  # NaN: not known yet
+                own = _data(exemplars, shapes, reference, e, oy, ox, y, x)
+                data_now[y, x] = own
+            cost0[p] += own
             cost1[p] += _data(exemplars, shapes, reference, ae, ay, ax, y, x)
             for k in range(4):
                 ny = y + (1 if k == 0 else -1 if k == 1 else 0)
@@ -1097,17 +1085,18 @@ def expansion_terms(
 
 
 @njit(cache=True, nogil=True)
-def expansion_apply(node, takes, labels, ids, changed_at, costs, y0, x0, alpha, number, move, lost):
+def expansion_apply(
+    node, takes, labels, ids, changed_at, data_now, y0, x0, alpha, number, move, lost
+):
     """Apply one alpha-expansion move's cut (:func:`expansion_terms`' ``node``, (h, w),
     and ``takes``, (n,) bool: the nodes that take ``alpha``), in one pass over the crop
     whose corner is (y0, x0): each such pixel gets ``alpha`` in ``labels`` (label_e,
-    label_y, label_x), ``number`` in ``ids``, ``move`` in ``changed_at`` and alpha's data
-    cost in ``data_now`` (``costs``: exemplars, shapes, reference, data_now, as for
-    :func:`expansion_data`), and the label it had (``ids``, 1-based) one pixel less in
-    ``lost``. Returns the number of pixels that took ``alpha``.
+    label_y, label_x), ``number`` in ``ids``, ``move`` in ``changed_at`` and NaN in
+    ``data_now`` (its data cost not known: :func:`expansion_terms` gathers it when next
+    needed), and the label it had (``ids``, 1-based) one pixel less in ``lost``. Returns
+    the number of pixels that took ``alpha``.
     """
     label_e, label_y, label_x = labels
-    exemplars, shapes, reference, data_now = costs
     h, w = node.shape
     count = 0
     for i in range(h):
@@ -1119,7 +1108,7 @@ def expansion_apply(node, takes, labels, ids, changed_at, costs, y0, x0, alpha, 
             lost[ids[y, x] - 1] += 1
             ids[y, x] = number
             changed_at[y, x] = move
-            data_now[y, x] = _data(exemplars, shapes, reference, alpha[0], alpha[1], alpha[2], y, x)
+            data_now[y, x] = np.nan
             label_e[y, x] = alpha[0]
             label_y[y, x] = alpha[1]
             label_x[y, x] = alpha[2]

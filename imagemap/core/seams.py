@@ -336,13 +336,9 @@ class _Moves:
         self.movable, self.held, self.free, self.groups = masks
         self.smoothness, self.spread, self.weights = smoothness, spread, weights
         self.height, self.width = labels[0].shape
-        from imagemap.core import kernels  # deferred: start-up (numba)
-
-        packed, shapes, _ = exemplars
-        # Each pixel's data cost of its own label, updated where a cut changes labels: the
-        # terms read it instead of gathering it again at every move (12-14 moves a pixel
-        # at 512^2).
-        self.data_now = kernels.expansion_data(packed, shapes, reference, labels, self.movable)
+        # Each pixel's data cost of its own label, NaN until a move's terms gather it, and
+        # again where a cut changes the label: not gathered again at every move.
+        self.data_now = np.full((self.height, self.width), np.nan)
         self.changed_at = np.zeros((self.height, self.width), np.int32)  # moves: < 2^31
         self.expanded_at: dict[tuple[int, ...], int] = {}
         self.count = 0  # moves made
@@ -455,7 +451,7 @@ class _Moves:
             self.labels,
             self.ids,
             self.changed_at,
-            (*self.exemplars[:2], self.reference, self.data_now),
+            self.data_now,
             rows.start,
             columns.start,
             self.alphas[k],
@@ -765,8 +761,8 @@ def _expand(
     expansion_apply`), or None where none does. The terms and the minimum cut are numba
     kernels (:func:`imagemap.core.flow.grid_cut`), run without the GIL; a large move's
     cut is in halves, on ``beside``'s thread too where given (an idle executor).
-    ``data_now`` (H, W): each pixel's data cost of its own label
-    (:func:`imagemap.core.kernels.expansion_data`)."""
+    ``data_now`` (H, W): each pixel's data cost of its own label where known, kept
+    between moves (:func:`imagemap.core.kernels.expansion_terms`)."""
     from imagemap.core import flow, kernels  # deferred: start-up (numba)
 
     label_e, label_y, label_x = labels
