@@ -973,7 +973,7 @@ def expansion_terms(
     copied colour to ``reference``, plus ``smooth`` times the seam costs
     (:func:`_seam`), each seam's also times the mean of its two pixels' ``weights``
     ((H, W)). ``data_now`` (H, W) keeps each pixel's data cost of its own label between
-    moves (NaN: not known yet; gathered here once, then read; :func:`expansion_apply`
+    moves (0: not known yet; gathered here once, then read; :func:`expansion_apply`
     forgets it where a cut changes the label): it only changes where a move changed
     labels, and a pixel is a node of 12-14 moves at 512^2. A pair of free neighbours
     p, q costs E(xp, xq) = a + (c - a) xp - c xq + (b + c - a)(1 - xp) xq with
@@ -1039,7 +1039,7 @@ def expansion_terms(
             y, x = y0 + i, x0 + j
             e, oy, ox = label_e[y, x], label_y[y, x], label_x[y, x]
             own = data_now[y, x]
-            if own != own:  # NaN: not known yet
+            if own == 0.0:  # not known yet (or exactly 0, 0.2 % at 512^2: gathered again)
                 own = _data(exemplars, shapes, reference, e, oy, ox, y, x)
                 data_now[y, x] = own
             cost0[p] += own
@@ -1091,7 +1091,7 @@ def expansion_apply(
     """Apply one alpha-expansion move's cut (:func:`expansion_terms`' ``node``, (h, w),
     and ``takes``, (n,) bool: the nodes that take ``alpha``), in one pass over the crop
     whose corner is (y0, x0): each such pixel gets ``alpha`` in ``labels`` (label_e,
-    label_y, label_x), ``number`` in ``ids``, ``move`` in ``changed_at`` and NaN in
+    label_y, label_x), ``number`` in ``ids``, ``move`` in ``changed_at`` and 0 in
     ``data_now`` (its data cost not known: :func:`expansion_terms` gathers it when next
     needed), and the label it had (``ids``, 1-based) one pixel less in ``lost``. Returns
     the number of pixels that took ``alpha``.
@@ -1108,7 +1108,7 @@ def expansion_apply(
             lost[ids[y, x] - 1] += 1
             ids[y, x] = number
             changed_at[y, x] = move
-            data_now[y, x] = np.nan
+            data_now[y, x] = 0.0
             label_e[y, x] = alpha[0]
             label_y[y, x] = alpha[1]
             label_x[y, x] = alpha[2]

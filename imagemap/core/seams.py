@@ -336,9 +336,10 @@ class _Moves:
         self.movable, self.held, self.free, self.groups = masks
         self.smoothness, self.spread, self.weights = smoothness, spread, weights
         self.height, self.width = labels[0].shape
-        # Each pixel's data cost of its own label, NaN until a move's terms gather it, and
-        # again where a cut changes the label: not gathered again at every move.
-        self.data_now = np.full((self.height, self.width), np.nan)
+        # Each pixel's data cost of its own label, 0 until a move's terms gather it, and
+        # again where a cut changes the label: not gathered again at every move. Zeros, so
+        # that the pages no move reaches are never written (the band's solve at 4096^2).
+        self.data_now = np.zeros((self.height, self.width))
         self.changed_at = np.zeros((self.height, self.width), np.int32)  # moves: < 2^31
         self.expanded_at: dict[tuple[int, ...], int] = {}
         self.count = 0  # moves made
