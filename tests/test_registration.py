@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from imagemap import Database, Example, colorize
-from imagemap.depth.register import register, registered_positions
+from imagemap.depth.register import (
+    example_positions,
+    position_frame,
+    query_positions,
+    register,
+)
 from imagemap.metrics import fragments
 
 
@@ -53,10 +58,12 @@ def test_registered_positions_agree_where_the_warp_says():
     """An example pixel's registered position is its query pixel's own position."""
     query, example = ellipsoid(), ellipsoid(centre=(42, 58), radii=(28, 52))
     warp = register(query, example)
-    query_levels, example_levels = registered_positions(query > 0, [example.shape], [warp], 2)
+    frame = position_frame(query > 0)
+    query_levels = query_positions(query.shape, frame, 2)
+    example_levels = example_positions(example.shape, warp, frame, 2)
     ey, ex = (int(round(v[0])) for v in warp.forward(np.array([45.0]), np.array([80.0])))
-    np.testing.assert_allclose(example_levels[0][0][ey, ex], query_levels[0][45, 80], atol=0.05)
-    assert query_levels[1].shape == (45, 60, 2) and example_levels[0][1].shape == (45, 60, 2)
+    np.testing.assert_allclose(example_levels[0][ey, ex], query_levels[0][45, 80], atol=0.05)
+    assert query_levels[1].shape == (45, 60, 2) and example_levels[1].shape == (45, 60, 2)
 
 
 def test_a_large_pair_is_registered_from_block_averaged_guides_as_well():
@@ -86,24 +93,29 @@ def test_a_coarser_position_grid_interpolates_the_same_positions():
         ellipsoid((300, 400), (140, 210), (90, 170)),
     )
     warp = register(query, example)
-    _, fine = registered_positions(query > 0, [example.shape], [warp], 1)
-    _, coarse = registered_positions(query > 0, [example.shape], [warp], 1, grid_points=32)
+    frame = position_frame(query > 0)
+    (fine,) = example_positions(example.shape, warp, frame, 1)
+    (coarse,) = example_positions(example.shape, warp, frame, 1, grid_points=32)
     inside = example > 0
-    assert np.max(np.abs(fine[0][0][inside] - coarse[0][0][inside])) < 0.01
+    assert np.max(np.abs(fine[inside] - coarse[inside])) < 0.01
 
 
 def test_each_example_gets_its_own_position_grid():
-    """With ``grid_points``, an example's grid step comes from its own size: a larger
-    example listed before it does not change its positions (known answer: the same
-    example alone)."""
+    """With ``grid_points``, an example's grid step comes from its own size (known
+    answer: the step of its longer side over the points, at least ``grid_step``), not a
+    larger example's."""
     query = ellipsoid((300, 400), (150, 200), (100, 160))
     small = ellipsoid((150, 200), (75, 100), (50, 80))
     large = ellipsoid((600, 800), (300, 400), (200, 320))
-    warps = [register(query, large), register(query, small)]
-    shapes = [large.shape, small.shape]
-    _, both = registered_positions(query > 0, shapes, warps, 1, grid_points=32)
-    _, alone = registered_positions(query > 0, shapes[1:], warps[1:], 1, grid_points=32)
-    np.testing.assert_array_equal(both[1][0], alone[0][0])
+    frame = position_frame(query > 0)
+    for example, step in ((large, 25), (small, 7)):  # ceil(800 / 32), ceil(200 / 32)
+        warp = register(query, example)
+        (by_points,) = example_positions(example.shape, warp, frame, 1, grid_points=32)
+        (by_step,) = example_positions(example.shape, warp, frame, 1, grid_step=step)
+        np.testing.assert_array_equal(by_points, by_step)
+    (small_grid,) = example_positions(small.shape, register(query, small), frame, 1, 4, 32)
+    (large_step,) = example_positions(small.shape, register(query, small), frame, 1, 25)
+    assert not np.array_equal(small_grid, large_step)
 
 
 def test_shifted_copies_of_one_striped_map_give_a_handful_of_fragments():

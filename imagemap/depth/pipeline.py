@@ -63,6 +63,7 @@ from scipy import ndimage
 from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
 from imagemap.core.finecopy import fine_positions
+from imagemap.core.kernels import run_each
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
@@ -99,9 +100,11 @@ from imagemap.depth.pose import (
 from imagemap.depth.register import (
     Warp,
     block_average,
+    example_positions,
+    position_frame,
     position_scales,
+    query_positions,
     register_with_detail,
-    registered_positions,
     relief_agreement,
     relief_detail,
 )
@@ -415,53 +418,63 @@ def _relief_channel(config: DepthConfig) -> bool:
 
 def _bands(state: State, config: DepthConfig) -> State:
     levels = sized_config(config, state.mask).pyramid.levels
-    query_positions: list[np.ndarray] | None = None
-    example_positions: list[list[np.ndarray] | None] = [None] * len(state.chosen)
-    if state.warps:
-        query_positions, registered = registered_positions(
-            state.mask,
-            [e.depth.shape for e in state.chosen],
-            state.warps,
-            levels,
-            grid_points=int(config.registration.detail_size),
-        )
-        example_positions = list(registered)
-        del registered  # each example's positions freed once its mappings are cut
-    scales = _position_factors(state, config, levels)
-    # The finest level's factor is the seams' weights' too (the relief stage): kept, not
-    # made again (the engine holds it until it has packed the finest level anyway).
-    state.finest_scale = None if scales is None else scales[0]
-    # Handed over to the engine, which drops each level once it has packed its bands.
-    state.query_levels = ReleasableLevels(
-        depth_mappings(state.depth, levels, config.guides, query_positions, scales)
-    )
+    frame = position_frame(state.mask) if state.warps else None
     # The examples cut to their objects and the margin the engine's windows read (an
     # object is often a third of its frame): the same synthesis, the frames not held.
     params = engine_params(sized_config(config, state.mask), state.mask, len(state.chosen))
     radius = max(plan.patch_size for plan in params.level_plans(levels)) // 2
-    state.exemplar_levels = []
     keep = config.finish.copies and all(e.depth.size <= KEEP_COLOURS_PIXELS for e in state.chosen)
-    kept = []
-    for index, e in enumerate(state.chosen):
-        positions, example_positions[index] = example_positions[index], None
+    # Each example's levels and kept colours by its index (filled on the threads).
+    exemplar_levels: dict[int, ReleasableLevels] = {}
+    kept: dict[int, np.ndarray] = {}
+
+    def query_bands() -> None:
+        positions = None if frame is None else query_positions(state.mask.shape, frame, levels)
+        scales = _position_factors(state, config, levels)
+        # The finest level's factor is the seams' weights' too (the relief stage): kept,
+        # not made again (the engine holds it until it has packed the finest level anyway).
+        state.finest_scale = None if scales is None else scales[0]
+        # Handed over to the engine, which drops each level once it has packed its bands.
+        state.query_levels = ReleasableLevels(
+            depth_mappings(state.depth, levels, config.guides, positions, scales)
+        )
+
+    def example_bands(index: int) -> None:
+        e = state.chosen[index]
+        positions = None
+        if frame is not None:
+            positions = example_positions(
+                e.depth.shape,
+                state.warps[index],
+                frame,
+                levels,
+                grid_points=int(config.registration.detail_size),
+            )
         colours = example_colours(e)
         if keep:
-            kept.append(colours[0])
-        state.exemplar_levels.append(
-            ReleasableLevels(
-                example_mappings(
-                    e,
-                    levels,
-                    config.matching.appearance_pyramid,
-                    config.guides,
-                    positions,
-                    crop_radius=radius,
-                    colours=colours,
-                )
+            kept[index] = colours[0]
+        exemplar_levels[index] = ReleasableLevels(
+            example_mappings(
+                e,
+                levels,
+                config.matching.appearance_pyramid,
+                config.guides,
+                positions,
+                crop_radius=radius,
+                colours=colours,
             )
         )
-        del positions, colours
-    state.colours = kept if keep else None
+
+    # The query's bands and each example's on the kernels' threads (SciPy's filters,
+    # distance transforms and interpolation release the GIL): each its own arrays, the
+    # same bytes, in example order.
+    run_each(
+        lambda task: query_bands() if task < 0 else example_bands(task),
+        [-1, *range(len(state.chosen))],
+    )
+    order = range(len(state.chosen))
+    state.exemplar_levels = [exemplar_levels[index] for index in order]
+    state.colours = [kept[index] for index in order] if keep else None
     state.changed = f"{len(state.chosen)} examples"
     return state
 

@@ -39,6 +39,7 @@ import numpy as np
 from scipy import ndimage
 from threadpoolctl import threadpool_limits
 
+from imagemap.core.kernels import run_each
 from imagemap.depth.config import Registration
 
 __all__ = [
@@ -49,7 +50,9 @@ __all__ = [
     "Registered",
     "register_all",
     "register_with_detail",
-    "registered_positions",
+    "example_positions",
+    "position_frame",
+    "query_positions",
     "registration_guide",
     "relief_detail",
 ]
@@ -553,10 +556,19 @@ def register_with_detail(
             )
         return _with_relief_residual(warp, query_detail, example_depth, registration)
 
+    tasks = list(zip(example_depths, angles, strict=True))
+    made_by_index: dict[int, tuple[Warp, tuple[np.ndarray, int]]] = {}
+
+    def made_at(index: int) -> None:
+        made_by_index[index] = one(tasks[index])
+
+    # The examples on the kernels' threads, each its own (SciPy's filters, distance
+    # transforms and interpolation release the GIL): the same bytes, in example order.
     # Small matrices: one BLAS thread (one limit for all the fits: threadpoolctl finds the
-    # loaded libraries anew at each, 2-10 ms).
+    # loaded libraries anew at each, 2-10 ms; OpenBLAS's limit is the process's).
     with threadpool_limits(limits=1, user_api="blas"):
-        made = [one(task) for task in zip(example_depths, angles, strict=True)]
+        run_each(made_at, list(range(len(tasks))))
+    made = [made_by_index[index] for index in range(len(tasks))]
     warps = [warp for warp, _ in made]
     details = [detail for _, detail in made]
     if query_detail[1] != 1 or any(block != 1 for _, block in details):
@@ -725,8 +737,9 @@ def block_average(
     return small_depth.astype(np.float32), small_mask
 
 
-def _frame(mask: np.ndarray) -> np.ndarray:
-    """(yc, xc, r): the query object's centroid and RMS radius (the engine's frame)."""
+def position_frame(mask: np.ndarray) -> np.ndarray:
+    """(yc, xc, r): the query object's centroid and RMS radius, the frame of the engine's
+    positions (:func:`query_positions`, :func:`example_positions`)."""
     ys, xs = np.nonzero(mask)
     radius = max(float(np.sqrt(ys.var() + xs.var())), 1.0)
     return np.array([ys.mean(), xs.mean(), radius])
@@ -741,54 +754,49 @@ def _level_coordinates(shape: tuple[int, int], level: int) -> tuple[np.ndarray, 
     return ys, xs
 
 
-def registered_positions(
-    query_mask: np.ndarray,
-    example_shapes: list[tuple[int, int]],
-    warps: list[Warp],
+def query_positions(shape: tuple[int, int], frame: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Position bands for the engine, per level (H_l, W_l, 2): each query pixel's position
+    relative to the query object's centroid in units of its RMS radius (``frame``:
+    :func:`position_frame`)."""
+    query_levels = []
+    for level in range(levels):
+        ys, xs = _level_coordinates(shape, level)
+        grid_y, grid_x = np.meshgrid((ys - frame[0]) / frame[2], (xs - frame[1]) / frame[2])
+        query_levels.append(np.stack([grid_y.T, grid_x.T], axis=-1).astype(np.float32))
+    return query_levels
+
+
+def example_positions(
+    shape: tuple[int, int],
+    warp: Warp,
+    frame: np.ndarray,
     levels: int,
     grid_step: int = 4,
     grid_points: int | None = None,
-) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
-    """Position bands for the engine: per level, the query's own position and each
-    example pixel's position where its warp puts it on the query, both relative to the
-    query object's centroid in units of its RMS radius.
+) -> list[np.ndarray]:
+    """Position bands for the engine, per level (H_l, W_l, 2): where ``warp`` puts each
+    pixel of an example of ``shape`` on the query, in :func:`query_positions`' units.
 
     The inverse warp is evaluated on a grid of every ``grid_step``-th pixel and
     interpolated (it is smooth); with ``grid_points``, the step grows so that the grid
-    has about that many points along an example's longer side.
-
-    Returns
-    -------
-    query : list of ndarray (H_l, W_l, 2)
-    examples : list (per example) of list (per level) of ndarray (H_l, W_l, 2)
+    has about that many points along the example's longer side (its own: each example
+    its own step).
     """
-    frame = _frame(query_mask)
-    query_levels = []
+    step = grid_step
+    if grid_points is not None:
+        step = max(grid_step, -(-max(shape) // grid_points))
+    coarse_y = np.arange(0, shape[0] + step, step, dtype=np.float64)
+    coarse_x = np.arange(0, shape[1] + step, step, dtype=np.float64)
+    cy, cx = np.meshgrid(coarse_y, coarse_x, indexing="ij")
+    qy, qx = warp.inverse(cy, cx)
+    positions = np.stack([(qy - frame[0]) / frame[2], (qx - frame[1]) / frame[2]])
+    per_level = []
     for level in range(levels):
-        ys, xs = _level_coordinates(query_mask.shape, level)
-        grid_y, grid_x = np.meshgrid((ys - frame[0]) / frame[2], (xs - frame[1]) / frame[2])
-        query_levels.append(np.stack([grid_y.T, grid_x.T], axis=-1).astype(np.float32))
-    example_levels = []
-    for shape, warp in zip(example_shapes, warps, strict=True):
-        # Each example's own step (a larger example before it must not coarsen its grid).
-        step = grid_step
-        if grid_points is not None:
-            step = max(grid_step, -(-max(shape) // grid_points))
-        coarse_y = np.arange(0, shape[0] + step, step, dtype=np.float64)
-        coarse_x = np.arange(0, shape[1] + step, step, dtype=np.float64)
-        cy, cx = np.meshgrid(coarse_y, coarse_x, indexing="ij")
-        qy, qx = warp.inverse(cy, cx)
-        positions = np.stack([(qy - frame[0]) / frame[2], (qx - frame[1]) / frame[2]])
-        per_level = []
-        for level in range(levels):
-            ys, xs = _level_coordinates(shape, level)
-            gy, gx = np.meshgrid(ys / step, xs / step, indexing="ij")
-            sampled = [
-                ndimage.map_coordinates(p, [gy, gx], order=1, mode="nearest") for p in positions
-            ]
-            per_level.append(np.stack(sampled, axis=-1).astype(np.float32))
-        example_levels.append(per_level)
-    return query_levels, example_levels
+        ys, xs = _level_coordinates(shape, level)
+        gy, gx = np.meshgrid(ys / step, xs / step, indexing="ij")
+        sampled = [ndimage.map_coordinates(p, [gy, gx], order=1, mode="nearest") for p in positions]
+        per_level.append(np.stack(sampled, axis=-1).astype(np.float32))
+    return per_level
 
 
 def relief_agreement(
