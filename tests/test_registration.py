@@ -199,3 +199,23 @@ def test_the_displacement_is_the_sum_of_its_sixteen_terms():
     found = warp.displacement(ys, xs)
     assert np.array_equal(found[0], dy.reshape(ys.shape))
     assert np.array_equal(found[1], dx.reshape(ys.shape))
+
+
+def test_the_inverse_is_every_points_twelve_steps_to_the_bit():
+    """Warp.inverse leaves a point once it is a fixed point to the bit: the same values as
+    twelve fixed-point steps of every point (the reference, written out here)."""
+    query, example = ellipsoid(), ellipsoid(centre=(40, 66), radii=(24, 40))
+    warp = register(query, example)
+    ys, xs = np.meshgrid(np.arange(-4.0, 95.0, 1.5), np.arange(-4.0, 125.0, 1.5), indexing="ij")
+    inverse = np.linalg.inv(warp.linear)
+    oy, ox = ys - warp.example_centre[0], xs - warp.example_centre[1]
+    ty = warp.query_centre[0] + inverse[0, 0] * oy + inverse[0, 1] * ox
+    tx = warp.query_centre[1] + inverse[1, 0] * oy + inverse[1, 1] * ox
+    qy, qx = ty.copy(), tx.copy()
+    for _ in range(12):
+        dy, dx = warp.displacement(qy, qx)
+        qy, qx = ty - dy, tx - dx
+    iy, ix = warp.inverse(ys, xs)
+    assert iy.shape == ys.shape
+    np.testing.assert_array_equal(iy, qy)
+    np.testing.assert_array_equal(ix, qx)

@@ -332,16 +332,45 @@ class Warp:
 
     def inverse(self, ys: np.ndarray, xs: np.ndarray, iterations: int = 12) -> tuple:
         """Query coordinates of example coordinates (fixed-point iteration: the
-        displacement is smooth and small against the object)."""
+        displacement is smooth and small against the object).
+
+        Each point is iterated until it is a fixed point to the bit (the next step would
+        give it again, and so every later one: it is left), or ``iterations`` times: the
+        values of ``iterations`` steps for every point. Most points are fixed after five or
+        six steps; a few alternate between two neighbouring floats to the end.
+
+        Examples
+        --------
+        >>> warp = Warp(np.array([4.0, 5.0]), np.array([3.0, 6.0]), np.eye(2),
+        ...             (0.0, 9.0, 0.0, 11.0), np.linspace(-1, 1, 50).reshape(2, 25), 5)
+        >>> qy, qx = warp.inverse(np.array([2.0, 5.5]), np.array([3.0, 8.0]))
+        >>> wy, wx = warp.forward(qy, qx)
+        >>> bool(np.allclose(wy, [2.0, 5.5]) and np.allclose(wx, [3.0, 8.0]))
+        True
+        """
         inverse = np.linalg.inv(self.linear)
         oy, ox = np.asarray(ys) - self.example_centre[0], np.asarray(xs) - self.example_centre[1]
-        ty = self.query_centre[0] + inverse[0, 0] * oy + inverse[0, 1] * ox
-        tx = self.query_centre[1] + inverse[1, 0] * oy + inverse[1, 1] * ox
+        ty = np.ravel(self.query_centre[0] + inverse[0, 0] * oy + inverse[0, 1] * ox)
+        tx = np.ravel(self.query_centre[1] + inverse[1, 0] * oy + inverse[1, 1] * ox)
         qy, qx = ty.copy(), tx.copy()
+        moving = np.arange(ty.size)  # the points not yet fixed
         for _ in range(iterations):
-            dy, dx = self.displacement(qy, qx)
-            qy, qx = ty - dy, tx - dx
-        return qy, qx
+            dy, dx = self.displacement(qy[moving], qx[moving])
+            ny, nx = ty[moving] - dy, tx[moving] - dx
+            # Compared by their bits: the same bits in, the same bits out (signed zeros, NaNs).
+            moved = _bits(ny) != _bits(qy[moving])
+            moved |= _bits(nx) != _bits(qx[moving])
+            qy[moving], qx[moving] = ny, nx
+            moving = moving[moved]
+            if not moving.size:
+                break
+        shape = np.shape(oy)
+        return qy.reshape(shape), qx.reshape(shape)
+
+
+def _bits(values: np.ndarray) -> np.ndarray:
+    """float64 ``values``' bits, as unsigned integers."""
+    return np.ascontiguousarray(values, np.float64).view(np.uint64)
 
 
 def _affine(fixed_mask, moving_mask, angle: float) -> tuple:
