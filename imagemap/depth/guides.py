@@ -413,10 +413,12 @@ def depth_mappings(
     guides: Guides = _GUIDES,
     positions: list[np.ndarray] | None = None,
     position_scales: list[np.ndarray | None] | None = None,
+    nearest: np.ndarray | None = None,
 ) -> list[Mapping]:
     """The query's pyramid of mappings (guide bands and mask) for a depth map;
     ``positions`` (per level, (H_l, W_l, 2)) replace the engine's relative position,
-    ``position_scales`` (per level, (H_l, W_l)) are the position term's factors."""
+    ``position_scales`` (per level, (H_l, W_l)) are the position term's factors;
+    ``nearest``: the object's :func:`~imagemap.core.blend.nearest_object_pixels`, if made."""
     depth = validate_depth(depth)
     masks = mask_pyramid(depth > 0, levels)
     level_positions: list[np.ndarray | None] = list(positions) if positions else [None] * levels
@@ -429,7 +431,11 @@ def depth_mappings(
             position_scale=scale,
         )
         for guide, mask, position, scale in zip(
-            _depth_guides(depth, masks, guides), masks, level_positions, scales, strict=True
+            _depth_guides(depth, masks, guides, nearest),
+            masks,
+            level_positions,
+            scales,
+            strict=True,
         )
     ]
 
@@ -504,13 +510,17 @@ def to_rgb(ycbcr: np.ndarray) -> np.ndarray:
     return out
 
 
-def example_colours(example: Example) -> tuple[np.ndarray, np.ndarray | None]:
+def example_colours(
+    example: Example, nearest: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
     """An example's :func:`example_ycbcr` and its mask's nearest object pixels
     (:func:`~imagemap.core.blend.nearest_object_pixels`; None for a mask that is all or
     nothing): the colours' fill and the depth's continuation past the outline read the
-    same nearest pixels, one distance transform for both."""
+    same nearest pixels, one distance transform for both (``nearest``: those pixels,
+    if made already)."""
     mask = example.mask
-    nearest = nearest_object_pixels(mask) if mask.any() and not mask.all() else None
+    if nearest is None and mask.any() and not mask.all():
+        nearest = nearest_object_pixels(mask)
     return example_ycbcr(example, nearest), nearest
 
 

@@ -154,6 +154,9 @@ class State(SynthesisState):
     full: tuple[np.ndarray, np.ndarray, list[Any]] | None = None
     searched: np.ndarray | None = None  # the object the engine searched, when averaged
     finest_scale: np.ndarray | None = None  # the finest level's position factor (bands)
+    # The query's then each example's nearest object pixels where the registration made
+    # them from its full-size mask (Registered.nearest), for the bands, which drop them.
+    nearest: list[np.ndarray | None] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.query_depth = self.depth
@@ -401,6 +404,9 @@ def _register(state: State, config: DepthConfig) -> State:
         angles=state.angles,
     )
     state.warps = registered.warps
+    # The bands' fills read them (one distance transform less per map: 15-20 ms each at
+    # 512^2); 8 bytes a pixel per map, held only until the bands, the next stage.
+    state.nearest = registered.nearest
     if _relief_channel(config):
         # The relief's detail the residuals were made from is the seams' relief channel
         # where it is at full size (objects up to 1.5 detail_size across: 12 bytes a
@@ -426,6 +432,8 @@ def _bands(state: State, config: DepthConfig) -> State:
     keep = config.finish.copies and all(e.depth.size <= KEEP_COLOURS_PIXELS for e in state.chosen)
     # Each example's levels and kept colours by its index (filled on the threads).
     exemplar_levels: dict[int, ReleasableLevels] = {}
+    nearest: list[np.ndarray | None] = state.nearest or [None] * (1 + len(state.chosen))
+    state.nearest = []
     kept: dict[int, np.ndarray] = {}
 
     def query_bands() -> None:
@@ -436,7 +444,7 @@ def _bands(state: State, config: DepthConfig) -> State:
         state.finest_scale = None if scales is None else scales[0]
         # Handed over to the engine, which drops each level once it has packed its bands.
         state.query_levels = ReleasableLevels(
-            depth_mappings(state.depth, levels, config.guides, positions, scales)
+            depth_mappings(state.depth, levels, config.guides, positions, scales, nearest[0])
         )
 
     def example_bands(index: int) -> None:
@@ -450,7 +458,7 @@ def _bands(state: State, config: DepthConfig) -> State:
                 levels,
                 grid_points=int(config.registration.detail_size),
             )
-        colours = example_colours(e)
+        colours = example_colours(e, nearest[1 + index])
         if keep:
             kept[index] = colours[0]
         exemplar_levels[index] = ReleasableLevels(

@@ -95,8 +95,22 @@ def registration_guide(
     >>> bool(guide[2, 4] > 0.5 > guide[0, 0])
     True
     """
+    return _guide_and_nearest(depth, mask, relief_weight, relief_scale)[0]
+
+
+def _guide_and_nearest(
+    depth: np.ndarray, mask: np.ndarray, relief_weight: float, relief_scale: float
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`registration_guide`, and ``mask``'s nearest object pixels its outside
+    distance was made from (:func:`~imagemap.core.blend.nearest_object_pixels`' values:
+    SciPy makes the distances from that feature transform), None for a mask that is all
+    or nothing (the bands make none for it)."""
     size = max(float(np.sqrt(mask.sum())), 1.0)
-    signed = _inside_distance(mask) - ndimage.distance_transform_edt(~mask)
+    outside, nearest = ndimage.distance_transform_edt(~mask, return_indices=True)
+    if not mask.any() or mask.all():
+        nearest = None
+    signed = _inside_distance(mask) - outside
+    del outside
     outline = np.tanh(signed / (OUTLINE_REACH * size))
     deepest = float(depth[mask].max()) if mask.any() else 1.0
     relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
@@ -106,7 +120,7 @@ def registration_guide(
         detail = np.where(mask, relief - smooth, 0.0)
         unit = float(np.percentile(np.abs(detail[mask]), 95)) or 1.0
         guide = guide + relief_weight * np.tanh(detail / unit)
-    return guide.astype(np.float32)
+    return guide.astype(np.float32), nearest
 
 
 def _mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
@@ -503,15 +517,23 @@ def register_all(
     ).warps
 
 
+#: One example's registration: its warp, its relief detail and block, its nearest object
+#: pixels (or None).
+_Made = tuple[Warp, tuple[np.ndarray, int], np.ndarray | None]
+
+
 @dataclass(frozen=True)
 class Registered:
     """What :func:`register_with_detail` made: the warps, and the relief's detail of the
     query and of each example at full size (:func:`relief_detail` at the registration's
     ``relief_detail_scale``) where the registration made it at full size (objects up to
-    about 1.5 ``detail_size`` across), else None."""
+    about 1.5 ``detail_size`` across), else None; and the query's then each example's
+    :func:`~imagemap.core.blend.nearest_object_pixels` where its guide was made from its
+    full-size mask (the bands' fill and depth continuation read them), else None."""
 
     warps: list[Warp]
     detail: tuple[np.ndarray, list[np.ndarray]] | None
+    nearest: list[np.ndarray | None]
 
 
 def register_with_detail(
@@ -547,27 +569,30 @@ def register_with_detail(
     block = max(1, int(1.0 / (registration.detail_size / registration.work_size * zoom)))
 
     def working(depth, mask):
+        """The working guide and mask, and the full-size mask's nearest object pixels
+        (None where the guide was made from block averages)."""
         if block > 1:
             depth, mask = block_average(depth, mask, block)
-        guide = registration_guide(
-            depth,
-            mask,
-            registration.registration_relief,
-            relief_scale=registration.relief_detail_scale,
+        guide, nearest = _guide_and_nearest(
+            depth, mask, registration.registration_relief, registration.relief_detail_scale
         )
+        if block > 1:
+            nearest = None
         scale = zoom * block
         if scale >= 1.0:
-            return guide, mask
+            return guide, mask, nearest
         small = ndimage.zoom(guide, scale, order=1, prefilter=False)
         small_mask = ndimage.zoom(mask.astype(np.float32), scale, order=1, prefilter=False) > 0.5
-        return small, small_mask if small_mask.any() else small > 0.25
+        return small, small_mask if small_mask.any() else small > 0.25, nearest
 
-    fixed, fixed_mask = working(query_depth, query_mask)
+    fixed, fixed_mask, query_nearest = working(query_depth, query_mask)
     query_detail = _detail_grid(query_depth, query_mask, registration)
 
-    def one(task: tuple[np.ndarray, float]) -> tuple[Warp, tuple[np.ndarray, int]]:
+    def one(
+        task: tuple[np.ndarray, float],
+    ) -> tuple[Warp, tuple[np.ndarray, int], np.ndarray | None]:
         example_depth, angle = task
-        moving, moving_mask = working(example_depth, example_depth > 0)
+        moving, moving_mask, nearest = working(example_depth, example_depth > 0)
         warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
         if zoom < 1.0:
             # Back to full-resolution pixels: a working pixel centre j is full-resolution
@@ -583,10 +608,10 @@ def register_with_detail(
                 coefficients=warp.coefficients / zoom,
                 n=warp.n,
             )
-        return _with_relief_residual(warp, query_detail, example_depth, registration)
+        return (*_with_relief_residual(warp, query_detail, example_depth, registration), nearest)
 
     tasks = list(zip(example_depths, angles, strict=True))
-    made_by_index: dict[int, tuple[Warp, tuple[np.ndarray, int]]] = {}
+    made_by_index: dict[int, _Made] = {}
 
     def made_at(index: int) -> None:
         made_by_index[index] = one(tasks[index])
@@ -598,11 +623,12 @@ def register_with_detail(
     with threadpool_limits(limits=1, user_api="blas"):
         run_each(made_at, list(range(len(tasks))))
     made = [made_by_index[index] for index in range(len(tasks))]
-    warps = [warp for warp, _ in made]
-    details = [detail for _, detail in made]
+    warps = [warp for warp, _, _ in made]
+    details = [detail for _, detail, _ in made]
+    nearest = [query_nearest] + [example_nearest for _, _, example_nearest in made]
     if query_detail[1] != 1 or any(block != 1 for _, block in details):
-        return Registered(warps, None)
-    return Registered(warps, (query_detail[0], [detail for detail, _ in details]))
+        return Registered(warps, None, nearest)
+    return Registered(warps, (query_detail[0], [detail for detail, _ in details]), nearest)
 
 
 def relief_detail(depth: np.ndarray, mask: np.ndarray, scale: float) -> np.ndarray:
