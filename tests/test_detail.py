@@ -74,6 +74,40 @@ def test_macro_part_transfer_weights_parts_equally():
     assert np.mean(transferred == labels) == pytest.approx(0.99)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_seamless_copy_keeping_its_copies_gives_the_same_bytes(monkeypatch, dtype):
+    """The blend keeps each shifted copy once gathered on small frames (KEEP_COPIES_PIXELS;
+    in float32 where the inputs are): the same bytes as gathering every copy again, with
+    a mask, edges kept, sources off the exemplars' edges and pixels without a source."""
+    from imagemap.core import poisson
+
+    rng = np.random.default_rng(3)
+    exemplars = [rng.random((30, 40, 3)).astype(dtype) for _ in range(2)]
+    source = np.stack(
+        [
+            rng.integers(-1, 2, (36, 44)),
+            rng.integers(0, 30, (36, 44)),
+            rng.integers(0, 40, (36, 44)),
+        ],
+        axis=-1,
+    ).astype(np.int32)
+    source[8:30, 6:40, 0] = 1  # a coherent block: its copy's own detail
+    source[8:30, 6:40, 1:] = np.stack(np.mgrid[0:22, 0:34], axis=-1) + (4, 3)
+    reference = rng.random((36, 44, 3)).astype(dtype)
+    mask = np.zeros((36, 44), bool)
+    mask[4:33, 3:42] = True
+
+    def blend():
+        return seamless_copy(
+            exemplars, source, reference, scale=5.0, edge_support=0.3, edge_floor=0.01, mask=mask
+        )
+
+    assert 36 * 44 <= poisson.KEEP_COPIES_PIXELS
+    kept = blend()
+    monkeypatch.setattr(poisson, "KEEP_COPIES_PIXELS", 0)
+    np.testing.assert_array_equal(kept, blend())
+
+
 def test_seamless_copy_keeps_a_coherent_copy_and_hides_a_palette_seam():
     rng = np.random.default_rng(1)
     texture = ndimage.gaussian_filter(rng.standard_normal((48, 64, 1)), (1, 1, 0))

@@ -141,7 +141,7 @@ def seamless_copy(
             raise ValueError(f"mask {mask.shape} does not fit the reference {reference.shape}")
         none_x |= mask[:, 1:] != mask[:, :-1]
         none_y |= mask[1:] != mask[:-1]
-    groups = _source_groups(exemplars, source)
+    copies = _Copies(exemplars, source, reference)
     # One channel at a time (a third of the memory of all at once), and within a channel
     # one side's gradient at a time; the reference is made float64 a channel at a time.
     # Only the choice of the stronger gradient across a seam couples the channels (it
@@ -154,7 +154,7 @@ def seamless_copy(
         ahead, behind = np.zeros(shape), np.zeros(shape)
         for channel in range(n_channels):
             ref = reference[..., channel].astype(np.float64)
-            sides = _side_gradients(groups, has, ref, channel, (axis,))
+            sides = _side_gradients(copies, ref, channel, (axis,))
             del ref
             for norm in (ahead, behind):
                 difference = next(sides)
@@ -171,7 +171,7 @@ def seamless_copy(
     edges = None
     if strongest:
         edges = _supported_edges(
-            groups,
+            copies,
             has,
             source,
             reference,
@@ -191,7 +191,7 @@ def seamless_copy(
         raise ValueError(f"out {out.shape} {out.dtype}: not float32 of the reference's shape")
     for channel in range(n_channels):
         ref = reference[..., channel].astype(np.float64)
-        gradients = _side_gradients(groups, has, ref, channel)
+        gradients = _side_gradients(copies, ref, channel)
         # Each side's own exemplar gradient (equal where the copy is coherent); across a
         # seam the stronger of the two, so an edge or stripe that meets the seam goes on
         # at full contrast instead of an average of two unrelated textures.
@@ -200,8 +200,9 @@ def seamless_copy(
         gy = next(gradients)
         np.copyto(gy, next(gradients), where=~down_wins)
         gradients.close()
+        copies.drop(channel)
         if edges is not None:  # the copy's own step across the supported edges
-            copy = _copy_channel(groups, has, ref, channel)
+            copy = copies(ref, channel)
             np.subtract(copy[:, 1:], copy[:, :-1], out=gx, where=edges[0])
             np.subtract(copy[1:], copy[:-1], out=gy, where=edges[1])
             del copy
@@ -221,7 +222,7 @@ def seamless_copy(
             spectrum[rows] /= lam + eig_y[rows, None] + eig_x[None, :]
         out[..., channel] = fft.idctn(spectrum, type=2, axes=(0, 1), norm="ortho", overwrite_x=True)
         del spectrum
-    del groups
+    del copies
     _trim_heap()  # before the caller's colour conversion
     return out
 
@@ -229,7 +230,7 @@ def seamless_copy(
 _ROWS = 256  # rows per block of the DCT denominator
 
 
-def _supported_edges(groups, has, source, reference, support, strongest, contrast, floor):
+def _supported_edges(copies, has, source, reference, support, strongest, contrast, floor):
     """Horizontal and vertical neighbour pairs (see :func:`seamless_copy`) copied from the
     same exemplar whose copied step is an edge (``contrast`` times either side's own
     gradient and at least ``floor``) that the reference shows too.
@@ -245,7 +246,7 @@ def _supported_edges(groups, has, source, reference, support, strongest, contras
         terms = [np.zeros(e[ahead].shape, np.float32) for _ in range(3)]  # step.span, span², step²
         for channel in range(reference.shape[2]):
             ref = reference[..., channel]
-            copy = _copy_channel(groups, has, ref, channel)  # float64 from the float32
+            copy = copies(ref, channel)  # float64 from the float32
             step = np.subtract(copy[ahead], copy[behind], dtype=np.float32)
             del copy
             # The reference's change from the pixel before the pair to the one after it:
@@ -308,6 +309,49 @@ def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
 _PIECE = 2**20
 
 
+#: Frames up to this many pixels (724 x 724) keep each channel's five shifted copies
+#: through the blend once gathered (60 bytes a pixel for three float32 channels: 14 MB at
+#: the 512^2 fish's 459 x 509 frame, 31 MB at most): 15 gathers instead of 42, each a
+#: full-size float64 copy of the reference and a take per exemplar (about half the
+#: blend's time at 512^2). Larger frames gather again: the blend is the 4096^2 peak.
+KEEP_COPIES_PIXELS = 2**19
+
+
+class _Copies:
+    """:func:`_copy_channel` of one blend's exemplars and source map: ``copies(ref,
+    channel, dy, dx)``, ``ref`` always the reference's own ``channel`` (any float type: the
+    same float64 values), a new float64 array each call. On frames up to
+    :data:`KEEP_COPIES_PIXELS` each is gathered once and kept in the inputs' type (float32
+    when the exemplars and the reference are: the copied values are theirs, the same
+    values), until :meth:`drop`."""
+
+    def __init__(self, exemplars, source, reference) -> None:
+        self.groups = _source_groups(exemplars, source)
+        self.has = source[..., 0] >= 0
+        height, width = source.shape[:2]
+        self.kept: dict[tuple[int, int, int], np.ndarray] | None = (
+            {} if height * width <= KEEP_COPIES_PIXELS else None
+        )
+        dtypes = {np.dtype(reference.dtype), *(np.dtype(e.dtype) for e in exemplars)}
+        self.dtype = np.float32 if dtypes == {np.dtype(np.float32)} else np.float64
+
+    def __call__(self, ref, channel: int, dy: int = 0, dx: int = 0) -> np.ndarray:
+        if self.kept is None:
+            return _copy_channel(self.groups, self.has, ref, channel, dy, dx)
+        kept = self.kept.get((channel, dy, dx))
+        if kept is not None:
+            return kept.astype(np.float64)
+        copy = _copy_channel(self.groups, self.has, ref, channel, dy, dx)
+        self.kept[(channel, dy, dx)] = copy.astype(self.dtype)
+        return copy
+
+    def drop(self, channel: int) -> None:
+        """Forget ``channel``'s copies (its solve has read them)."""
+        if self.kept is not None:
+            for key in [key for key in self.kept if key[0] == channel]:
+                del self.kept[key]
+
+
 def _source_groups(exemplars, source):
     """Per exemplar: (exemplar (H, W, C), C-contiguous, flat indices of the pixels copied
     from it, source y, x)."""
@@ -323,22 +367,22 @@ def _source_groups(exemplars, source):
     return groups
 
 
-def _side_gradients(groups, has, ref, channel, axes=(1, 0)):
+def _side_gradients(copies, ref, channel, axes=(1, 0)):
     """Per channel, one at a time (a generator: the caller frees each before the next is
     made), along each of ``axes`` (1: horizontal pairs, 0: vertical): the horizontal
     gradient by the left pixel's source and by the right pixel's, the vertical one by the
     upper and by the lower pixel's source."""
-    copy = _copy_channel(groups, has, ref, channel)
+    copy = copies(ref, channel)
     if 1 in axes:
-        right = _copy_channel(groups, has, ref, channel, 0, 1)[:, :-1]
+        right = copies(ref, channel, 0, 1)[:, :-1]
         yield np.subtract(right, copy[:, :-1], out=right)
         del right
-        left = _copy_channel(groups, has, ref, channel, 0, -1)[:, 1:]
+        left = copies(ref, channel, 0, -1)[:, 1:]
         yield np.subtract(copy[:, 1:], left, out=left)
         del left
     if 0 in axes:
-        down = _copy_channel(groups, has, ref, channel, 1, 0)[:-1]
+        down = copies(ref, channel, 1, 0)[:-1]
         yield np.subtract(down, copy[:-1], out=down)
         del down
-        up = _copy_channel(groups, has, ref, channel, -1, 0)[1:]
+        up = copies(ref, channel, -1, 0)[1:]
         yield np.subtract(copy[1:], up, out=up)
