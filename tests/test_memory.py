@@ -728,3 +728,23 @@ def test_resampled_depth_in_row_blocks_equals_the_whole_grids_formula(
     rows = slice(14, 21)
     part_y, part_x = frame.to_query(rows)
     assert np.array_equal(part_y, qy[rows]) and np.array_equal(part_x, qx[rows])
+
+
+def test_each_example_runs_every_index_once_and_large_frames_in_order(monkeypatch):
+    """each_example calls the function once per example; frames above
+    THREADED_FRAME_PIXELS one after the other, in order, on the calling thread."""
+    import threading
+
+    from imagemap.depth import budget
+
+    calls: list[tuple[int, str]] = []
+
+    def record(index: int) -> None:
+        calls.append((index, threading.current_thread().name))
+
+    budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
+    assert sorted(index for index, _ in calls) == [0, 1, 2]
+    calls.clear()
+    monkeypatch.setattr(budget, "THREADED_FRAME_PIXELS", 30)  # the second frame is larger
+    budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
+    assert calls == [(index, threading.current_thread().name) for index in range(3)]

@@ -38,12 +38,37 @@ __all__ = [
     "Estimate",
     "MemoryBudgetError",
     "available_memory",
+    "each_example",
     "estimate_colorize",
     "guard_colorize",
     "memory_check",
 ]
 
 log = logging.getLogger("imagemap")
+
+#: Examples' frames up to this many pixels have their own work (the registration's guides
+#: and fit, the bands, the small features) done on the kernels' threads at once; larger
+#: frames one example at a time. Two examples' transients at once, and the memory the
+#: worker threads' malloc arenas keep: fish, 2 examples (benchmarks/memory.py), the 512^2
+#: task's peak 259 -> 271 MB (reached in the engine; the bands' 175 -> 188), the 1024^2
+#: fish's 327 -> 329 MB (the bands' 269 -> 306 MB, the registration's 191 -> 241 MB: still
+#: under the engine's). Above it the bands' peak would pass the engine's.
+THREADED_FRAME_PIXELS = 2**20
+
+
+def each_example(function, shapes: Sequence[tuple[int, ...]]) -> None:
+    """``function(index)`` for each example of frame ``shapes[index]``: on the kernels'
+    threads (:func:`imagemap.core.kernels.run_each`) where every frame has at most
+    :data:`THREADED_FRAME_PIXELS` pixels, else one after the other in order."""
+    from imagemap.core.kernels import run_each  # deferred: start-up (numba); the guard's users
+
+    indices = list(range(len(shapes)))
+    if all(shape[0] * shape[1] <= THREADED_FRAME_PIXELS for shape in shapes):
+        run_each(function, indices)
+    else:
+        for index in indices:
+            function(index)
+
 
 # Bytes per item beside the features (see the module docstring), and the measured
 # factors. CALIBRATION: fitted on fish runs (queries 150x200 to 2400x3200, examples

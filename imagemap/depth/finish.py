@@ -33,6 +33,7 @@ from imagemap.core.pyramid import collapse_laplacian
 from imagemap.core.seams import place_seams, with_channels
 from imagemap.core.stages import Stage
 from imagemap.depth import completion
+from imagemap.depth.budget import each_example
 from imagemap.depth.config import DepthConfig
 from imagemap.depth.guides import example_ycbcr, to_rgb
 
@@ -133,15 +134,19 @@ def example_features(
     (``filled``: the exemplars are :func:`~imagemap.depth.guides.example_ycbcr`'s, their
     background filled already, as the copy stage makes them)."""
     if state.features is None:
-        state.features = [
-            completion.small_features(
-                exemplar,
-                example.mask,
-                completion=config.completion,
-                filled=filled,
+        pairs = list(zip(state.made("exemplars"), state.chosen, strict=True))
+        found: dict[int, tuple[np.ndarray, int]] = {}
+
+        def find(index: int) -> None:
+            exemplar, example = pairs[index]
+            found[index] = completion.small_features(
+                exemplar, example.mask, completion=config.completion, filled=filled
             )
-            for exemplar, example in zip(state.made("exemplars"), state.chosen, strict=True)
-        ]
+
+        # Each example's on the kernels' threads (the hosts' median filter and distances
+        # release the GIL), in example order: the same labels.
+        each_example(find, [exemplar.shape for exemplar, _ in pairs])
+        state.features = [found[index] for index in range(len(pairs))]
     return state.features
 
 

@@ -63,11 +63,10 @@ from scipy import ndimage
 from imagemap.core.blend import copy_through
 from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
 from imagemap.core.finecopy import fine_positions
-from imagemap.core.kernels import run_each
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
-from imagemap.depth.budget import averaging_factor, guard_colorize
+from imagemap.depth.budget import averaging_factor, each_example, guard_colorize
 from imagemap.depth.config import OPTIONS, PRESETS, DepthConfig, resolve_config
 from imagemap.depth.finish import (
     BLEND,
@@ -476,9 +475,9 @@ def _bands(state: State, config: DepthConfig) -> State:
     # The query's bands and each example's on the kernels' threads (SciPy's filters,
     # distance transforms and interpolation release the GIL): each its own arrays, the
     # same bytes, in example order.
-    run_each(
-        lambda task: query_bands() if task < 0 else example_bands(task),
-        [-1, *range(len(state.chosen))],
+    each_example(
+        lambda task: query_bands() if task == 0 else example_bands(task - 1),
+        [state.depth.shape, *(e.depth.shape for e in state.chosen)],
     )
     order = range(len(state.chosen))
     state.exemplar_levels = [exemplar_levels[index] for index in order]

@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 from threadpoolctl import threadpool_limits
 
-from imagemap.core.kernels import run_each
+from imagemap.depth.budget import each_example
 from imagemap.depth.config import Registration
 
 __all__ = [
@@ -621,7 +621,7 @@ def register_with_detail(
     # Small matrices: one BLAS thread (one limit for all the fits: threadpoolctl finds the
     # loaded libraries anew at each, 2-10 ms; OpenBLAS's limit is the process's).
     with threadpool_limits(limits=1, user_api="blas"):
-        run_each(made_at, list(range(len(tasks))))
+        each_example(made_at, [depth.shape for depth in example_depths])
     made = [made_by_index[index] for index in range(len(tasks))]
     warps = [warp for warp, _, _ in made]
     details = [detail for _, detail, _ in made]
