@@ -200,12 +200,12 @@ def seamless_copy(
         gy = next(gradients)
         np.copyto(gy, next(gradients), where=~down_wins)
         gradients.close()
-        copies.drop(channel)
         if edges is not None:  # the copy's own step across the supported edges
             copy = copies(ref, channel)
             np.subtract(copy[:, 1:], copy[:, :-1], out=gx, where=edges[0])
             np.subtract(copy[1:], copy[:-1], out=gy, where=edges[1])
             del copy
+        copies.drop(channel)
         np.subtract(ref[:, 1:], ref[:, :-1], out=gx, where=none_x)
         np.subtract(ref[1:], ref[:-1], out=gy, where=none_y)
         # Normal equations: (lam - L) O = lam R + div g (L: Neumann graph Laplacian).
@@ -348,8 +348,8 @@ class _Copies:
     def drop(self, channel: int) -> None:
         """Forget ``channel``'s copies (its solve has read them)."""
         if self.kept is not None:
-            for key in [key for key in self.kept if key[0] == channel]:
-                del self.kept[key]
+            for dy, dx in ((0, 0), (0, 1), (0, -1), (1, 0), (-1, 0)):
+                self.kept.pop((channel, dy, dx), None)
 
 
 def _source_groups(exemplars, source):
