@@ -732,7 +732,8 @@ def test_resampled_depth_in_row_blocks_equals_the_whole_grids_formula(
 
 def test_each_example_runs_every_index_once_and_large_frames_in_order(monkeypatch):
     """each_example calls the function once per example; frames above
-    THREADED_FRAME_PIXELS one after the other, in order, on the calling thread."""
+    THREADED_FRAME_PIXELS or all below THREADED_MIN_PIXELS one after the other, in order,
+    on the calling thread."""
     import threading
 
     from imagemap.depth import budget
@@ -742,9 +743,13 @@ def test_each_example_runs_every_index_once_and_large_frames_in_order(monkeypatc
     def record(index: int) -> None:
         calls.append((index, threading.current_thread().name))
 
+    here = threading.current_thread().name
+    monkeypatch.setattr(budget, "THREADED_MIN_PIXELS", 50)
     budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
     assert sorted(index for index, _ in calls) == [0, 1, 2]
-    calls.clear()
-    monkeypatch.setattr(budget, "THREADED_FRAME_PIXELS", 30)  # the second frame is larger
-    budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
-    assert calls == [(index, threading.current_thread().name) for index in range(3)]
+    for least, most in ((100, 2**20), (50, 60)):  # all under 100; 72 over 60
+        calls.clear()
+        monkeypatch.setattr(budget, "THREADED_MIN_PIXELS", least)
+        monkeypatch.setattr(budget, "THREADED_FRAME_PIXELS", most)
+        budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
+        assert calls == [(index, here) for index in range(3)]
