@@ -222,19 +222,22 @@ def test_the_inverse_is_every_points_twelve_steps_to_the_bit():
 
 
 def test_the_registrations_nearest_pixels_are_the_bands_own_or_none():
-    """register_with_detail hands on the query's and each example's nearest object pixels
-    where it made its guide from the full-size mask: the very indices the bands' fills
-    would make (nearest_object_pixels); none where it averaged blocks."""
+    """register_with_detail hands on, when asked, the query's and each example's nearest
+    object pixels where it made its guide from the full-size mask: the very indices the
+    bands' fills would make (nearest_object_pixels); none where it averaged blocks."""
     from imagemap.core.blend import nearest_object_pixels
     from imagemap.depth.config import Registration
     from imagemap.depth.register import register_with_detail
 
     query = ellipsoid()
     examples = [ellipsoid(centre=(42, 58), radii=(28, 52)), ellipsoid(radii=(26, 44))]
-    registered = register_with_detail(query, examples)
+    assert register_with_detail(query, examples).nearest == [None, None, None]  # not asked
+    registered = register_with_detail(query, examples, keep_nearest=True)
     assert len(registered.nearest) == 3
     for nearest, depth in zip(registered.nearest, [query, *examples], strict=True):
         assert nearest is not None
         np.testing.assert_array_equal(nearest, nearest_object_pixels(depth > 0))
-    blocks = register_with_detail(query, examples, registration=Registration(detail_size=16.0))
+    blocks = register_with_detail(
+        query, examples, registration=Registration(detail_size=16.0), keep_nearest=True
+    )
     assert blocks.nearest == [None, None, None]

@@ -401,10 +401,9 @@ def _register(state: State, config: DepthConfig) -> State:
         [example.depth for example in state.chosen],
         registration=config.registration,
         angles=state.angles,
+        keep_nearest=max(e.depth.size for e in [state, *state.chosen]) <= KEEP_NEAREST_PIXELS,
     )
     state.warps = registered.warps
-    # The bands' fills read them (one distance transform less per map: 15-20 ms each at
-    # 512^2); 8 bytes a pixel per map, held only until the bands, the next stage.
     state.nearest = registered.nearest
     if _relief_channel(config):
         # The relief's detail the residuals were made from is the seams' relief channel
@@ -414,6 +413,14 @@ def _register(state: State, config: DepthConfig) -> State:
         state.relief = registered.detail
     state.changed = f"{len(state.warps)} examples warped onto the query"
     return state
+
+
+#: Frames up to this many pixels (1024 x 1024) keep the nearest object pixels the
+#: registration made (Registered.nearest) for the bands' fills and depth continuation, one
+#: feature transform less per map (34 ms for the three at 512^2): 8 bytes a pixel per map,
+#: held from the registration to the end of the bands (6 MB at 512^2, 24 MB at 1024^2).
+#: Larger frames' bands make them again, one example at a time.
+KEEP_NEAREST_PIXELS = 2**20
 
 
 def _relief_channel(config: DepthConfig) -> bool:
@@ -445,6 +452,7 @@ def _bands(state: State, config: DepthConfig) -> State:
         state.query_levels = ReleasableLevels(
             depth_mappings(state.depth, levels, config.guides, positions, scales, nearest[0])
         )
+        nearest[0] = None
 
     def example_bands(index: int) -> None:
         e = state.chosen[index]
@@ -458,6 +466,7 @@ def _bands(state: State, config: DepthConfig) -> State:
                 grid_points=int(config.registration.detail_size),
             )
         colours = example_colours(e, nearest[1 + index])
+        nearest[1 + index] = None  # read: not held to the stage's end
         if keep:
             kept[index] = colours[0]
         exemplar_levels[index] = ReleasableLevels(

@@ -528,8 +528,9 @@ class Registered:
     query and of each example at full size (:func:`relief_detail` at the registration's
     ``relief_detail_scale``) where the registration made it at full size (objects up to
     about 1.5 ``detail_size`` across), else None; and the query's then each example's
-    :func:`~imagemap.core.blend.nearest_object_pixels` where its guide was made from its
-    full-size mask (the bands' fill and depth continuation read them), else None."""
+    :func:`~imagemap.core.blend.nearest_object_pixels` where they were asked for and its
+    guide was made from its full-size mask (the bands' fill and depth continuation read
+    them), else None."""
 
     warps: list[Warp]
     detail: tuple[np.ndarray, list[np.ndarray]] | None
@@ -542,10 +543,12 @@ def register_with_detail(
     *,
     registration: Registration = _REGISTRATION,
     angles: list[float] | None = None,
+    keep_nearest: bool = False,
 ) -> Registered:
     """:func:`register_all`'s warps, and the relief's detail the relief residuals were made
     from where it is the full-size :func:`relief_detail` of the query and of every example
-    (:class:`Registered`): the seams' relief channel, not made a second time.
+    (:class:`Registered`): the seams' relief channel, not made a second time; with
+    ``keep_nearest``, the nearest object pixels its outside distances were made from.
 
     Examples
     --------
@@ -576,7 +579,7 @@ def register_with_detail(
         guide, nearest = _guide_and_nearest(
             depth, mask, registration.registration_relief, registration.relief_detail_scale
         )
-        if block > 1:
+        if block > 1 or not keep_nearest:
             nearest = None
         scale = zoom * block
         if scale >= 1.0:
