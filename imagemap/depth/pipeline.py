@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from imagemap.core.blend import copy_through
+from imagemap.core.blend import copy_through, nearest_object_pixels
 from imagemap.core.engine import EngineParams, ReleasableLevels, synthesize
 from imagemap.core.finecopy import fine_positions
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
@@ -646,11 +646,17 @@ def _warp_copy(state: State, config: DepthConfig) -> State:
     height, width = example.mask.shape
     iy = np.clip(np.rint(ey), 0, height - 1).astype(np.int64)
     ix = np.clip(np.rint(ex), 0, width - 1).astype(np.int64)
-    ny, nx = ndimage.distance_transform_edt(
-        ~example.mask, return_distances=False, return_indices=True
-    )  # the indices only: SciPy's distances are three more (2, H, W) arrays
+    # The registration's nearest object pixels where it kept them, else made here (the
+    # indices only: SciPy's distances are three more (2, H, W) arrays); the colours' fill
+    # reads the same.
+    nearest = state.nearest[1] if len(state.nearest) > 1 else None
+    state.nearest = []
+    if nearest is None:
+        nearest = nearest_object_pixels(example.mask)
+    ny, nx = nearest
     source = np.stack([np.zeros_like(iy), ny[iy, ix], nx[iy, ix]], axis=-1).astype(np.int32)
-    state.exemplars = [example_ycbcr(example)]
+    state.exemplars = [example_ycbcr(example, nearest)]
+    del nearest, ny, nx
     state.source = source
     state.ycbcr = copy_through(state.exemplars, source).astype(np.float32)
     state.changed = f"{int(state.mask.sum())} pixels copied from {example.name}"
