@@ -241,3 +241,25 @@ def test_the_registrations_nearest_pixels_are_the_bands_own_or_none():
         query, examples, registration=Registration(detail_size=16.0), keep_nearest=True
     )
     assert blocks.nearest == [None, None, None]
+
+
+def test_the_examples_on_threads_give_the_one_at_a_time_bytes(monkeypatch):
+    """The registration, the bands and the small features of each example on the kernels'
+    threads (budget.each_example) give the very map, sources and costs of one example at a
+    time (the reference: the frames below THREADED_MIN_PIXELS)."""
+    from imagemap.depth import budget
+
+    examples = []
+    for i, (centre, radii) in enumerate([((45, 60), (30, 48)), ((43, 62), (29, 50))]):
+        depth = ellipsoid(centre=centre, radii=radii)
+        examples.append(Example.from_arrays(f"fish_{i}", depth, stripes(depth, phase=3.0 * i)))
+    query = ellipsoid(centre=(46, 58), radii=(31, 46))
+    database = Database(examples)
+    runs = []
+    for least in (2**40, 0):  # one at a time, then on the threads
+        monkeypatch.setattr(budget, "THREADED_MIN_PIXELS", least)
+        runs.append(colorize(query, database, "fish", seed=0))
+    one, threaded = runs
+    for a, b in ((one.image, threaded.image), (one.source, threaded.source)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(one.cost, threaded.cost)
