@@ -637,22 +637,24 @@ def _window_costs(
     n_appearance = appearance_channels.shape[0]
     for m in range(start, stop):
         c = matches[m]
-        e = cand_e[c]
-        qy = query_y[m]
-        qx = query_x[m]
-        ey = cand_y[c]
-        ex = cand_x[c]
+        e = _U(cand_e[c])  # unsigned: no wrap-around check per index (see _U)
+        qy = _U(query_y[m])
+        qx = _U(query_x[m])
+        ey = _U(cand_y[c])
+        ex = _U(cand_x[c])
         s = 0.0
         for oy in range(k):
             for ox in range(k):
                 w = window_weights[oy, ox]
+                uy, ux = _U(oy), _U(ox)
+                query_pixel = query_bands[qy + uy, qx + ux]
                 acc = 0.0
                 for ch in range(n_guide):
-                    d = query_bands[qy + oy, qx + ox, ch] - exemplar_guide[e, ey + oy, ex + ox, ch]
+                    d = query_pixel[ch] - exemplar_guide[e, ey + uy, ex + ux, _U(ch)]
                     acc += d * d
                 for j in range(n_appearance):
-                    a = exemplar_appearance[e, ey + oy, ex + ox, appearance_channels[j]]
-                    d = query_bands[qy + oy, qx + ox, n_guide + j] - a * appearance_scale[j]
+                    a = exemplar_appearance[e, ey + uy, ex + ux, _U(appearance_channels[j])]
+                    d = query_pixel[n_guide + j] - a * appearance_scale[j]
                     acc += d * d
                 s += w * acc
         dy = query_position[m, 0] - cand_position[c, 0]
