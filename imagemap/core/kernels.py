@@ -776,14 +776,16 @@ def _vote_rows(row0, row1, exemplar_appearance, window_weights, sources, out):
                     cx = px - ox
                     if cx < 0 or cx >= width:
                         continue
-                    e = sources[cy, cx, 0]
-                    if e < 0:
+                    source = sources[cy, cx]
+                    if source[0] < 0:
                         continue
                     w = window_weights[oy, ox]
-                    sy = sources[cy, cx, 1] + oy
-                    sx = sources[cy, cx, 2] + ox
+                    # Unsigned: no wrap-around check per index (see _U).
+                    pixel = exemplar_appearance[
+                        _U(source[0]), _U(source[1]) + _U(oy), _U(source[2]) + _U(ox)
+                    ]
                     for ch in range(channels):
-                        acc[ch] += w * exemplar_appearance[e, sy, sx, ch]
+                        acc[ch] += w * pixel[ch]
                     wsum += w
             if wsum > 0:
                 for ch in range(channels):
