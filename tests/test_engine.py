@@ -254,3 +254,33 @@ def test_a_search_with_active_centres_moves_only_those():
     assert np.all(after <= before) and np.mean(after < before) > 0.5
     everywhere = solver.search(start, init=True, seed=2, rng=None, active=~np.zeros_like(active))
     assert np.array_equal(everywhere, solver.search(start, init=True, seed=2, rng=None))
+
+
+def test_the_e_steps_choice_keeps_the_lower_exact_cost():
+    """``LevelSolver.choose`` (one pass of the exact costs' kernel) gives what the costs of
+    the matches and of the candidates, made apart and compared, give: each centre's lower
+    cost, its candidate only where that is strictly lower, and the count of changes."""
+    from imagemap.core.solver import LevelSolver, Timer
+
+    rng = np.random.default_rng(0)
+    guide = ndimage.gaussian_filter(rng.random((50, 50, 1)), 2).astype(np.float32)
+    exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
+    query = Mapping(guide=np.roll(guide, 4, axis=1))
+    params = EngineParams(
+        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=(1.0, 0.5)
+    )
+    solver = LevelSolver(query, [exemplar], 5, params, np.random.default_rng(0), Timer())
+    r = solver.r
+    estimate = np.pad(np.concatenate([guide, guide**2], axis=2), ((r, r), (r, r), (0, 0)))
+    solver.set_appearance(np.roll(estimate, 4, axis=1))
+    n, n_cand = len(solver.query_y), len(solver.cand_e)
+    matches = np.random.default_rng(1).integers(0, n_cand, n)
+    candidates = np.random.default_rng(2).integers(0, n_cand, n)
+    candidates[::4] = matches[::4]  # some candidates are the match itself
+    old, new = solver.costs(matches), solver.costs(candidates)
+    better = new < old
+    chosen = matches.copy()
+    cost, changed = solver.choose(chosen, candidates)
+    assert np.array_equal(chosen, np.where(better, candidates, matches))
+    assert np.array_equal(cost, np.where(better, new, old))
+    assert changed == int(better.sum()) and 0 < changed < n

@@ -326,18 +326,13 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             candidates = solver.search(
                 matches, init=False, seed=level_seed + 1 + iteration, rng=rng
             )
-            old_cost = solver.costs(matches)
-            # Exact costs of new candidates only where they differ from the old match.
-            differ = np.flatnonzero(candidates != matches)
-            new_cost = old_cost.copy()
-            new_cost[differ] = solver.costs(candidates, differ)
-            better = new_cost < old_cost
-            matches = np.where(better, candidates, matches)
-            value = float(np.where(better, new_cost, old_cost).mean(dtype=np.float64))
-            changed = int(better.sum())
+            # A new candidate replaces the match where its exact cost is lower.
+            matches = np.ascontiguousarray(matches, dtype=np.int64)
+            chosen_cost, changed = solver.choose(matches, candidates)
+            value = float(chosen_cost.mean(dtype=np.float64))
             # The E-step's temporaries (a few MB of int64 and float32 per window centre)
             # freed before the M-step and the next E-step, where the level's peak is.
-            del candidates, old_cost, new_cost, differ, better
+            del candidates, chosen_cost
             trim_heap()  # given back (glibc keeps freed blocks below 4 MB resident)
             objective[level].append(value)
             if params.vote == "mode":

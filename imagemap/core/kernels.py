@@ -613,6 +613,9 @@ def _window_costs(
     start,
     stop,
     out,
+    changed,
+    matches,
+    candidates,
     query_bands,
     exemplar_guide,
     exemplar_appearance,
@@ -624,43 +627,55 @@ def _window_costs(
     cand_e,
     cand_y,
     cand_x,
-    matches,
     query_position,
     cand_position,
     position_weight2,
     cand_bias,
     position_scales,
 ):
-    """Window distances of query centres [start, stop) (see :func:`window_costs`)."""
+    """Window distances of query centres [start, stop) (see :func:`window_costs`); with
+    ``candidates`` (not empty), the E-step's choice."""
     k = window_weights.shape[0]
     n_guide = exemplar_guide.shape[3]
     n_appearance = appearance_channels.shape[0]
+    trials = 1 if candidates.shape[0] == 0 else 2
     for m in range(start, stop):
-        c = matches[m]
-        e = _U(cand_e[c])  # unsigned: no wrap-around check per index (see _U)
-        qy = _U(query_y[m])
+        qy = _U(query_y[m])  # unsigned: no wrap-around check per index (see _U)
         qx = _U(query_x[m])
-        ey = _U(cand_y[c])
-        ex = _U(cand_x[c])
-        s = 0.0
-        for oy in range(k):
-            for ox in range(k):
-                w = window_weights[oy, ox]
-                uy, ux = _U(oy), _U(ox)
-                query_pixel = query_bands[qy + uy, qx + ux]
-                acc = 0.0
-                for ch in range(n_guide):
-                    d = query_pixel[ch] - exemplar_guide[e, ey + uy, ex + ux, _U(ch)]
-                    acc += d * d
-                for j in range(n_appearance):
-                    a = exemplar_appearance[e, ey + uy, ex + ux, _U(appearance_channels[j])]
-                    d = query_pixel[n_guide + j] - a * appearance_scale[j]
-                    acc += d * d
-                s += w * acc
-        dy = query_position[m, 0] - cand_position[c, 0]
-        dx = query_position[m, 1] - cand_position[c, 1]
-        s += position_weight2 * position_scales[m] * (dy * dy + dx * dx) + cand_bias[c]
-        out[m] = s
+        for trial in range(trials):  # the match, then the candidate
+            c = matches[m] if trial == 0 else candidates[m]
+            if trial == 1:
+                changed[m] = False
+                if c == matches[m]:  # the candidate's distance only where it differs
+                    break
+            e = _U(cand_e[c])
+            ey = _U(cand_y[c])
+            ex = _U(cand_x[c])
+            s = 0.0
+            for oy in range(k):
+                for ox in range(k):
+                    w = window_weights[oy, ox]
+                    uy, ux = _U(oy), _U(ox)
+                    query_pixel = query_bands[qy + uy, qx + ux]
+                    acc = 0.0
+                    for ch in range(n_guide):
+                        d = query_pixel[ch] - exemplar_guide[e, ey + uy, ex + ux, _U(ch)]
+                        acc += d * d
+                    for j in range(n_appearance):
+                        a = exemplar_appearance[e, ey + uy, ex + ux, _U(appearance_channels[j])]
+                        d = query_pixel[n_guide + j] - a * appearance_scale[j]
+                        acc += d * d
+                    s += w * acc
+            dy = query_position[m, 0] - cand_position[c, 0]
+            dx = query_position[m, 1] - cand_position[c, 1]
+            s += position_weight2 * position_scales[m] * (dy * dy + dx * dx) + cand_bias[c]
+            cost = np.float32(s)
+            if trial == 0:
+                out[m] = cost
+            elif cost < out[m]:
+                out[m] = cost
+                matches[m] = c
+                changed[m] = True
 
 
 def window_costs(
@@ -681,6 +696,9 @@ def window_costs(
     position_weight2,
     cand_bias,
     position_scales=None,
+    *,
+    candidates=None,
+    changed=None,
 ):
     """Exact weighted window distance for each query centre and its match.
 
@@ -693,15 +711,28 @@ def window_costs(
     ``window_weights`` (k, k) is the Gaussian window, summing to one;
     ``cand_bias`` (N,) an additive cost per candidate (exemplar preference);
     ``position_scales`` (M,) a factor per query centre on the position term (default 1).
+
+    With ``candidates`` (M,) int64 and ``changed`` (M,) bool, the E-step's choice: each
+    centre's match (``matches``, int64, updated in place) is replaced by its candidate
+    where the candidate's distance is lower (``changed`` True there), and the distances
+    returned are the chosen ones. A centre's query window is read for both distances in
+    one pass, the candidate's made only where it differs from the match: the same values
+    and choices as both distances made apart and compared.
     """
-    out = np.empty(matches.shape[0], dtype=np.float32)
+    n = matches.shape[0]
+    out = np.empty(n, dtype=np.float32)
     if position_scales is None:
-        position_scales = np.ones(matches.shape[0], dtype=np.float32)
+        position_scales = np.ones(n, dtype=np.float32)
+    if candidates is None:
+        candidates, changed = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.bool_)
     _run(
         lambda a, b: _window_costs(
             a,
             b,
             out,
+            changed,
+            matches,
+            candidates,
             query_bands,
             exemplar_guide,
             exemplar_appearance,
@@ -713,14 +744,13 @@ def window_costs(
             cand_e,
             cand_y,
             cand_x,
-            matches,
             query_position,
             cand_position,
             position_weight2,
             cand_bias,
             position_scales,
         ),
-        matches.shape[0],
+        n,
         1024,
     )
     return out

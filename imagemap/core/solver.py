@@ -49,7 +49,6 @@ _BAND_MULTIPLE = 2
 # Below this many multiply-adds, PatchMatch starts from an exact search, not at random.
 _EXACT_START_FLOPS = 2e9
 _SOURCE_ROWS = 256  # rows per block when the dense source map is made
-_COST_PIECE = 32768  # window centres per piece of a subset's exact costs (bounded gathers)
 #: Quantized features: integer steps from 0 to the largest magnitude (int16), and the
 #: margin of that largest magnitude over the largest value in the PCA samples.
 _FEATURE_RANGE = 32767
@@ -880,54 +879,46 @@ class LevelSolver:
             )
         self.timer.add("features", start)
 
-    def costs(self, matches: np.ndarray, subset: np.ndarray | None = None) -> np.ndarray:
-        """Exact window distances of query centres (all, or ``subset``) to ``matches``."""
+    def costs(self, matches: np.ndarray) -> np.ndarray:
+        """Exact window distances of the query centres to ``matches``."""
         start = time.perf_counter()
-        if subset is None:
-            out = self._costs(
-                matches,
-                self.query_band_y,
-                self.query_band_x,
-                self.query_position,
-                self.query_position_scale2,
-            )
-        else:
-            # In pieces: the subset's gathered centres, positions and matches (about 30
-            # bytes a centre) stay small beside the level's arrays.
-            out = np.empty(len(subset), dtype=np.float32)
-            for first in range(0, len(subset), _COST_PIECE):
-                piece = subset[first : first + _COST_PIECE]
-                out[first : first + len(piece)] = self._costs(
-                    matches[piece],
-                    self.query_band_y[piece],
-                    self.query_band_x[piece],
-                    self.query_position[piece],
-                    self.query_position_scale2[piece],
-                )
+        out = _kernels.window_costs(*self._cost_arguments(np.ascontiguousarray(matches)))
         self.timer.add("costs", start)
         return out
 
-    def _costs(self, matches, centres_y, centres_x, positions, scales) -> np.ndarray:
-        """The exact costs' kernel (:func:`~imagemap.core.kernels.window_costs`) for the
-        centres given, each with its match."""
-        return _kernels.window_costs(
+    def choose(self, matches: np.ndarray, candidates: np.ndarray) -> tuple[np.ndarray, int]:
+        """The E-step's choice: each centre's match (int64, updated in place) replaced by
+        its candidate where the candidate's exact window distance is lower; returns the
+        chosen distances and how many matches changed
+        (:func:`~imagemap.core.kernels.window_costs`)."""
+        start = time.perf_counter()
+        changed = np.empty(len(matches), dtype=np.bool_)
+        out = _kernels.window_costs(
+            *self._cost_arguments(matches), candidates=candidates, changed=changed
+        )
+        self.timer.add("costs", start)
+        return out, int(np.count_nonzero(changed))
+
+    def _cost_arguments(self, matches: np.ndarray) -> tuple:
+        """The arguments of :func:`~imagemap.core.kernels.window_costs` for ``matches``."""
+        return (
             self.query_active,
             self.exemplar_guide,
             self.exemplar_appearance,
             self.appearance_active,
             self.appearance_scale,
             self.window,
-            centres_y,
-            centres_x,
+            self.query_band_y,
+            self.query_band_x,
             self.cand_e,
             self.band_y,
             self.band_x,
-            np.ascontiguousarray(matches),
-            positions,
+            matches,
+            self.query_position,
             self.cand_position,
             np.float32(self.params.position_weight**2),
             self.cand_bias,
-            scales,
+            self.query_position_scale2,
         )
 
     def vote(
