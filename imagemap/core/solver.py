@@ -166,7 +166,20 @@ def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) ->
     row_index = _pad_index(h, r, mode)[rows]
     col_index = _pad_index(w, r, mode)[cols]
     inside_rows, inside_cols = row_index >= 0, col_index >= 0  # all but constant padding
-    block = array[row_index[inside_rows][:, None], col_index[inside_cols][None, :]]
+    source_rows, source_cols = row_index[inside_rows], col_index[inside_cols]
+    if _is_run(source_rows) and _is_run(source_cols):
+        # A box of the array (no reflection in the crop), and the rows and columns it goes
+        # to a box of ``out`` (constant padding is at the ends): scaled straight from a
+        # view, no gathered copy (the level-0 bands of the 512^2 task: 35 against 8 ms).
+        (y0, y1), (x0, x1) = (_run_bounds(inside) for inside in (inside_rows, inside_cols))
+        view = array[source_rows[0] : source_rows[-1] + 1, source_cols[0] : source_cols[-1] + 1]
+        if scale is None:
+            out[y0:y1, x0:x1] = view
+        else:
+            np.multiply(view, scale, out=out[y0:y1, x0:x1])
+        out[:y0], out[y1:], out[y0:y1, :x0], out[y0:y1, x1:] = 0, 0, 0, 0
+        return
+    block = array[source_rows[:, None], source_cols[None, :]]
     if scale is not None:
         np.multiply(block, scale, out=block)
     if inside_rows.all() and inside_cols.all():
@@ -174,6 +187,17 @@ def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) ->
         return
     out[...] = 0
     out[np.ix_(inside_rows, inside_cols)] = block
+
+
+def _is_run(index: np.ndarray) -> bool:
+    """Whether ``index`` is a non-empty run of consecutive ascending integers."""
+    return len(index) > 0 and bool(np.all(np.diff(index) == 1))
+
+
+def _run_bounds(inside: np.ndarray) -> tuple[int, int]:
+    """First and end of the True entries of ``inside`` (one run of them)."""
+    where = np.flatnonzero(inside)
+    return int(where[0]), int(where[-1]) + 1
 
 
 def _box(valid: np.ndarray) -> tuple[int, int, int, int]:
