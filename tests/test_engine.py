@@ -284,3 +284,28 @@ def test_the_e_steps_choice_keeps_the_lower_exact_cost():
     assert np.array_equal(chosen, np.where(better, candidates, matches))
     assert np.array_equal(cost, np.where(better, new, old))
     assert changed == int(better.sum()) and 0 < changed < n
+
+
+def test_nearest_candidates_on_a_box_are_the_whole_frames():
+    """The propagation snaps a coordinate that is no candidate to the nearest one by the
+    feature transform of a box holding the candidates and the points: the same candidate
+    (ties included) as the transform of the exemplar's whole frame gives."""
+    from imagemap.core.solver import _box, _nearest_candidates
+
+    rng = np.random.default_rng(0)
+    for trial in range(200):
+        h, w = (int(v) for v in rng.integers(8, 50, 2))
+        seeds = rng.random((h, w)) < rng.uniform(0.002, 0.05)
+        seeds[rng.integers(0, h), rng.integers(0, w)] = True
+        valid = ndimage.binary_dilation(seeds, iterations=int(rng.integers(0, 4)) or 1)
+        if trial % 2:  # ragged edges: more ties
+            valid &= rng.random((h, w)) < 0.9
+        valid[rng.integers(0, h), rng.integers(0, w)] = True
+        y0, y1, x0, x1 = _box(valid)
+        lookup = np.full((y1 - y0 + int(rng.integers(0, 3)), x1 - x0), -1, dtype=np.int64)
+        ys, xs = np.nonzero(valid)
+        lookup[ys - y0, xs - x0] = np.arange(len(ys))
+        py, px = rng.integers(0, h, 30), rng.integers(0, w, 30)
+        ny, nx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
+        expected = lookup[ny[py, px] - y0, nx[py, px] - x0]
+        assert np.array_equal(_nearest_candidates(lookup, py - y0, px - x0), expected)

@@ -302,7 +302,6 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         # number drawn): before the features, so that its transients do not add to them.
         propagated: Any = None if coarse_source is None else solver.propagate(coarse_source)
         coarse_source = None
-        solver.exemplar_valid = None  # type: ignore[assignment]  # what only propagate needed
         trim_heap()
         solver.prepare(rng)
         trim_heap()  # the PCA's and the feature blocks' temporaries, before the E-steps
