@@ -503,6 +503,8 @@ class LevelSolver:
         self.window = _gaussian_window(k, params.window_sigma)
         self.timer = timer
         self.chosen: np.ndarray | None = None  # sources the mode vote copied
+        # Every pixel's nearest window centre (rows, columns), for the dense source maps.
+        self.nearest_centre: np.ndarray | None = None
         first = exemplars[0].appearance
         if first is None:  # the engine checks every exemplar level has appearance
             raise ValueError("an exemplar has no appearance")
@@ -1147,9 +1149,11 @@ class LevelSolver:
         ``copied`` overrides ``params.vote``), else its position in the match of its
         nearest window centre."""
         h, w = self.query_shape
-        ny, nx = ndimage.distance_transform_edt(
-            self.query_lookup < 0, return_distances=False, return_indices=True
-        )
+        if self.nearest_centre is None:  # made once: the copy's map needs it again
+            self.nearest_centre = ndimage.distance_transform_edt(
+                self.query_lookup < 0, return_distances=False, return_indices=True
+            )
+        ny, nx = self.nearest_centre
         if copied is None:
             copied = self.params.vote == "mode"
         chosen_all = self.chosen if copied else None  # the mode vote's copied sources
