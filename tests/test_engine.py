@@ -309,3 +309,30 @@ def test_nearest_candidates_on_a_box_are_the_whole_frames():
         ny, nx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
         expected = lookup[ny[py, px] - y0, nx[py, px] - x0]
         assert np.array_equal(_nearest_candidates(lookup, py - y0, px - x0), expected)
+
+
+@pytest.mark.parametrize("columns", [(1,), (2,), (3,), (3, 1), (1, 1, 2)])
+def test_masked_std_is_numpys_std_of_the_stacked_columns(columns):
+    """The band scales' standard deviations (kernels.masked_std) have the bits of NumPy's
+    std of the gathered (pixels, columns) array, whatever the columns' parts, masks,
+    dtypes and counts (above NumPy's 8192-element buffer too)."""
+    from imagemap.core.kernels import masked_std
+
+    rng = np.random.default_rng(len(columns) * 10 + sum(columns))
+    for shape, dtypes in [((40, 30), None), ((150, 90), None), ((7, 5), ("f8",))]:
+        parts, masks, gathered = [], [], []
+        picks = [rng.permutation(n + 2)[:n] for n in columns]  # alike for every image
+        for image in range(3):
+            image_parts = []
+            for k, n in enumerate(columns):
+                dtype = np.float32 if dtypes is None or k else np.float64
+                array = (rng.random((*shape, n + 2)) * (k + 2) + 5 * k).astype(dtype)
+                image_parts.append((array, picks[k]))
+            mask = None if image == 1 else rng.random(shape) < 0.4
+            parts.append(image_parts)
+            masks.append(mask)
+            bands = np.concatenate([a[..., c] for a, c in image_parts], axis=2)
+            gathered.append(bands[mask] if mask is not None else bands.reshape(-1, sum(columns)))
+        expected = np.concatenate(gathered, axis=0).std(axis=0)
+        got = masked_std(parts, masks)
+        assert got.dtype == expected.dtype and np.array_equal(got, expected), (shape, dtypes)

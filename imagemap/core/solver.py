@@ -786,20 +786,14 @@ class LevelSolver:
     ) -> np.ndarray:
         if len(channels) == 0:
             return np.ones(0, dtype=np.float32)
-        values = []
+        parts = []  # per exemplar, its columns: own bands, then context bands
         for e, ex in enumerate(exemplars):
-            if part == "guide":  # own bands, then context bands: one (N, C) array
+            if part == "guide":
                 extra = None if context is None else context[e]
-                parts = _guide_parts(ex.guide, extra, channels, n_own)
-                picked = [array[..., c] for array, c in parts]
-                bands = picked[0] if len(picked) == 1 else np.concatenate(picked, axis=2)
+                parts.append(_guide_parts(ex.guide, extra, channels, n_own))
             else:
-                bands = getattr(ex, part)[..., channels]
-            values.append(
-                bands[ex.mask] if ex.mask is not None else bands.reshape(-1, len(channels))
-            )
-        stacked = np.concatenate(values, axis=0)
-        std = stacked.std(axis=0)
+                parts.append([(getattr(ex, part), channels)])
+        std = _kernels.masked_std(parts, [ex.mask for ex in exemplars])
         floor = max(float(std.max()), 1e-12) * 1e-3
         return np.maximum(std, floor).astype(np.float32)
 
