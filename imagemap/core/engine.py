@@ -320,7 +320,11 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         appearance = solver.vote(matches, appearance)
         previous = np.inf
         for iteration in range(plan.max_iterations):
-            trim_heap()  # the previous E-step's and M-step's freed temporaries
+            # No heap trim between the E-steps and M-steps: their temporaries are few
+            # since the choice is one kernel pass (a candidate per centre and its cost),
+            # the same sizes every iteration; trimmed, they were faulted back in each
+            # time (512^2: 8k of 42k page faults an engine call) for no lower peak (512^2
+            # and 1024^2 whole processes 232-235 and 327-330 MB either way).
             solver.set_appearance(appearance)
             candidates = solver.search(
                 matches, init=False, seed=level_seed + 1 + iteration, rng=rng
@@ -329,10 +333,7 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             matches = np.ascontiguousarray(matches, dtype=np.int64)
             chosen_cost, changed = solver.choose(matches, candidates)
             value = float(chosen_cost.mean(dtype=np.float64))
-            # The E-step's temporaries (a few MB of int64 and float32 per window centre)
-            # freed before the M-step and the next E-step, where the level's peak is.
-            del candidates, chosen_cost
-            trim_heap()  # given back (glibc keeps freed blocks below 4 MB resident)
+            del candidates, chosen_cost  # freed before the M-step
             objective[level].append(value)
             if params.vote == "mode":
                 # Generalised EM: a copying M-step is kept only if it does not raise the
