@@ -336,3 +336,37 @@ def test_masked_std_is_numpys_std_of_the_stacked_columns(columns):
         expected = np.concatenate(gathered, axis=0).std(axis=0)
         got = masked_std(parts, masks)
         assert got.dtype == expected.dtype and np.array_equal(got, expected), (shape, dtypes)
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 5])
+def test_the_vote_is_the_weighted_mean_of_the_covering_windows(channels):
+    """kernels.vote (three channels summed in scalars, the rest in an array): every
+    covered pixel is the window-weighted mean of the estimates its windows give, in
+    every channel; pixels no window covers keep their value."""
+    from imagemap.core import kernels
+
+    rng = np.random.default_rng(channels)
+    k, r, (h, w) = 3, 1, (9, 11)
+    exemplar = rng.random((2, 14, 15, channels)).astype(np.float32)
+    weights = rng.random((k, k)).astype(np.float32)
+    lookup = np.full((h, w), -1, dtype=np.int32)
+    centred = rng.random((h, w)) < 0.6
+    centred[3:6] = False  # no window covers the padded row 5
+    centres = np.argwhere(centred)
+    lookup[centres[:, 0], centres[:, 1]] = np.arange(len(centres))
+    cand_e = rng.integers(0, 2, 40).astype(np.int32)
+    cand_y = rng.integers(0, 12, 40).astype(np.int32)  # windows' top-left, padded bands
+    cand_x = rng.integers(0, 13, 40).astype(np.int32)
+    matches = rng.integers(0, 40, len(centres)).astype(np.int64)
+    out = np.full((h + 2 * r, w + 2 * r, channels), -7.0, dtype=np.float32)
+    kernels.vote(exemplar, weights, lookup, cand_e, cand_y, cand_x, matches, out)
+    total = np.zeros(out.shape, dtype=np.float64)
+    weight = np.zeros(out.shape[:2], dtype=np.float64)
+    for (cy, cx), c in zip(centres, matches, strict=True):
+        # The window of centre (cy, cx) covers padded pixels cy..cy+k-1, cx..cx+k-1.
+        window = exemplar[cand_e[c], cand_y[c] : cand_y[c] + k, cand_x[c] : cand_x[c] + k]
+        total[cy : cy + k, cx : cx + k] += weights[..., None] * window
+        weight[cy : cy + k, cx : cx + k] += weights
+    covered = weight > 0
+    assert np.allclose(out[covered], (total[covered] / weight[covered][:, None]), rtol=1e-6)
+    assert np.all(out[~covered] == -7.0) and (~covered).any()

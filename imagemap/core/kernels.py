@@ -788,16 +788,22 @@ def _match_sources(query_lookup, cand_e, cand_y, cand_x, matches) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def _vote_rows(row0, row1, exemplar_appearance, window_weights, sources, out):
+    """Rows [row0, row1) of :func:`vote`. The first three channels' sums are scalars (in
+    registers: an array's element is stored and loaded again at every addition, which
+    made each pixel's 49 additions a chain of store-to-load waits), the rest an array:
+    the same additions in the same order, 0.6-0.75 of the time at three channels."""
     k = window_weights.shape[0]
     height = sources.shape[0]
     width = sources.shape[1]
     channels = exemplar_appearance.shape[3]
+    more = np.zeros(max(channels - 3, 0), dtype=np.float64)  # channels past the third
     for py in range(row0, row1):
-        acc = np.zeros(channels, dtype=np.float64)
         for px in range(out.shape[1]):
             wsum = 0.0
-            for ch in range(channels):
-                acc[ch] = 0.0
+            sum0 = 0.0
+            sum1 = 0.0
+            sum2 = 0.0
+            more[:] = 0.0
             for oy in range(k):
                 cy = py - oy  # window centre in unpadded query coordinates
                 if cy < 0 or cy >= height:
@@ -814,12 +820,22 @@ def _vote_rows(row0, row1, exemplar_appearance, window_weights, sources, out):
                     pixel = exemplar_appearance[
                         _U(source[0]), _U(source[1]) + _U(oy), _U(source[2]) + _U(ox)
                     ]
-                    for ch in range(channels):
-                        acc[ch] += w * pixel[ch]
+                    sum0 += w * pixel[0]
+                    if channels > 1:
+                        sum1 += w * pixel[1]
+                    if channels > 2:
+                        sum2 += w * pixel[2]
+                    for ch in range(3, channels):
+                        more[ch - 3] += w * pixel[ch]
                     wsum += w
             if wsum > 0:
-                for ch in range(channels):
-                    out[py, px, ch] = acc[ch] / wsum
+                out[py, px, 0] = sum0 / wsum
+                if channels > 1:
+                    out[py, px, 1] = sum1 / wsum
+                if channels > 2:
+                    out[py, px, 2] = sum2 / wsum
+                for ch in range(3, channels):
+                    out[py, px, ch] = more[ch - 3] / wsum
 
 
 def vote(
