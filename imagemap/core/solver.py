@@ -170,7 +170,7 @@ def _pad_crop_into(out, array, r, mode, rows: slice, cols: slice, scale=None) ->
     if _is_run(source_rows) and _is_run(source_cols):
         # A box of the array (no reflection in the crop), and the rows and columns it goes
         # to a box of ``out`` (constant padding is at the ends): scaled straight from a
-        # view, no gathered copy (the level-0 bands of the 512^2 task: 35 against 8 ms).
+        # view, no gathered copy (the 512^2 engine's packing: 21 against 41 ms in all).
         (y0, y1), (x0, x1) = (_run_bounds(inside) for inside in (inside_rows, inside_cols))
         view = array[source_rows[0] : source_rows[-1] + 1, source_cols[0] : source_cols[-1] + 1]
         if scale is None:
