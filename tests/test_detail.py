@@ -35,6 +35,19 @@ def identity_source(shape, exemplar=0):
     return source
 
 
+def random_source(rng, shape, reach):
+    """A source map of random pixels: exemplar -1 (none), 0 or 1, and a source row and
+    column within ``reach`` (rows, columns), drawn in that order."""
+    return np.stack(
+        [
+            rng.integers(-1, 2, shape),
+            rng.integers(0, reach[0], shape),
+            rng.integers(0, reach[1], shape),
+        ],
+        axis=-1,
+    ).astype(np.int32)
+
+
 def test_blur_ratio_is_one_for_a_copy_and_less_for_a_blurred_copy():
     rng = np.random.default_rng(0)
     copy = rng.random((40, 50, 3)).astype(np.float32)
@@ -83,14 +96,7 @@ def test_seamless_copy_keeping_its_copies_gives_the_same_bytes(monkeypatch, dtyp
 
     rng = np.random.default_rng(3)
     exemplars = [rng.random((30, 40, 3)).astype(dtype) for _ in range(2)]
-    source = np.stack(
-        [
-            rng.integers(-1, 2, (36, 44)),
-            rng.integers(0, 30, (36, 44)),
-            rng.integers(0, 40, (36, 44)),
-        ],
-        axis=-1,
-    ).astype(np.int32)
+    source = random_source(rng, (36, 44), (30, 40))
     source[8:30, 6:40, 0] = 1  # a coherent block: its copy's own detail
     source[8:30, 6:40, 1:] = np.stack(np.mgrid[0:22, 0:34], axis=-1) + (4, 3)
     reference = rng.random((36, 44, 3)).astype(dtype)
@@ -630,10 +636,7 @@ def test_the_blends_shifted_copies_are_copy_through_clipped(monkeypatch, piece):
         monkeypatch.setattr(poisson, "_PIECE", piece)
     rng = np.random.default_rng(9)
     exemplars = [rng.random((13, 17, 3)).astype(np.float32), rng.random((9, 6, 3))]
-    source = np.stack(
-        [rng.integers(-1, 2, (11, 14)), rng.integers(0, 9, (11, 14)), rng.integers(0, 6, (11, 14))],
-        axis=-1,
-    ).astype(np.int32)
+    source = random_source(rng, (11, 14), (9, 6))
     source[0, :5, 1:] = [12, 20]  # past the smaller exemplar: clipped, as copy_through
     has = source[..., 0] >= 0
     reference = rng.random((11, 14))
@@ -661,14 +664,7 @@ def test_the_blend_written_over_its_reference_is_the_same_map():
     it: the same bytes as a fresh result, edges kept and an object's outline too."""
     rng = np.random.default_rng(5)
     exemplars = [rng.random((40, 50, 3)).astype(np.float32), rng.random((30, 44, 3))]
-    source = np.stack(
-        [
-            rng.integers(-1, 2, (36, 41)),
-            rng.integers(0, 30, (36, 41)),
-            rng.integers(0, 44, (36, 41)),
-        ],
-        axis=-1,
-    ).astype(np.int32)
+    source = random_source(rng, (36, 41), (30, 44))
     source[8:20, 5:30, 0] = 0  # a coherent block: copied gradients to keep
     source[8:20, 5:30, 1:] = np.stack(np.mgrid[3:15, 10:35], axis=-1)
     mask = np.zeros((36, 41), bool)

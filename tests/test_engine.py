@@ -227,21 +227,30 @@ def test_the_level_plan_moves_the_final_reseed_and_the_free_levels(blob_database
         EngineParams(levels=(LevelPlan(5),)).level_plans(2)
 
 
+def _rolled_guide_solver(size, shift, axis, appearance_weights):
+    """A level's solver (5x5 windows) on one smooth random exemplar, its guide and the
+    guide squared as appearance, for a query that is its guide rolled by ``shift``
+    along ``axis``; with the guide."""
+    from imagemap.core.solver import LevelSolver, Timer
+
+    rng = np.random.default_rng(0)
+    guide = ndimage.gaussian_filter(rng.random((size, size, 1)), 2).astype(np.float32)
+    exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
+    query = Mapping(guide=np.roll(guide, shift, axis=axis))
+    params = EngineParams(
+        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=appearance_weights
+    )
+    solver = LevelSolver(query, [exemplar], 5, params, np.random.default_rng(0), Timer())
+    return solver, guide
+
+
 def test_a_search_with_active_centres_moves_only_those():
     """PatchMatch's ``active`` (the reseed's worst fits): only those centres change their
     match, each to one at least as close on the searched dimensions, and with every
     centre active it is the plain search."""
     from imagemap.core import kernels as _kernels
-    from imagemap.core.solver import LevelSolver, Timer
 
-    rng = np.random.default_rng(0)
-    guide = ndimage.gaussian_filter(rng.random((60, 60, 1)), 2).astype(np.float32)
-    exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
-    query = Mapping(guide=np.roll(guide, 5, axis=0))
-    params = EngineParams(
-        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=(1.0, 1.0)
-    )
-    solver = LevelSolver(query, [exemplar], 5, params, np.random.default_rng(0), Timer())
+    solver, _ = _rolled_guide_solver(60, 5, 0, (1.0, 1.0))
     start = np.random.default_rng(1).integers(0, len(solver.cand_e), len(solver.query_y))
     active = np.zeros(len(start), dtype=bool)
     active[::3] = True
@@ -260,16 +269,8 @@ def test_the_e_steps_choice_keeps_the_lower_exact_cost():
     """``LevelSolver.choose`` (one pass of the exact costs' kernel) gives what the costs of
     the matches and of the candidates, made apart and compared, give: each centre's lower
     cost, its candidate only where that is strictly lower, and the count of changes."""
-    from imagemap.core.solver import LevelSolver, Timer
 
-    rng = np.random.default_rng(0)
-    guide = ndimage.gaussian_filter(rng.random((50, 50, 1)), 2).astype(np.float32)
-    exemplar = Mapping(guide=guide, appearance=np.concatenate([guide, guide**2], axis=2))
-    query = Mapping(guide=np.roll(guide, 4, axis=1))
-    params = EngineParams(
-        levels=uniform_levels((5,)), guide_weights=(1.0,), appearance_weights=(1.0, 0.5)
-    )
-    solver = LevelSolver(query, [exemplar], 5, params, np.random.default_rng(0), Timer())
+    solver, guide = _rolled_guide_solver(50, 4, 1, (1.0, 0.5))
     r = solver.r
     estimate = np.pad(np.concatenate([guide, guide**2], axis=2), ((r, r), (r, r), (0, 0)))
     solver.set_appearance(np.roll(estimate, 4, axis=1))
