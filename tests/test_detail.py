@@ -644,16 +644,16 @@ def test_the_blends_shifted_copies_are_copy_through_clipped(monkeypatch, piece):
     for dy, dx in [(0, 0), (0, 1), (0, -1), (1, 0), (-1, 0)]:
         for channel in range(3):
             expected = copy_through([e[..., channel] for e in exemplars], source, dy, dx)
-            found = poisson._copy_channel(groups, has, reference, channel, dy, dx)
+            found = poisson._copy_channel(groups, reference, channel, dy, dx)
             assert found.dtype == np.float64
             assert np.array_equal(found, np.where(has, expected, reference))
             # A float32 channel of a map (a strided view) is read as float64, unchanged.
             single = np.stack([reference] * 3, axis=-1).astype(np.float32)[..., channel]
-            found = poisson._copy_channel(groups, has, single, channel, dy, dx)
+            found = poisson._copy_channel(groups, single, channel, dy, dx)
             assert found.dtype == np.float64 and found.flags.c_contiguous
             assert np.array_equal(found, np.where(has, expected, single.astype(np.float64)))
     grey = poisson._source_groups([exemplars[0][..., 0]], np.maximum(source, 0) * [0, 1, 1])
-    found = poisson._copy_channel(grey, np.ones((11, 14), bool), reference, 0, 1, 0)
+    found = poisson._copy_channel(grey, reference, 0, 1, 0)
     assert np.array_equal(
         found, copy_through([exemplars[0][..., 0]], np.maximum(source, 0) * [0, 1, 1], 1, 0)
     )

@@ -274,13 +274,13 @@ def _along(axis: int, part: slice) -> tuple[slice, slice]:
     return (part, slice(None)) if axis == 0 else (slice(None), part)
 
 
-def _copy_channel(groups, has, ref, channel, dy=0, dx=0) -> np.ndarray:
+def _copy_channel(groups, ref, channel, dy=0, dx=0) -> np.ndarray:
     """One channel of :func:`copy_through` shifted by (dy, dx); ``ref`` (the reference's
     channel, any float type: the copy is float64) where no source.
 
     ``groups``: per exemplar, (exemplar, flat pixel indices, their source y and x)."""
     # The reference's values, then every pixel with a source its exemplar's: the pixels
-    # of the groups are those of ``has``. Each source read from the exemplar's flat
+    # of the groups are those with a source. Each source read from the exemplar's flat
     # values (one index per pixel: row, column, channel), not by three index arrays:
     # the same values, a quarter of the time. The indices are made as intp (np.take
     # converts any other to a whole intp copy), a piece of the group at a time.
@@ -327,7 +327,6 @@ class _Copies:
 
     def __init__(self, exemplars, source, reference) -> None:
         self.groups = _source_groups(exemplars, source)
-        self.has = source[..., 0] >= 0
         height, width = source.shape[:2]
         self.kept: dict[tuple[int, int, int], np.ndarray] | None = (
             {} if height * width <= KEEP_COPIES_PIXELS else None
@@ -337,19 +336,19 @@ class _Copies:
 
     def __call__(self, ref, channel: int, dy: int = 0, dx: int = 0) -> np.ndarray:
         if self.kept is None:
-            return _copy_channel(self.groups, self.has, ref, channel, dy, dx)
+            return _copy_channel(self.groups, ref, channel, dy, dx)
         kept = self.kept.get((channel, dy, dx))
         if kept is not None:
             return kept.astype(np.float64)
-        copy = _copy_channel(self.groups, self.has, ref, channel, dy, dx)
+        copy = _copy_channel(self.groups, ref, channel, dy, dx)
         self.kept[(channel, dy, dx)] = copy.astype(self.dtype)
         return copy
 
     def drop(self, channel: int) -> None:
         """Forget ``channel``'s copies (its solve has read them)."""
         if self.kept is not None:
-            for dy, dx in ((0, 0), (0, 1), (0, -1), (1, 0), (-1, 0)):
-                self.kept.pop((channel, dy, dx), None)
+            for key in [key for key in self.kept if key[0] == channel]:
+                del self.kept[key]
 
 
 def _source_groups(exemplars, source):
