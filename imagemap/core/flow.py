@@ -43,6 +43,10 @@ _QUEUED = 2
 #: arc 4 p + d). Kept beside the parent's number, so that a walk up a tree reads one field
 #: a step (the parent) instead of the arc and then its head: 0.87x the flow's CPU.
 _TURN = 2
+#: The index type of :func:`max_flow`'s arrays (every index there is >= 0): numba checks a
+#: signed index for a negative value to wrap around, not an unsigned one (0.87x the flow's
+#: CPU on the 512^2 moves; as :data:`imagemap.core.kernels._U`).
+_U = np.uint64
 #: The augmentations' time stamps are int32: past this many, every stamp is set back to 0
 #: (they only mark which distances are of the current augmentation).
 _STAMP_LIMIT = (1 << 31) - 2
@@ -118,25 +122,25 @@ def _origin(start, info, now):
     steps = 0
     j = start
     while True:
-        if info[4 * j + 1] == now:
-            steps += info[4 * j + 2]
+        if info[_U(4 * j + 1)] == now:
+            steps += info[_U(4 * j + 2)]
             break
-        parent = info[4 * j]
+        parent = info[_U(4 * j)]
         steps += 1
         if parent == _ROOT:
-            info[4 * j + 1] = now
-            info[4 * j + 2] = 1
+            info[_U(4 * j + 1)] = now
+            info[_U(4 * j + 2)] = 1
             break
         if parent < 0:
             return _FAR
         j = parent
     d = steps
     j = start
-    while info[4 * j + 1] != now:
-        info[4 * j + 1] = now
-        info[4 * j + 2] = d
+    while info[_U(4 * j + 1)] != now:
+        info[_U(4 * j + 1)] = now
+        info[_U(4 * j + 2)] = d
         d -= 1
-        j = info[4 * j]
+        j = info[_U(4 * j)]
     return steps
 
 
@@ -144,8 +148,8 @@ def _origin(start, info, now):
 def _orphan(info, orphans, n_orphans, node):
     """Cut ``node`` off from its tree (its arc to its parent, or its terminal's, saturated)
     and list it as the ``n_orphans``-th orphan of the augmentation; the new count."""
-    info[4 * node] = _ORPHAN
-    orphans[n_orphans] = node
+    info[_U(4 * node)] = _ORPHAN
+    orphans[_U(n_orphans)] = node
     return n_orphans + 1
 
 
@@ -176,14 +180,14 @@ def max_flow(heads, residual, terminal):
     head = 0
     tail = 0
     for p in range(n):
-        if terminal[p] != 0.0:
-            info[4 * p] = _ROOT
-            info[4 * p + 2] = 1
-            info[4 * p + 3] = (_SINK if terminal[p] < 0.0 else 0) | _QUEUED
-            queue[tail] = p
+        if terminal[_U(p)] != 0.0:
+            info[_U(4 * p)] = _ROOT
+            info[_U(4 * p + 2)] = 1
+            info[_U(4 * p + 3)] = (_SINK if terminal[_U(p)] < 0.0 else 0) | _QUEUED
+            queue[_U(tail)] = p
             tail += 1
         else:
-            info[4 * p] = _FREE
+            info[_U(4 * p)] = _FREE
     orphans = np.empty(n + 1, np.int32)  # a ring as well: each node an orphan once at a time
     path = np.empty(n + 1, np.int32)  # the augmenting path's arcs, as found: walked twice
     now = 0
@@ -193,33 +197,33 @@ def max_flow(heads, residual, terminal):
         if current < 0:
             if head == tail:
                 break
-            i = queue[head]
+            i = queue[_U(head)]
             head = head + 1 if head < n else 0
-            info[4 * i + 3] &= ~_QUEUED
-            if info[4 * i] == _FREE:
+            info[_U(4 * i + 3)] &= ~_QUEUED
+            if info[_U(4 * i)] == _FREE:
                 continue
         else:
             i = current
         current = -1
         # Growth: the first arc that joins i's tree to the other one.
         meet = -1  # the arc from the source tree's node to the sink tree's
-        ts_i = info[4 * i + 1]
-        d_i = info[4 * i + 2]
-        if not (info[4 * i + 3] & _SINK):
+        ts_i = info[_U(4 * i + 1)]
+        d_i = info[_U(4 * i + 2)]
+        if not (info[_U(4 * i + 3)] & _SINK):
             for d in range(4):
                 a = 4 * i + d
-                j = heads[a]
-                if j < 0 or residual[a] <= 0.0:
+                j = heads[_U(a)]
+                if j < 0 or residual[_U(a)] <= 0.0:
                     continue
-                pj = info[4 * j]
-                fj = info[4 * j + 3]
+                pj = info[_U(4 * j)]
+                fj = info[_U(4 * j + 3)]
                 if pj == _FREE:
-                    info[4 * j] = i
-                    info[4 * j + 1] = ts_i
-                    info[4 * j + 2] = d_i + 1
-                    info[4 * j + 3] = _QUEUED | ((d ^ 2) << _TURN)
+                    info[_U(4 * j)] = i
+                    info[_U(4 * j + 1)] = ts_i
+                    info[_U(4 * j + 2)] = d_i + 1
+                    info[_U(4 * j + 3)] = _QUEUED | ((d ^ 2) << _TURN)
                     if not (fj & _QUEUED):
-                        queue[tail] = j
+                        queue[_U(tail)] = j
                         tail = tail + 1 if tail < n else 0
                 elif fj & _SINK:
                     meet = a
@@ -227,21 +231,21 @@ def max_flow(heads, residual, terminal):
         else:
             for d in range(4):
                 a = 4 * i + d
-                j = heads[a]
+                j = heads[_U(a)]
                 if j < 0:
                     continue
                 back = 4 * j + (d ^ 2)
-                if residual[back] <= 0.0:
+                if residual[_U(back)] <= 0.0:
                     continue
-                pj = info[4 * j]
-                fj = info[4 * j + 3]
+                pj = info[_U(4 * j)]
+                fj = info[_U(4 * j + 3)]
                 if pj == _FREE:
-                    info[4 * j] = i
-                    info[4 * j + 1] = ts_i
-                    info[4 * j + 2] = d_i + 1
-                    info[4 * j + 3] = _SINK | _QUEUED | ((d ^ 2) << _TURN)
+                    info[_U(4 * j)] = i
+                    info[_U(4 * j + 1)] = ts_i
+                    info[_U(4 * j + 2)] = d_i + 1
+                    info[_U(4 * j + 3)] = _SINK | _QUEUED | ((d ^ 2) << _TURN)
                     if not (fj & _QUEUED):
-                        queue[tail] = j
+                        queue[_U(tail)] = j
                         tail = tail + 1 if tail < n else 0
                 elif not (fj & _SINK):
                     meet = back
@@ -252,122 +256,124 @@ def max_flow(heads, residual, terminal):
         now += 1
         if now == _STAMP_LIMIT:
             for p in range(n):
-                info[4 * p + 1] = 0
+                info[_U(4 * p + 1)] = 0
             now = 1
         # Augmentation: the bottleneck of source -> root ... meet ... root -> sink.
-        t = heads[meet]
+        t = heads[_U(meet)]
         s = meet >> 2  # the arc's own node
-        bottleneck = residual[meet]
+        bottleneck = residual[_U(meet)]
         n_source = 0
         j = s
-        while info[4 * j] != _ROOT:
-            parent = info[4 * j]
-            turn = (info[4 * j + 3] >> _TURN) & 3
+        while info[_U(4 * j)] != _ROOT:
+            parent = info[_U(4 * j)]
+            turn = (info[_U(4 * j + 3)] >> _TURN) & 3
             back = 4 * parent + (turn ^ 2)
-            path[n_source] = 4 * j + turn
+            path[_U(n_source)] = 4 * j + turn
             n_source += 1
-            if residual[back] < bottleneck:
-                bottleneck = residual[back]
+            if residual[_U(back)] < bottleneck:
+                bottleneck = residual[_U(back)]
             j = parent
         root_s = j
-        if terminal[j] < bottleneck:
-            bottleneck = terminal[j]
+        if terminal[_U(j)] < bottleneck:
+            bottleneck = terminal[_U(j)]
         n_sink = n_source
         j = t
-        while info[4 * j] != _ROOT:
-            a = 4 * j + ((info[4 * j + 3] >> _TURN) & 3)
-            path[n_sink] = a
+        while info[_U(4 * j)] != _ROOT:
+            a = 4 * j + ((info[_U(4 * j + 3)] >> _TURN) & 3)
+            path[_U(n_sink)] = a
             n_sink += 1
-            if residual[a] < bottleneck:
-                bottleneck = residual[a]
-            j = info[4 * j]
+            if residual[_U(a)] < bottleneck:
+                bottleneck = residual[_U(a)]
+            j = info[_U(4 * j)]
         root_t = j
-        if -terminal[j] < bottleneck:
-            bottleneck = -terminal[j]
-        residual[meet] -= bottleneck
-        residual[4 * t + ((meet & 3) ^ 2)] += bottleneck
+        if -terminal[_U(j)] < bottleneck:
+            bottleneck = -terminal[_U(j)]
+        residual[_U(meet)] -= bottleneck
+        residual[_U(4 * t + ((meet & 3) ^ 2))] += bottleneck
         n_orphans = 0
         for k in range(n_source):
-            a = path[k]
-            back = 4 * heads[a] + ((a & 3) ^ 2)
-            residual[a] += bottleneck
-            residual[back] -= bottleneck
-            if residual[back] == 0.0:
+            a = path[_U(k)]
+            back = 4 * heads[_U(a)] + ((a & 3) ^ 2)
+            residual[_U(a)] += bottleneck
+            residual[_U(back)] -= bottleneck
+            if residual[_U(back)] == 0.0:
                 n_orphans = _orphan(info, orphans, n_orphans, a >> 2)
-        terminal[root_s] -= bottleneck
-        if terminal[root_s] == 0.0:
+        terminal[_U(root_s)] -= bottleneck
+        if terminal[_U(root_s)] == 0.0:
             n_orphans = _orphan(info, orphans, n_orphans, root_s)
         for k in range(n_source, n_sink):
-            a = path[k]
-            back = 4 * heads[a] + ((a & 3) ^ 2)
-            residual[back] += bottleneck
-            residual[a] -= bottleneck
-            if residual[a] == 0.0:
+            a = path[_U(k)]
+            back = 4 * heads[_U(a)] + ((a & 3) ^ 2)
+            residual[_U(back)] += bottleneck
+            residual[_U(a)] -= bottleneck
+            if residual[_U(a)] == 0.0:
                 n_orphans = _orphan(info, orphans, n_orphans, a >> 2)
-        terminal[root_t] += bottleneck
-        if terminal[root_t] == 0.0:
+        terminal[_U(root_t)] += bottleneck
+        if terminal[_U(root_t)] == 0.0:
             n_orphans = _orphan(info, orphans, n_orphans, root_t)
         flow += bottleneck
         # Adoption, the orphans nearest the terminals first (a child's old parent may
         # then be back in the tree when the child looks for one).
         for k in range(n_orphans // 2):
-            tmp = orphans[k]
-            orphans[k] = orphans[n_orphans - 1 - k]
-            orphans[n_orphans - 1 - k] = tmp
+            tmp = orphans[_U(k)]
+            orphans[_U(k)] = orphans[_U(n_orphans - 1 - k)]
+            orphans[_U(n_orphans - 1 - k)] = tmp
         first = 0
         last = n_orphans  # orphans[first:last], as a ring of n + 1
         while first != last:
-            o = orphans[first]
+            o = orphans[_U(first)]
             first = first + 1 if first < n else 0
-            in_sink = info[4 * o + 3] & _SINK
+            in_sink = info[_U(4 * o + 3)] & _SINK
             best = -1
             best_distance = _FAR
             for d in range(4):
                 a = 4 * o + d
-                j = heads[a]
+                j = heads[_U(a)]
                 if j < 0:
                     continue
                 if in_sink:
-                    if residual[a] <= 0.0:
+                    if residual[_U(a)] <= 0.0:
                         continue
-                elif residual[4 * j + (d ^ 2)] <= 0.0:
+                elif residual[_U(4 * j + (d ^ 2))] <= 0.0:
                     continue
-                if info[4 * j] == _FREE or (info[4 * j + 3] & _SINK) != in_sink:
+                if info[_U(4 * j)] == _FREE or (info[_U(4 * j + 3)] & _SINK) != in_sink:
                     continue
                 steps = _origin(j, info, now)
                 if steps < best_distance:
                     best = a
                     best_distance = steps
             if best >= 0:
-                info[4 * o] = heads[best]
-                info[4 * o + 3] = (info[4 * o + 3] & (_SINK | _QUEUED)) | ((best & 3) << _TURN)
-                info[4 * o + 1] = now
-                info[4 * o + 2] = best_distance + 1
+                info[_U(4 * o)] = heads[_U(best)]
+                info[_U(4 * o + 3)] = (info[_U(4 * o + 3)] & (_SINK | _QUEUED)) | (
+                    (best & 3) << _TURN
+                )
+                info[_U(4 * o + 1)] = now
+                info[_U(4 * o + 2)] = best_distance + 1
                 continue
-            info[4 * o] = _FREE
+            info[_U(4 * o)] = _FREE
             for d in range(4):
                 a = 4 * o + d
-                j = heads[a]
+                j = heads[_U(a)]
                 if j < 0:
                     continue
-                pj = info[4 * j]
-                fj = info[4 * j + 3]
+                pj = info[_U(4 * j)]
+                fj = info[_U(4 * j + 3)]
                 if pj == _FREE or (fj & _SINK) != in_sink:
                     continue
-                reaches = residual[a] > 0.0 if in_sink else residual[4 * j + (d ^ 2)] > 0.0
+                reaches = residual[_U(a)] > 0.0 if in_sink else residual[_U(4 * j + (d ^ 2))] > 0.0
                 if reaches and not (fj & _QUEUED):
-                    info[4 * j + 3] = fj | _QUEUED
-                    queue[tail] = j
+                    info[_U(4 * j + 3)] = fj | _QUEUED
+                    queue[_U(tail)] = j
                     tail = tail + 1 if tail < n else 0
                 if pj == o:
-                    info[4 * j] = _ORPHAN
-                    orphans[last] = j
+                    info[_U(4 * j)] = _ORPHAN
+                    orphans[_U(last)] = j
                     last = last + 1 if last < n else 0
-        if info[4 * i] == _FREE:
+        if info[_U(4 * i)] == _FREE:
             current = -1
     sink_side = np.zeros(n, np.bool_)
     for p in range(n):
-        sink_side[p] = (info[4 * p + 3] & _SINK) != 0 and info[4 * p] != _FREE
+        sink_side[_U(p)] = (info[_U(4 * p + 3)] & _SINK) != 0 and info[_U(4 * p)] != _FREE
     return flow, sink_side
 
 
