@@ -393,7 +393,6 @@ def grid_graph(node, cost0, cost1, first, second, capacity):
     return heads, residual, terminal, pushed
 
 
-@njit(cache=True, nogil=True)
 def grid_cut(node, cost0, cost1, first, second, capacity):
     """The minimum cut of one alpha-expansion move (the terms of
     :func:`imagemap.core.kernels.expansion_terms`): whether each node takes alpha (pays
@@ -402,23 +401,25 @@ def grid_cut(node, cost0, cost1, first, second, capacity):
     sum of the nodes' smaller unary costs). The nodes on the cut's sink side take alpha,
     as with PyMaxflow's ``add_grid_tedges(nodes, cost1 - low, cost0 - low)``,
     ``maxflow()`` and ``get_grid_segments``, ``low`` the smaller of the two costs.
+
+    Not a kernel of its own: it calls :func:`grid_graph` and :func:`max_flow` (both
+    without the GIL), which the halved moves call too, so a fresh process loads two
+    kernels from numba's cache where a compiled ``grid_cut``, with its own copies of both,
+    made it load three (about 12 ms, docs/performance.md).
     """
     heads, residual, terminal, pushed = grid_graph(node, cost0, cost1, first, second, capacity)
     flow, takes = max_flow(heads, residual, terminal)
     return takes, flow + pushed
 
 
-@njit(cache=True, nogil=True)
 def _halves(heads, middle):
     """The arcs of the nodes before ``middle`` and of those from it (numbered from 0),
-    each half's arcs into the other left out (-1)."""
+    each half's arcs into the other left out (-1). NumPy, not a kernel: one fewer for a
+    fresh process to load from numba's cache (about 5 ms)."""
     before = heads[: 4 * middle].copy()
-    for a in range(len(before)):
-        if before[a] >= middle:
-            before[a] = -1
-    after = heads[4 * middle :].copy()
-    for a in range(len(after)):
-        after[a] = after[a] - middle if after[a] >= middle else -1
+    before[before >= middle] = -1
+    after = heads[4 * middle :] - np.int32(middle)  # into the first half, or none: < 0
+    after[after < 0] = -1
     return before, after
 
 
