@@ -248,14 +248,10 @@ def test_the_data_costs_kept_between_moves_are_those_of_the_labels_left(monkeypa
     np.testing.assert_array_equal(moves.data_now[known], expected[known])
 
 
-def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
-    """Independent moves (crops more than a pixel apart) run two at a time on two threads,
-    and a large move alone is cut on both (core/flow.grid_cut_halved): the labels are
-    those of the moves one at a time on one thread, and pairs and halved cuts did run."""
-    from imagemap.core import flow, kernels, seams
-
-    # 64 tiles of 12 px a side, each its own label: with a short reach, the crops of
-    # many moves in turn are far apart.
+def tiles():
+    """Exemplars, a source map of 64 tiles of 12 px a side, each its own label, and a
+    reference showing each 2x2 group of tiles copied whole by one of its tiles' labels:
+    with a short reach, the crops of many moves in turn are far apart."""
     rng = np.random.default_rng(2)
     exemplars = [rng.random((120, 120, 3)).astype(np.float32) for _ in range(2)]
     rows, columns = np.indices((96, 96))
@@ -263,12 +259,21 @@ def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
     offsets_of = rng.integers(0, 24, size=(64, 2))
     offsets = offsets_of[tile]
     source = np.stack([tile % 2, rows + offsets[..., 0], columns + offsets[..., 1]], -1)
-    # The reference shows each 2x2 group of tiles copied whole by one of its tiles' labels.
     group = (rows // 24) * 16 + (columns // 24) * 2
     target = np.stack(
         [group % 2, rows + offsets_of[group][..., 0], columns + offsets_of[group][..., 1]], -1
     )
     reference = colours(exemplars, target)[0] + 0.05 * rng.standard_normal((96, 96, 3))
+    return exemplars, source, reference
+
+
+def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
+    """Independent moves (crops more than a pixel apart) run two at a time on two threads,
+    and a large move alone is cut on both (core/flow.grid_cut_halved): the labels are
+    those of the moves one at a time on one thread, and pairs and halved cuts did run."""
+    from imagemap.core import flow, kernels, seams
+
+    exemplars, source, reference = tiles()
     pairs = []
     side_thread = seams._side_thread
 
@@ -295,6 +300,38 @@ def test_moves_run_in_pairs_find_what_the_moves_in_turn_find(monkeypatch):
     in_turn = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
     np.testing.assert_array_equal(paired, in_turn)
     assert (paired != source).any(axis=-1).mean() > 0.2  # the moves changed many labels
+
+
+def test_a_partner_not_taken_is_cut_as_planned_and_planned_once(monkeypatch):
+    """A move planned as the next one's partner and found too small to pair is cut next,
+    in turn, from that plan (the move before it changes nothing the plan read): the labels
+    are those of one thread, and every move is planned once."""
+    from imagemap.core import kernels, seams
+
+    exemplars, source, reference = tiles()
+    plans, cuts = [], []
+    planned, cut = seams._Moves._planned, seams._Moves._cut
+
+    def counted_plan(self, *args):
+        made = planned(self, *args)
+        if made is not None:
+            plans.append(made[0])
+        return made
+
+    def counted_cut(self, move, *args):
+        cuts.append(move[0])
+        return cut(self, move, *args)
+
+    monkeypatch.setattr(seams._Moves, "_planned", counted_plan)
+    monkeypatch.setattr(seams._Moves, "_cut", counted_cut)
+    monkeypatch.setattr(kernels, "n_threads", lambda: 2)
+    monkeypatch.setattr(seams, "_PAIRED_PIXELS", 10**9)  # every partner too small
+    alone = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
+    assert len(cuts) >= 20 and plans == cuts  # each planned once, in the order cut
+    monkeypatch.setattr(kernels, "n_threads", lambda: 1)
+    in_turn = place_seams(exemplars, source, reference, smoothness=0.3, spread=0.5)
+    np.testing.assert_array_equal(alone, in_turn)
+    assert (alone != source).any(axis=-1).mean() > 0.2
 
 
 def test_two_moves_pair_only_with_a_pixel_between_their_crops():
