@@ -44,7 +44,7 @@ _QUEUED = 2
 #: a step (the parent) instead of the arc and then its head: 0.87x the flow's CPU.
 _TURN = 2
 #: The index type of :func:`max_flow`'s arrays (every index there is >= 0): numba checks a
-#: signed index for a negative value to wrap around, not an unsigned one (0.87x the flow's
+#: signed index for a negative value to wrap around, not an unsigned one (0.85x the flow's
 #: CPU on the 512^2 moves; as :data:`imagemap.core.kernels._U`).
 _U = np.uint64
 #: The augmentations' time stamps are int32: past this many, every stamp is set back to 0

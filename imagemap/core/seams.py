@@ -379,7 +379,7 @@ class _Moves:
                     if min(move[3].sum(), partner[3].sum()) < _PAIRED_PIXELS:
                         # not worth a hand-over: in turn, next, as planned (this move
                         # changes nothing its plan read); not planned again (a quarter of
-                        # the moves at 512^2, each a maximum filter over its crop)
+                        # the plans at 512^2, each a maximum filter over its crop)
                         ahead, partner, position = (other, partner), None, scan - 1
                     break
             if partner is None:  # alone: a large one's cut is shared with the side thread
