@@ -287,6 +287,31 @@ def test_the_e_steps_choice_keeps_the_lower_exact_cost():
     assert changed == int(better.sum()) and 0 < changed < n
 
 
+def test_the_heap_is_trimmed_around_the_finest_levels_features_alone(
+    blob_database, query_blob, monkeypatch
+):
+    """The heap's free pages go back (``trim_heap``) just before and after the finest
+    level's features and after its E-steps, at no other point of a call: every coarser
+    level is made without a trim (``engine.TRIMMED_LEVELS``)."""
+    from imagemap.core import engine
+
+    events: list = []
+    monkeypatch.setattr(engine, "trim_heap", lambda: events.append("trim"))
+    prepare = engine.LevelSolver.prepare
+
+    def recorded(solver, rng):
+        events.append(solver.query_shape)
+        prepare(solver, rng)
+
+    monkeypatch.setattr(engine.LevelSolver, "prepare", recorded)
+    depth, _ = query_blob
+    colorize(depth, blob_database, "busts", seed=3)
+    coarser, finest = events[:-4], events[-3]
+    assert events[-4:] == ["trim", finest, "trim", "trim"], events
+    assert coarser and "trim" not in coarser, events
+    assert all(shape[0] < finest[0] and shape[1] < finest[1] for shape in coarser), events
+
+
 def test_nearest_candidates_on_a_box_are_the_whole_frames():
     """The propagation snaps a coordinate that is no candidate to the nearest one by the
     feature transform of a box holding the candidates and the points: the same candidate

@@ -70,6 +70,18 @@ __all__ = [
 
 log = logging.getLogger("imagemap")
 
+#: The levels, from the finest, that give the heap's free pages back
+#: (:func:`~imagemap.core.solver.trim_heap`) before and after their features and after
+#: their E-steps; no other trim. A call's peak is its finest level's features (the PCA
+#: samples and feature blocks beside every band), and a trim just before them gives back
+#: every page freed until then (the front end's, the coarser levels'): the trims at the
+#: start and at the coarser levels lowered no peak, and each was paid for again in page
+#: faults when the next phase took its pages back. 512^2 side-by-side task: 46-47k ->
+#: 17-19k minor faults an engine call, the process's peak the same (292-301 MB either
+#: way); without the trim after the finest E-steps 16 MB more stayed resident into the
+#: next stages (1024^2: the seams' peak 331 -> 336 MB).
+TRIMMED_LEVELS = 1
+
 
 @dataclass
 class EngineResult:
@@ -202,7 +214,6 @@ def synthesize(
     _validate(query_levels, exemplar_levels, params)
     # One BLAS thread: the numba kernels own the cores, and a multithreaded
     # OpenBLAS on a busy machine spins (a 363x363 eigh measured 300x slower).
-    trim_heap()  # the front end's temporaries: freed, not yet given back
     # SciPy's own OpenBLAS (the PCA's eigh) loaded before the limit below, so that the
     # limit covers it too (threadpoolctl limits the libraries loaded)
     import scipy.linalg  # deferred: start-up: only a synthesis fits a PCA  # noqa: F401
@@ -302,9 +313,13 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         # number drawn): before the features, so that its transients do not add to them.
         propagated: Any = None if coarse_source is None else solver.propagate(coarse_source)
         coarse_source = None
-        trim_heap()
+        # The heap's free pages are given back around the finest level's features alone
+        # (see TRIMMED_LEVELS); at the coarser levels the freed pages stay for the next.
+        if level < TRIMMED_LEVELS:
+            trim_heap()
         solver.prepare(rng)
-        trim_heap()  # the PCA's and the feature blocks' temporaries, before the E-steps
+        if level < TRIMMED_LEVELS:
+            trim_heap()  # the PCA's and the feature blocks' temporaries, before the E-steps
         level_seed = int(rng.integers(0, 2**62))
         h, w = solver.query_shape
         appearance = np.zeros((h + 2 * solver.r, w + 2 * solver.r, n_appearance), dtype=np.float32)
@@ -375,7 +390,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
             solver.set_appearance(appearance, project=False)
             final_cost = solver.costs(matches)
         solver.release_search()  # what only the E-step needs, before the dense maps
-        trim_heap()
+        if level < TRIMMED_LEVELS:
+            trim_heap()  # the E-steps' state, before the dense maps and the next stages
         r = solver.r  # the level's estimate copied out once the E-step's state is freed
         appearance_levels[level] = np.ascontiguousarray(appearance[r : r + h, r : r + w])
         if len(context_bands) and level > 0:
