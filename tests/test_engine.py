@@ -287,12 +287,10 @@ def test_the_e_steps_choice_keeps_the_lower_exact_cost():
     assert changed == int(better.sum()) and 0 < changed < n
 
 
-def test_the_heap_is_trimmed_around_the_finest_levels_features_alone(
-    blob_database, query_blob, monkeypatch
-):
-    """The heap's free pages go back (``trim_heap``) just before and after the finest
-    level's features and after its E-steps, at no other point of a call: every coarser
-    level is made without a trim (``engine.TRIMMED_LEVELS``)."""
+def test_the_heap_is_trimmed_around_the_finest_levels_features_alone(monkeypatch):
+    """The heap's free pages go back (``trim_heap``) just before and after the features of
+    each of the ``engine.TRIMMED_LEVELS`` finest levels and after their E-steps, at no
+    other point of a call: the coarser levels are made without a trim."""
     from imagemap.core import engine
 
     events: list = []
@@ -304,12 +302,25 @@ def test_the_heap_is_trimmed_around_the_finest_levels_features_alone(
         prepare(solver, rng)
 
     monkeypatch.setattr(engine.LevelSolver, "prepare", recorded)
-    depth, _ = query_blob
-    colorize(depth, blob_database, "busts", seed=3)
-    coarser, finest = events[:-4], events[-3]
-    assert events[-4:] == ["trim", finest, "trim", "trim"], events
-    assert coarser and "trim" not in coarser, events
-    assert all(shape[0] < finest[0] and shape[1] < finest[1] for shape in coarser), events
+    guide = ndimage.gaussian_filter(np.random.default_rng(0).random((64, 64, 1)), 2)
+    guide = guide.astype(np.float32)
+    levels = engine.TRIMMED_LEVELS + 2
+    exemplar = [
+        Mapping(guide=guide[:: 2**i, :: 2**i], appearance=guide[:: 2**i, :: 2**i] ** 2)
+        for i in range(levels)
+    ]
+    query = [Mapping(guide=np.roll(guide, 3, axis=1)[:: 2**i, :: 2**i]) for i in range(levels)]
+    params = EngineParams(
+        levels=uniform_levels((5,) * levels), guide_weights=(1.0,), appearance_weights=(1.0,)
+    )
+    synthesize(query, [exemplar], params, seed=1)
+    shapes = [event for event in events if event != "trim"]  # coarse to fine
+    assert len(shapes) > engine.TRIMMED_LEVELS, shapes  # some level is not trimmed
+    expected: list = []
+    for level, shape in zip(range(len(shapes) - 1, -1, -1), shapes, strict=True):
+        trimmed = level < engine.TRIMMED_LEVELS
+        expected += ["trim", shape, "trim", "trim"] if trimmed else [shape]
+    assert events == expected
 
 
 def test_nearest_candidates_on_a_box_are_the_whole_frames():

@@ -72,15 +72,17 @@ log = logging.getLogger("imagemap")
 
 #: The levels, from the finest, that give the heap's free pages back
 #: (:func:`~imagemap.core.solver.trim_heap`) before and after their features and after
-#: their E-steps; no other trim. A call's peak is its finest level's features (the PCA
-#: samples and feature blocks beside every band), and a trim just before them gives back
-#: every page freed until then (the front end's, the coarser levels'): the trims at the
-#: start and at the coarser levels lowered no peak, and each was paid for again in page
-#: faults when the next phase took its pages back. 512^2 side-by-side task: 46-47k ->
-#: 17-19k minor faults an engine call, the process's peak the same (292-301 MB either
-#: way); without the trim after the finest E-steps 16 MB more stayed resident into the
-#: next stages (1024^2: the seams' peak 331 -> 336 MB).
-TRIMMED_LEVELS = 1
+#: their E-steps; no other trim. A call's peak is the features of one of them (the PCA
+#: samples and feature blocks beside every band): the finest level's at 512^2, the next
+#: one's at 200x150, whose windows are the widest of the default plan (11 x 11, against 7
+#: x 7 at the finest). A trim just before them gives back every page freed until then
+#: (the front end's, the coarser levels'): the trims at the start and at the coarser
+#: levels lowered no peak, and each was paid for again in page faults when the next phase
+#: took its pages back. Side-by-side task, an engine call's minor faults and the process's
+#: peak, trims as before -> these: 512^2 46-47k -> 29-32k, 292-301 -> 291-301 MB; 200x150
+#: 22-23k -> 21k, 192-193 -> 193-194 MB. The finest level alone: 512^2 17-20k faults,
+#: but 200x150 peaked at 196-197 MB.
+TRIMMED_LEVELS = 2
 
 
 @dataclass
