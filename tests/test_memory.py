@@ -704,21 +704,38 @@ def test_upsampled_on_a_box_is_the_whole_maps_box():
     assert np.array_equal(register._upsampled(grid, 3.0, shape, box), whole[box])
 
 
-@pytest.mark.parametrize("angle, scale, mirrored", [(23.0, 1.3, False), (-71.5, 0.8, True)])
+@pytest.mark.parametrize(
+    "angle, scale, mirrored, centre",
+    [
+        (23.0, 1.3, False, (33.0, 41.0)),
+        (-71.5, 0.8, True, (33.0, 41.0)),
+        # A pose the warp absorbs (absorbed_pose): a move by whole pixels, the points taken.
+        (0.0, 1.0, False, (33.27, 40.61)),
+        (0.0, 1.0, True, (32.9, 41.45)),
+    ],
+)
 def test_resampled_depth_in_row_blocks_equals_the_whole_grids_formula(
-    monkeypatch, angle, scale, mirrored
+    monkeypatch, angle, scale, mirrored, centre
 ):
     """resample_depth a few rows at a time, from the nearest object pixels' indices
-    alone, gives the bytes of the whole grid's interpolation (the distances made too)."""
+    alone, gives the bytes of the whole grid's interpolation (the distances made too);
+    a move by whole pixels, taken without interpolating, too."""
     from scipy import ndimage
 
     from imagemap.depth import pose as posing
+    from imagemap.depth.config import Selection
 
     yy, xx = np.mgrid[:70, :90]
-    depth = np.where(((yy - 33) / 20.0) ** 2 + ((xx - 41) / 31.0) ** 2 < 1, 1 + xx / 90.0, 0)
+    relief = 1 + xx / 90.0 + np.random.default_rng(3).random((70, 90)) / 7.0
+    depth = np.where(((yy - 33) / 20.0) ** 2 + ((xx - 41) / 31.0) ** 2 < 1, relief, 0)
     depth = depth.astype(np.float32)
-    found = posing.Pose((33.0, 41.0), (40.0, 52.0), scale, angle, mirrored)
-    frame = posing.canonical_frame(depth > 0, found, margin=6.0, align=4)
+    found = posing.Pose(centre, (centre[0] + 7.4, centre[1] + 11.2), scale, angle, mirrored)
+    found = posing.absorbed_pose(found, Selection())
+    # Room enough that the frame reaches past the query's (the points there are 0 too).
+    frame = posing.canonical_frame(depth > 0, found, margin=16.0, align=4)
+    whole_y, whole_x = frame.to_query()
+    assert posing._on_pixels(whole_y, whole_x) == (scale == 1.0)
+    assert whole_y.min() < 0 and whole_x.min() < 0
     mask = depth > 0
     _, (iy, ix) = ndimage.distance_transform_edt(~mask, return_indices=True)
     filled = depth[iy, ix].astype(np.float32)
