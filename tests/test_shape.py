@@ -171,6 +171,38 @@ def test_the_query_grids_of_all_poses_at_once_are_each_poses_own():
             assert np.array_equal(row, own)
 
 
+def test_the_query_made_once_for_the_search_gives_the_same_distances_and_poses():
+    """The selection makes the query's coarse_query once for its distances and its poses'
+    refinement: the same distances, candidates and poses as each making its own; a query
+    made for other settings is refused."""
+    from imagemap.depth import pose
+
+    yy, xx = np.mgrid[:90, :130]
+
+    def body(cy: float, cx: float, ry: float, rx: float, turn: float) -> np.ndarray:
+        c, s = np.cos(np.radians(turn)), np.sin(np.radians(turn))
+        u, v = c * (xx - cx) + s * (yy - cy), -s * (xx - cx) + c * (yy - cy)
+        inside = (u / rx) ** 2 + (v / (ry * (1 + 0.4 * u / rx))) ** 2 < 1
+        return np.where(inside, 1.0 + 0.01 * u, 0.0).astype(np.float32)
+
+    query = body(44.6, 61.3, 18, 40, 17.0)
+    examples = [body(45, 65, 20, 45, 0.0), body(40, 60, 15, 35, -30.0)]
+    grids = np.stack([pose.shape_grid(example) for example in examples])
+    for mirrored in (True, False):
+        made = pose.coarse_query(query, mirrored=mirrored)
+        own = pose.pose_distances(query, grids, mirrored=mirrored)
+        given = pose.pose_distances(query, grids, mirrored=mirrored, query=made)
+        assert all(np.array_equal(a, b) for a, b in zip(own, given, strict=True))
+        own_poses = pose.find_poses(query, examples, mirrored=mirrored, example_grids=grids)
+        given_poses = pose.find_poses(
+            query, examples, mirrored=mirrored, example_grids=grids, query=made
+        )
+        assert given_poses == own_poses
+        assert own_poses[0].angle != 0.0  # the refinement ran: the test tests the poses
+    with pytest.raises(ValueError, match="other settings"):
+        pose.pose_distances(query, grids, mirrored=False, query=pose.coarse_query(query))
+
+
 @pytest.mark.parametrize("mirrored", [False, True])
 def test_unposing_without_a_turn_reads_the_rounded_rows_and_columns(mirrored):
     """A pose that does not turn (moved, scaled, mirrored) brings the map back by its rows

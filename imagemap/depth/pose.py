@@ -47,8 +47,10 @@ __all__ = [
     "MIRROR_TIE",
     "SPAN",
     "CanonicalFrame",
+    "CoarseQuery",
     "Pose",
     "canonical_frame",
+    "coarse_query",
     "find_poses",
     "pose_distances",
     "shape_grid",
@@ -124,10 +126,14 @@ class Pose:
 def _frame(depth: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
     """(centroid (y, x), size in pixels, the depth divided by its object's median)."""
     mask = depth > 0
-    ys, xs = np.nonzero(mask)
-    centre = np.array([ys.mean(), xs.mean()])
-    size = float(np.sqrt(mask.sum()))
+    centre, size = _centre_size(mask)
     return centre, size, np.where(mask, depth / float(np.median(depth[mask])), 0.0)
+
+
+def _centre_size(mask: np.ndarray) -> tuple[np.ndarray, float]:
+    """(centroid (y, x), size in pixels: the square root of the area) of ``mask``."""
+    ys, xs = np.nonzero(mask)
+    return np.array([ys.mean(), xs.mean()]), float(np.sqrt(len(ys)))
 
 
 def _smoothed(
@@ -203,15 +209,52 @@ def _query_grids(image, centre, size, poses, grid, span) -> np.ndarray:
     return found.reshape(len(poses), grid * grid)
 
 
-def _coarse(depth, example_grids, mirrored, angle_step, grid, span):
-    """(query image, centre, size), and per example and mirror hypothesis (unmirrored
-    first) the coarse search's best distance and angle: arrays (N, hypotheses)."""
+@dataclass(frozen=True)
+class CoarseQuery:
+    """The query as the coarse search compares it (:func:`coarse_query`): its smoothed
+    image (and block), centroid and size, and its shape grid turned to every angle of the
+    search, each mirror hypothesis (unmirrored first) in turn: (hypotheses * angles,
+    grid**2)."""
+
+    image: tuple[np.ndarray, int]
+    centre: np.ndarray
+    size: float
+    angles: np.ndarray
+    flips: tuple[bool, ...]
+    grids: np.ndarray
+    settings: tuple[bool, float, int, float]  # made for: mirrored, angle step, grid, span
+
+
+def coarse_query(
+    depth: np.ndarray,
+    *,
+    mirrored: bool = True,
+    angle_step: float = ANGLE_STEP,
+    grid: int = GRID,
+    span: float = SPAN,
+) -> CoarseQuery:
+    """The query's side of the coarse search (arguments as :func:`pose_distances`), made
+    once for the selection's distances and the poses' refinement (the same query)."""
     centre, size, normalized = _frame(np.asarray(depth, np.float64))
     image = _smoothed(normalized, size, grid, span)
     angles = np.arange(-90.0 + angle_step, 90.0 + 1e-9, angle_step)
     flips = (False, True) if mirrored else (False,)
     poses = [(a, m) for m in flips for a in angles]
-    queries = _query_grids(image, centre, size, poses, grid, span).astype(np.float64)
+    grids = _query_grids(image, centre, size, poses, grid, span).astype(np.float64)
+    settings = (mirrored, angle_step, grid, span)
+    return CoarseQuery(image, centre, size, angles, flips, grids, settings)
+
+
+def _coarse(depth, example_grids, mirrored, angle_step, grid, span, query=None):
+    """(query image, centre, size), and per example and mirror hypothesis (unmirrored
+    first) the coarse search's best distance and angle: arrays (N, hypotheses).
+    ``query``: the :func:`coarse_query` of ``depth``, if made (for these settings)."""
+    if query is None:
+        query = coarse_query(depth, mirrored=mirrored, angle_step=angle_step, grid=grid, span=span)
+    elif query.settings != (mirrored, angle_step, grid, span):
+        raise ValueError("coarse_query was made for other settings than the search's")
+    image, centre, size = query.image, query.centre, query.size
+    angles, flips, queries = query.angles, query.flips, query.grids
     examples = np.asarray(example_grids, np.float64)
     ssd = (
         np.square(queries).sum(1)[:, None]
@@ -232,6 +275,7 @@ def pose_distances(
     angle_step: float = ANGLE_STEP,
     grid: int = GRID,
     span: float = SPAN,
+    query: CoarseQuery | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each example's shape distance to the query at the coarse search's best pose.
 
@@ -245,6 +289,8 @@ def pose_distances(
         Try the query mirrored too.
     angle_step : float
         Degrees between the angles tried over (-90, 90].
+    query : CoarseQuery, optional
+        :func:`coarse_query` of ``depth`` for these settings, if made.
 
     Returns
     -------
@@ -253,7 +299,7 @@ def pose_distances(
     candidates : ndarray (N, 2)
         Its angle (degrees) and whether it is mirrored (0 or 1).
     """
-    _, distances, angles = _coarse(depth, example_grids, mirrored, angle_step, grid, span)
+    _, distances, angles = _coarse(depth, example_grids, mirrored, angle_step, grid, span, query)
     hypothesis = np.argmin(distances, axis=1)
     rows = np.arange(len(distances))
     candidates = np.stack([angles[rows, hypothesis], hypothesis.astype(np.float64)], axis=1)
@@ -269,6 +315,7 @@ def find_poses(
     grid: int = GRID,
     span: float = SPAN,
     example_grids: np.ndarray | None = None,
+    query: CoarseQuery | None = None,
 ) -> list[Pose]:
     """The pose of ``depth`` against each example depth: for each mirror hypothesis the
     coarse search's best angle refined by bisection, then the better hypothesis (each
@@ -286,6 +333,8 @@ def find_poses(
         As :func:`pose_distances`.
     example_grids : ndarray, optional
         The examples' :func:`shape_grid` (made here if not given).
+    query : CoarseQuery, optional
+        :func:`coarse_query` of ``depth`` for these settings (made here if not given).
 
     Returns
     -------
@@ -294,7 +343,7 @@ def find_poses(
     if example_grids is None:
         example_grids = np.stack([shape_grid(e, grid, span) for e in examples])
     (image, centre, size), distances, angles = _coarse(
-        depth, example_grids, mirrored, angle_step, grid, span
+        depth, example_grids, mirrored, angle_step, grid, span, query
     )
     poses = []
     for k, (example, target) in enumerate(
@@ -327,7 +376,7 @@ def find_poses(
             shape_distance = min(shape_distance, value)
         assert best_pose is not None
         _, angle, mirror = best_pose
-        example_centre, example_size, _ = _frame(np.asarray(example, np.float64))
+        example_centre, example_size = _centre_size(np.asarray(example) > 0)
         poses.append(
             Pose(
                 query_centre=(float(centre[0]), float(centre[1])),

@@ -14,7 +14,14 @@ import numpy as np
 
 from imagemap.database import Database
 from imagemap.depth.config import Selection
-from imagemap.depth.pose import Pose, find_poses, pose_distances, shape_grid
+from imagemap.depth.pose import (
+    CoarseQuery,
+    Pose,
+    coarse_query,
+    find_poses,
+    pose_distances,
+    shape_grid,
+)
 from imagemap.io import validate_depth
 from imagemap.validate import check_int
 
@@ -44,15 +51,20 @@ def example_grid(example, selection: Selection = _SELECTION) -> np.ndarray:
 
 
 def selection_distances(
-    depth: np.ndarray, database: Database, selection: Selection = _SELECTION
+    depth: np.ndarray,
+    database: Database,
+    selection: Selection = _SELECTION,
+    query: CoarseQuery | None = None,
 ) -> np.ndarray:
     """Each example's shape distance to ``depth`` at its best pose (one value per example,
-    in the database's order; :func:`imagemap.depth.pose.pose_distances`)."""
+    in the database's order; :func:`imagemap.depth.pose.pose_distances`; ``query``: the
+    query's :func:`~imagemap.depth.pose.coarse_query`, if made)."""
     grids = np.stack([example_grid(example, selection) for example in database])
     distances, _ = pose_distances(
         np.asarray(depth, np.float32),
         grids,
         mirrored=selection.mirror,
+        query=query,
     )
     return distances
 
@@ -90,18 +102,27 @@ def select_with_poses(
     """
     m = check_int("m", m, minimum=1)
     depth = validate_depth(depth)
-    coarse = np.argsort(selection_distances(depth, database, selection), kind="stable")
+    # The query's side of the coarse search, made once for the distances and the poses.
+    query = coarse_query(depth, mirrored=selection.mirror)
+    coarse = np.argsort(selection_distances(depth, database, selection, query), kind="stable")
     candidates = [int(i) for i in coarse[: m + REFINED_EXTRA]]
-    poses = poses_against(depth, [database[i] for i in candidates], selection)
+    poses = poses_against(depth, [database[i] for i in candidates], selection, query)
     order = sorted(range(len(candidates)), key=lambda k: (poses[k].distance, k))[:m]
     return [candidates[k] for k in order], [poses[k] for k in order]
 
 
-def poses_against(depth: np.ndarray, examples: list, selection: Selection = _SELECTION):
-    """The query's refined :class:`~imagemap.depth.pose.Pose` against each example."""
+def poses_against(
+    depth: np.ndarray,
+    examples: list,
+    selection: Selection = _SELECTION,
+    query: CoarseQuery | None = None,
+):
+    """The query's refined :class:`~imagemap.depth.pose.Pose` against each example
+    (``query``: its :func:`~imagemap.depth.pose.coarse_query`, if made)."""
     return find_poses(
         depth,
         [example.depth for example in examples],
         mirrored=selection.mirror,
         example_grids=np.stack([example_grid(example, selection) for example in examples]),
+        query=query,
     )
