@@ -201,6 +201,31 @@ def test_the_displacement_is_the_sum_of_its_sixteen_terms():
     assert np.array_equal(found[1], dx.reshape(ys.shape))
 
 
+def test_a_position_grid_on_a_level_is_its_interpolation_at_the_levels_pixels():
+    """_on_level gives the bytes of map_coordinates at each level's pixel centres divided
+    by the step: by SciPy's zoom and shift for a step that is a power of two (every
+    coordinate exact), by map_coordinates itself for another step."""
+    from scipy import ndimage
+
+    from imagemap.depth.register import _level_coordinates, _on_level
+
+    rng = np.random.default_rng(5)
+    for step in (1, 2, 3, 4, 5, 8, 16):
+        for shape in ((97, 130), (64, 64), (5, 301)):
+            grid_shape = (
+                len(range(0, shape[0] + step, step)),
+                len(range(0, shape[1] + step, step)),
+            )
+            grid = np.cumsum(rng.normal(size=grid_shape), axis=1) * 10.0 ** rng.uniform(-3, 3)
+            for level in range(4):
+                ys, xs = _level_coordinates(shape, level)
+                gy, gx = np.meshgrid(ys / step, xs / step, indexing="ij")
+                expected = ndimage.map_coordinates(grid, [gy, gx], order=1, mode="nearest")
+                found = _on_level(grid, shape, level, step)
+                assert found.dtype == expected.dtype
+                assert np.array_equal(found, expected)
+
+
 def test_the_inverse_is_every_points_twelve_steps_to_the_bit():
     """Warp.inverse leaves a point once it is a fixed point to the bit: the same values as
     twelve fixed-point steps of every point (the reference, written out here)."""

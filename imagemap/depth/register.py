@@ -850,11 +850,36 @@ def example_positions(
     positions = np.stack([(qy - frame[0]) / frame[2], (qx - frame[1]) / frame[2]])
     per_level = []
     for level in range(levels):
-        ys, xs = _level_coordinates(shape, level)
-        gy, gx = np.meshgrid(ys / step, xs / step, indexing="ij")
-        sampled = [ndimage.map_coordinates(p, [gy, gx], order=1, mode="nearest") for p in positions]
+        sampled = [_on_level(p, shape, level, step) for p in positions]
         per_level.append(np.stack(sampled, axis=-1).astype(np.float32))
     return per_level
+
+
+def _on_level(grid: np.ndarray, shape: tuple[int, int], level: int, step: int) -> np.ndarray:
+    """``grid`` (a value every ``step`` full-resolution pixels) interpolated bilinearly
+    (``mode="nearest"``) at the pixel centres of pyramid level ``level`` of a frame of
+    ``shape`` (:func:`_level_coordinates`).
+
+    For a ``step`` that is a power of two every coordinate, ``(i * 2**level + (2**level -
+    1) / 2) / step``, is a float exactly, however it is computed: SciPy's zoom and shift
+    (``affine_transform`` with a diagonal) then interpolates them as ``map_coordinates``
+    does, the same values, with each row's and column's weights made once (half the time
+    at 512^2). Other steps round the coordinates differently: ``map_coordinates`` of the
+    coordinates as divided here.
+    """
+    ys, xs = _level_coordinates(shape, level)
+    if step & (step - 1) == 0:
+        factor = 2**level
+        return ndimage.affine_transform(
+            grid,
+            np.full(2, factor / step),
+            (factor - 1) / 2.0 / step,
+            output_shape=(len(ys), len(xs)),
+            order=1,
+            mode="nearest",
+        )
+    gy, gx = np.meshgrid(ys / step, xs / step, indexing="ij")
+    return ndimage.map_coordinates(grid, [gy, gx], order=1, mode="nearest")
 
 
 def relief_agreement(
