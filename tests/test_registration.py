@@ -226,6 +226,41 @@ def test_a_position_grid_on_a_level_is_its_interpolation_at_the_levels_pixels():
                 assert np.array_equal(found, expected)
 
 
+def test_the_guide_made_where_the_zoom_reads_it_zooms_to_the_whole_guides_values():
+    """_guide_and_nearest gives the guide of SciPy's distance transforms written out
+    (the whole map, and the nearest pixels its outside distance came from); made only at
+    the rows and columns _zoom_reads names, its zoom to the working size is the same."""
+    from scipy import ndimage
+
+    from imagemap.depth.register import OUTLINE_REACH, _guide_and_nearest, _zoom_reads
+
+    rng = np.random.default_rng(8)
+    for shape, noisy, scale in (((90, 120), False, 0.2), ((131, 77), True, 0.53),
+                                ((64, 64), False, 0.999), ((200, 150), True, 0.07)):  # fmt: skip
+        depth = ellipsoid(shape, (shape[0] * 0.45, shape[1] * 0.55), (shape[0] / 3, shape[1] / 3))
+        mask = depth > 0
+        if noisy:  # holes, and specks outside
+            mask ^= rng.random(shape) < 0.05
+            depth = np.where(mask, depth + 0.3, 0.0).astype(np.float32)
+        size = float(np.sqrt(mask.sum()))
+        outside, (iy, ix) = ndimage.distance_transform_edt(~mask, return_indices=True)
+        signed = ndimage.distance_transform_edt(mask) - outside
+        relief = np.where(mask, depth / float(depth[mask].max()), 0.0)
+        smooth = ndimage.gaussian_filter(relief, 0.05 * size)
+        detail = np.where(mask, relief - smooth, 0.0)
+        unit = float(np.percentile(np.abs(detail[mask]), 95))
+        expected = 0.5 * np.tanh(signed / (OUTLINE_REACH * size)) + 0.5 * relief
+        expected = (expected + 0.3 * np.tanh(detail / unit)).astype(np.float32)
+        guide, nearest = _guide_and_nearest(depth, mask, 0.3, 0.05)
+        assert np.array_equal(guide, expected)
+        assert np.array_equal(nearest, np.stack([iy, ix]))
+        reads = _zoom_reads(shape, scale)
+        assert sum(map(len, reads)) < sum(shape) or scale > 0.5  # fewer pixels made
+        part, _ = _guide_and_nearest(depth, mask, 0.3, 0.05, reads)
+        zoomed = ndimage.zoom(part, scale, order=1, prefilter=False)
+        assert np.array_equal(zoomed, ndimage.zoom(expected, scale, order=1, prefilter=False))
+
+
 def test_the_inverse_is_every_points_twelve_steps_to_the_bit():
     """Warp.inverse leaves a point once it is a fixed point to the bit: the same values as
     twelve fixed-point steps of every point (the reference, written out here)."""

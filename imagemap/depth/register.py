@@ -99,28 +99,69 @@ def registration_guide(
 
 
 def _guide_and_nearest(
-    depth: np.ndarray, mask: np.ndarray, relief_weight: float, relief_scale: float
+    depth: np.ndarray,
+    mask: np.ndarray,
+    relief_weight: float,
+    relief_scale: float,
+    reads: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`registration_guide`, and ``mask``'s nearest object pixels its outside
-    distance was made from (:func:`~imagemap.core.blend.nearest_object_pixels`' values:
-    SciPy makes the distances from that feature transform), None for a mask that is all
-    or nothing (the bands make none for it)."""
+    distance was made from (:func:`~imagemap.core.blend.nearest_object_pixels`' values),
+    None for a mask that is all or nothing (the bands make none for it).
+
+    With ``reads`` (rows, columns: :func:`_zoom_reads`), the guide only at the pixels of
+    those rows and columns, 0 elsewhere: the pixels the zoom to the working size reads
+    (a sixth of them at 512^2), which then gives the same values. The distances, the
+    relief's smoothing and its percentile are the whole map's as before; each pixel's
+    distances come from the feature transforms as SciPy makes them
+    (:func:`_distances_at`), its terms by the same operations on the same values."""
+    height, width = mask.shape
+    rows, columns = reads if reads is not None else (np.arange(height), np.arange(width))
+    at = np.ix_(rows, columns)
     size = max(float(np.sqrt(mask.sum())), 1.0)
-    outside, nearest = ndimage.distance_transform_edt(~mask, return_indices=True)
+    nearest = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
+    signed = _inside_distance(mask, rows, columns) - _distances_at(nearest, rows, columns)
     if not mask.any() or mask.all():
         nearest = None
-    signed = _inside_distance(mask) - outside
-    del outside
     outline = np.tanh(signed / (OUTLINE_REACH * size))
     deepest = float(depth[mask].max()) if mask.any() else 1.0
     relief = np.where(mask, depth / max(deepest, 1e-30), 0.0)
-    guide = 0.5 * outline + 0.5 * relief
+    guide = 0.5 * outline + 0.5 * relief[at]
     if relief_weight and mask.any():
         smooth = _smoothed_inside_box(relief, mask, relief_scale * size)
         detail = np.where(mask, relief - smooth, 0.0)
         unit = float(np.percentile(np.abs(detail[mask]), 95)) or 1.0
-        guide = guide + relief_weight * np.tanh(detail / unit)
-    return guide.astype(np.float32), nearest
+        guide = guide + relief_weight * np.tanh(detail[at] / unit)
+    if reads is None:
+        return guide.astype(np.float32), nearest
+    out = np.zeros(mask.shape, np.float32)
+    out[at] = guide
+    return out, nearest
+
+
+def _distances_at(features: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """The distances ``ndimage.distance_transform_edt`` makes from its feature transform
+    ``features`` (2, H, W), at the pixels of ``rows`` and ``columns`` only: the same
+    operations (the offsets squared as float64, summed, the square root), the same
+    values."""
+    at = np.ix_(rows, columns)
+    dy = (features[0][at] - rows[:, None]).astype(np.float64)
+    dx = (features[1][at] - columns[None, :]).astype(np.float64)
+    return np.sqrt(np.multiply(dy, dy, out=dy) + np.multiply(dx, dx, out=dx))
+
+
+def _zoom_reads(shape: tuple[int, int], scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rows and the columns of an array of ``shape`` that ``ndimage.zoom(array, scale,
+    order=1, prefilter=False)`` reads: the two neighbours of each output point along each
+    axis, at zoom's own coordinates (output index times (n - 1) / (out - 1), out the
+    rounded n * scale; a neighbour past the edge is none)."""
+    reads = []
+    for n in shape:
+        out = int(round(n * scale))
+        step = (n - 1) / (out - 1) if out > 1 else 1.0
+        first = np.floor(np.arange(out) * step).astype(np.intp)
+        reads.append(np.unique(np.clip(np.concatenate([first, first + 1]), 0, n - 1)))
+    return reads[0], reads[1]
 
 
 def _mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
@@ -136,21 +177,33 @@ def _mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
     )
 
 
-def _inside_distance(mask: np.ndarray) -> np.ndarray:
-    """``ndimage.distance_transform_edt(mask)``: each object pixel's distance to the
-    background, 0 outside, transformed on the object's box and a pixel around it (the
-    background's pixels there are at least as near as any beyond: the same distances).
+def _inside_distance(mask: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """``ndimage.distance_transform_edt(mask)`` at the pixels of ``rows`` and ``columns``:
+    each object pixel's distance to the background, 0 outside, transformed on the
+    object's box and a pixel around it (the background's pixels there are at least as
+    near as any beyond: the same distances).
 
     Examples
     --------
     >>> mask = np.zeros((9, 12), bool); mask[2:7, 3:10] = True; mask[4, 5] = False
-    >>> bool(np.array_equal(_inside_distance(mask), ndimage.distance_transform_edt(mask)))
+    >>> rows, columns = np.arange(9), np.array([0, 4, 5, 6, 11])
+    >>> bool(np.array_equal(_inside_distance(mask, rows, columns),
+    ...                     ndimage.distance_transform_edt(mask)[np.ix_(rows, columns)]))
     True
     """
     box = _mask_box(mask, 1)
-    out = np.zeros(mask.shape)
-    if box is not None:
-        out[box] = ndimage.distance_transform_edt(mask[box])
+    out = np.zeros((len(rows), len(columns)))
+    if box is None:
+        return out
+    (y0, y1), (x0, x1) = (box[0].start, box[0].stop), (box[1].start, box[1].stop)
+    features = ndimage.distance_transform_edt(
+        mask[box], return_distances=False, return_indices=True
+    )
+    inside_rows = np.flatnonzero((rows >= y0) & (rows < y1))
+    inside_columns = np.flatnonzero((columns >= x0) & (columns < x1))
+    out[np.ix_(inside_rows, inside_columns)] = _distances_at(
+        features, rows[inside_rows] - y0, columns[inside_columns] - x0
+    )
     return out
 
 
@@ -576,12 +629,17 @@ def register_with_detail(
         (None where the guide was made from block averages)."""
         if block > 1:
             depth, mask = block_average(depth, mask, block)
+        scale = zoom * block
         guide, nearest = _guide_and_nearest(
-            depth, mask, registration.registration_relief, registration.relief_detail_scale
+            depth,
+            mask,
+            registration.registration_relief,
+            registration.relief_detail_scale,
+            # Made only where the zoom to the working size reads it: the same zoomed guide.
+            _zoom_reads(mask.shape, scale) if scale < 1.0 else None,
         )
         if block > 1 or not keep_nearest:
             nearest = None
-        scale = zoom * block
         if scale >= 1.0:
             return guide, mask, nearest
         small = ndimage.zoom(guide, scale, order=1, prefilter=False)
