@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -442,17 +442,19 @@ def _bands(state: State, config: DepthConfig) -> State:
     state.nearest = []
     kept: dict[int, np.ndarray] = {}
 
-    def query_bands() -> None:
-        positions = None if frame is None else query_positions(state.mask.shape, frame, levels)
-        scales = _position_factors(state, config, levels)
-        # The finest level's factor is the seams' weights' too (the relief stage): kept,
-        # not made again (the engine holds it until it has packed the finest level anyway).
-        state.finest_scale = None if scales is None else scales[0]
-        # Handed over to the engine, which drops each level once it has packed its bands.
-        state.query_levels = ReleasableLevels(
-            depth_mappings(state.depth, levels, config.guides, positions, scales, nearest[0])
-        )
+    # The query's bands in two tasks, its guides and its positions with their factors,
+    # each about half an example's: on two threads the four tasks end about together.
+    query: dict[str, Any] = {}
+
+    def query_guides() -> None:
+        query["guides"] = depth_mappings(state.depth, levels, config.guides, None, None, nearest[0])
         nearest[0] = None
+
+    def query_factors() -> None:
+        query["positions"] = (
+            None if frame is None else query_positions(state.mask.shape, frame, levels)
+        )
+        query["scales"] = _position_factors(state, config, levels)
 
     def example_bands(index: int) -> None:
         e = state.chosen[index]
@@ -484,9 +486,26 @@ def _bands(state: State, config: DepthConfig) -> State:
     # The query's bands and each example's on the kernels' threads (SciPy's filters,
     # distance transforms and interpolation release the GIL): each its own arrays, the
     # same bytes, in example order.
+    tasks = [query_guides, query_factors]
     each_example(
-        lambda task: query_bands() if task == 0 else example_bands(task - 1),
-        [state.depth.shape, *(e.depth.shape for e in state.chosen)],
+        lambda task: tasks[task]() if task < len(tasks) else example_bands(task - len(tasks)),
+        [state.depth.shape, state.depth.shape, *(e.depth.shape for e in state.chosen)],
+    )
+    scales = query["scales"]
+    # The finest level's factor is the seams' weights' too (the relief stage): kept, not
+    # made again (the engine holds it until it has packed the finest level anyway).
+    state.finest_scale = None if scales is None else scales[0]
+    # Handed over to the engine, which drops each level once it has packed its bands.
+    state.query_levels = ReleasableLevels(
+        [
+            replace(level, position=position, position_scale=scale)
+            for level, position, scale in zip(
+                query.pop("guides"),
+                query.pop("positions") or [None] * levels,
+                scales or [None] * levels,
+                strict=True,
+            )
+        ]
     )
     order = range(len(state.chosen))
     state.exemplar_levels = [exemplar_levels[index] for index in order]
