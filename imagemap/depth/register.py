@@ -34,6 +34,7 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy import ndimage
@@ -646,15 +647,30 @@ def register_with_detail(
         small_mask = ndimage.zoom(mask.astype(np.float32), scale, order=1, prefilter=False) > 0.5
         return small, small_mask if small_mask.any() else small > 0.25, nearest
 
-    fixed, fixed_mask, query_nearest = working(query_depth, query_mask)
-    query_detail = _detail_grid(query_depth, query_mask, registration)
+    # First the guides and the relief's details of the query and of every example, which
+    # do not depend on one another: six tasks for two examples, not the query's two on
+    # one thread while the other waits (the query's guide and detail, then each example's
+    # guide and detail; task 2 i is map i's guide, 2 i + 1 its detail, map 0 the query).
+    depths = [query_depth, *example_depths]
+    prepared: dict[int, Any] = {}
 
-    def one(
-        task: tuple[np.ndarray, float],
-    ) -> tuple[Warp, tuple[np.ndarray, int], np.ndarray | None]:
-        example_depth, angle = task
-        moving, moving_mask, nearest = working(example_depth, example_depth > 0)
-        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angle)
+    def prepare(task: int) -> None:
+        depth = depths[task // 2]
+        mask = query_mask if task < 2 else depth > 0
+        prepared[task] = (
+            working(depth, mask) if task % 2 == 0 else _detail_grid(depth, mask, registration)
+        )
+
+    # On the kernels' threads (SciPy's filters, distance transforms and interpolation
+    # release the GIL): the same bytes, each task its own arrays.
+    each_example(prepare, [depth.shape for depth in depths for _ in range(2)])
+    fixed, fixed_mask, query_nearest = prepared.pop(0)
+    query_detail = prepared.pop(1)
+
+    def one(index: int) -> _Made:
+        moving, moving_mask, nearest = prepared.pop(2 + 2 * index)
+        example_detail = prepared.pop(3 + 2 * index)
+        warp = _fit(fixed, moving, fixed_mask, moving_mask, registration, angles[index])
         if zoom < 1.0:
             # Back to full-resolution pixels: a working pixel centre j is full-resolution
             # coordinate (j + 0.5) / zoom - 0.5; the displacement scales with 1 / zoom.
@@ -669,21 +685,19 @@ def register_with_detail(
                 coefficients=warp.coefficients / zoom,
                 n=warp.n,
             )
-        return (*_with_relief_residual(warp, query_detail, example_depth, registration), nearest)
+        return _with_relief_residual(warp, query_detail, example_detail), example_detail, nearest
 
-    tasks = list(zip(example_depths, angles, strict=True))
     made_by_index: dict[int, _Made] = {}
 
     def made_at(index: int) -> None:
-        made_by_index[index] = one(tasks[index])
+        made_by_index[index] = one(index)
 
-    # The examples on the kernels' threads, each its own (SciPy's filters, distance
-    # transforms and interpolation release the GIL): the same bytes, in example order.
-    # Small matrices: one BLAS thread (one limit for all the fits: threadpoolctl finds the
-    # loaded libraries anew at each, 2-10 ms; OpenBLAS's limit is the process's).
+    # Then each example's fit and relief residual, on the threads too. Small matrices: one
+    # BLAS thread (one limit for all the fits: threadpoolctl finds the loaded libraries
+    # anew at each, 2-10 ms; OpenBLAS's limit is the process's).
     with threadpool_limits(limits=1, user_api="blas"):
         each_example(made_at, [depth.shape for depth in example_depths])
-    made = [made_by_index[index] for index in range(len(tasks))]
+    made = [made_by_index[index] for index in range(len(example_depths))]
     warps = [warp for warp, _, _ in made]
     details = [detail for _, detail, _ in made]
     nearest = [query_nearest] + [example_nearest for _, _, example_nearest in made]
@@ -798,28 +812,23 @@ def _detail_grid(
 def _with_relief_residual(
     warp: Warp,
     query_detail: tuple[np.ndarray, int],
-    example_depth: np.ndarray,
-    registration: Registration,
-) -> tuple[Warp, tuple[np.ndarray, int]]:
-    """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail
-    (:func:`_detail_grid`) against the example's carried onto it by the warp, with the
-    object about ``detail_size`` pixels across (block averages of larger maps); and the
-    example's detail with its block (:func:`_detail_grid`)."""
+    example_detail: tuple[np.ndarray, int],
+) -> Warp:
+    """``warp`` with its :attr:`Warp.relief_residual`: the query's relief detail against
+    the example's carried onto it by the warp (each :func:`_detail_grid`'s, with the
+    object about ``detail_size`` pixels across: block averages of larger maps)."""
     query_detail_map, step = query_detail
-    example_detail, example_step = _detail_grid(example_depth, example_depth > 0, registration)
+    example_map, example_step = example_detail
     # The query's grid pixel j is full-resolution coordinate (j + 0.5) * step - 0.5.
     gy = np.arange(query_detail_map.shape[0], dtype=np.float64)
     gx = np.arange(query_detail_map.shape[1], dtype=np.float64)
     ey, ex = warp.forward_grid((gy + 0.5) * step - 0.5, (gx + 0.5) * step - 0.5)
     landed = ndimage.map_coordinates(
-        example_detail, [(ey + 0.5) / example_step - 0.5, (ex + 0.5) / example_step - 0.5],
+        example_map, [(ey + 0.5) / example_step - 0.5, (ex + 0.5) / example_step - 0.5],
         order=1, mode="constant", cval=0.0,
     )  # fmt: skip
     residual = np.square(query_detail_map - landed).astype(np.float32)
-    return replace(warp, relief_residual=residual, relief_step=float(step)), (
-        example_detail,
-        example_step,
-    )
+    return replace(warp, relief_residual=residual, relief_step=float(step))
 
 
 def block_average(
