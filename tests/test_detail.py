@@ -616,8 +616,10 @@ def test_silhouette_band_equals_the_distance_transforms(saturation):
     # Below the switch the band is found from the offsets nearer than the saturation,
     # above it from two distance transforms: both must be the signed distance, clipped.
     rng = np.random.default_rng(7)
-    for trial in range(5):
+    for trial in range(9):
         mask = ndimage.gaussian_filter(rng.random((37 + trial, 45)), 2.5) > 0.5
+        if trial >= 5:  # an object in a part of a larger frame (the band on its box)
+            mask = np.pad(mask[: 10 + trial, 5:30], [(trial - 4, 13), (40 - trial, 2 * trial)])
         inside = ndimage.distance_transform_edt(mask)
         outside = ndimage.distance_transform_edt(~mask)
         expected = np.clip((inside - outside) / saturation, -1, 1).astype(np.float32)
