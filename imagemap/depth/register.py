@@ -112,16 +112,23 @@ def _guide_and_nearest(
 
     With ``reads`` (rows, columns: :func:`_zoom_reads`), the guide only at the pixels of
     those rows and columns, 0 elsewhere: the pixels the zoom to the working size reads
-    (a sixth of them at 512^2), which then gives the same values. The distances, the
-    relief's smoothing and its percentile are the whole map's as before; each pixel's
-    distances come from the feature transforms as SciPy makes them
-    (:func:`_distances_at`), its terms by the same operations on the same values."""
-    height, width = mask.shape
-    rows, columns = reads if reads is not None else (np.arange(height), np.arange(width))
-    at = np.ix_(rows, columns)
+    (a sixth of them at 512^2; all of a small map's, which then takes the whole guide's
+    way), which then gives the same values. The distances, the relief's smoothing and its
+    percentile are the whole map's as before; each pixel's distances come from the feature
+    transforms as SciPy makes them (:func:`_distances_at`), its terms by the same
+    operations on the same values."""
     size = max(float(np.sqrt(mask.sum())), 1.0)
-    nearest = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
-    signed = _inside_distance(mask, rows, columns) - _distances_at(nearest, rows, columns)
+    if reads is not None and (len(reads[0]), len(reads[1])) == mask.shape:
+        reads = None  # every pixel read (a small map): the whole guide
+    if reads is None:
+        at: tuple = (slice(None), slice(None))
+        outside, nearest = ndimage.distance_transform_edt(~mask, return_indices=True)
+        signed = _inside_distance(mask) - outside
+        del outside
+    else:
+        at = np.ix_(*reads)
+        nearest = ndimage.distance_transform_edt(~mask, return_distances=False, return_indices=True)
+        signed = _inside_distance(mask, reads) - _distances_at(nearest, *reads)
     if not mask.any() or mask.all():
         nearest = None
     outline = np.tanh(signed / (OUTLINE_REACH * size))
@@ -178,21 +185,31 @@ def _mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
     )
 
 
-def _inside_distance(mask: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
-    """``ndimage.distance_transform_edt(mask)`` at the pixels of ``rows`` and ``columns``:
-    each object pixel's distance to the background, 0 outside, transformed on the
-    object's box and a pixel around it (the background's pixels there are at least as
-    near as any beyond: the same distances).
+def _inside_distance(
+    mask: np.ndarray, reads: tuple[np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
+    """``ndimage.distance_transform_edt(mask)``: each object pixel's distance to the
+    background, 0 outside, transformed on the object's box and a pixel around it (the
+    background's pixels there are at least as near as any beyond: the same distances);
+    with ``reads`` (rows, columns), at those rows' and columns' pixels only.
 
     Examples
     --------
     >>> mask = np.zeros((9, 12), bool); mask[2:7, 3:10] = True; mask[4, 5] = False
+    >>> bool(np.array_equal(_inside_distance(mask), ndimage.distance_transform_edt(mask)))
+    True
     >>> rows, columns = np.arange(9), np.array([0, 4, 5, 6, 11])
-    >>> bool(np.array_equal(_inside_distance(mask, rows, columns),
+    >>> bool(np.array_equal(_inside_distance(mask, (rows, columns)),
     ...                     ndimage.distance_transform_edt(mask)[np.ix_(rows, columns)]))
     True
     """
     box = _mask_box(mask, 1)
+    if reads is None:
+        out = np.zeros(mask.shape)
+        if box is not None:
+            out[box] = ndimage.distance_transform_edt(mask[box])
+        return out
+    rows, columns = reads
     out = np.zeros((len(rows), len(columns)))
     if box is None:
         return out
