@@ -221,20 +221,19 @@ def test_memory_estimate_counts_the_silhouette_band_and_grown_levels():
 #: Fresh-process runs of ``benchmarks/memory.py`` (generated fish, m = 2): the guard's inputs
 #: (query shape, object and border pixels, the two largest examples' crops or frames, the
 #: window sizes, PCA fraction, guide bands, search size), the peak RSS the call added (MB),
-#: its CPU and its wall seconds (2048^2 and 4096^2 above the search size). The seconds are
-#: the #44 sixth round's runs (2026-11-29, quiet, load 1.0-1.1; 4096^2 the mean of two runs,
-#: 48.2 and 39.3 s); the peaks the 4096^2 peak round's (2026-11-29, load 4.5-5: 190, 387 and
-#: 1193 MB added), each with the examples' depths the database held before the call added
-#: back (8 / 32 / 128 MB: ``colorize_estimate`` takes those off for a database that drops
-#: them, ``estimate_colorize`` does not).
+#: its CPU and its wall seconds (2048^2 and 4096^2 above the search size). The seconds and
+#: peaks are the #44 ninth round's runs (2026-11-29, load 1.1-1.3, one run each: 197.5, 387
+#: and 1196 MB added), each peak with the examples' depths the database held before the
+#: call added back (8 / 32 / 128 MB: ``colorize_estimate`` takes those off for a database
+#: that drops them, ``estimate_colorize`` does not).
 MEASURED_RUNS = [
     (((1024, 1024), 185723, 3384, [((1024, 1024), 133698, 3102), ((1024, 1024), 169081, 3496)],
-      (7, 7, 11, 9), 0.2, 3, 640.0), 198, 10.3, 8.5),
+      (7, 7, 11, 9), 0.2, 3, 640.0), 206, 11.3, 7.9),
     (((2048, 2048), 742912, 6784, [((1330, 2048), 534808, 6230), ((1394, 2048), 676361, 6982)],
-      (7, 7, 7, 11, 9), 0.2, 3, 640.0), 419, 17.0, 15.1),
+      (7, 7, 7, 11, 9), 0.2, 3, 640.0), 419, 15.5, 12.7),
     (((4096, 4096), 2971692, 13576,
       [((2661, 4096), 2139318, 12476), ((2788, 4096), 2705426, 13986)],
-      (7, 7, 7, 7, 11, 9), 0.2, 3, 640.0), 1321, 44.1, 43.8),
+      (7, 7, 7, 7, 11, 9), 0.2, 3, 640.0), 1324, 37.3, 34.5),
 ]  # fmt: skip
 
 

@@ -131,6 +131,12 @@ _MEMORY_FACTOR = 0.8
 # max-flow), quiet machine (load 1.0-1.1): 8.5 / 15.1 s and 48.2 / 39.3 s (two runs) of wall
 # time at 1024^2, 2048^2 and 4096^2, against 11.8 / 20.1 / 45.0 s estimated (1.38, 1.33 over).
 # 6.4e-7 scaled by 0.75: 8.9 / 17.2 / 42.1 s (+5 %, +14 %, -13 % / +7 %).
+# Refitted after the ninth round (2026-11-29: the stages around the engine and the seams
+# faster, the full-size pose and selection cheaper), load 1.1-1.3, one run each: 7.87 / 12.7
+# / 34.5 s of wall time at 1024^2, 2048^2 and 4096^2, against 8.9 / 17.2 / 42.1 s estimated
+# (1.13, 1.36, 1.22 over; CPU 11.3 / 15.5 / 37.3 s). The full-size stages alone had sped up:
+# _SECONDS_PER_FULL_PIXEL 0.85e-6 -> 0.6e-6 gives 8.9 / 14.8 / 32.4 s (wall +13 %, +16 %,
+# -6 %; CPU -22 %, -5 %, -13 %).
 _SECONDS_PER_FEATURE = 4.8e-7
 _SECONDS_OVERHEAD = 0.3
 
@@ -152,7 +158,7 @@ _SECONDS_OVERHEAD = 0.3
 # it); 80 -> 70 bytes a query pixel gives 376 / 1303 MB (-3 %, +9 %; 80 gave +8 %, +23 %).
 _FULL_PIXEL_BYTES = 70
 _FULL_EXAMPLE_PIXEL_BYTES = 12
-_SECONDS_PER_FULL_PIXEL = 0.85e-6  # refitted with _SECONDS_PER_FEATURE above
+_SECONDS_PER_FULL_PIXEL = 0.6e-6  # refitted with _SECONDS_PER_FEATURE above
 
 #: Runs estimated to take longer than this are announced with a warning (not refused).
 LONG_RUN_SECONDS = 300.0
