@@ -758,7 +758,7 @@ def test_each_example_runs_every_index_once_and_large_frames_in_order(monkeypatc
     on the calling thread."""
     import threading
 
-    from imagemap.depth import budget
+    from imagemap.depth import schedule
 
     calls: list[tuple[int, str]] = []
 
@@ -766,12 +766,12 @@ def test_each_example_runs_every_index_once_and_large_frames_in_order(monkeypatc
         calls.append((index, threading.current_thread().name))
 
     here = threading.current_thread().name
-    monkeypatch.setattr(budget, "THREADED_MIN_PIXELS", 50)
-    budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
+    monkeypatch.setattr(schedule, "THREADED_MIN_PIXELS", 50)
+    schedule.each_example(record, [(4, 5), (6, 7), (8, 9)])
     assert sorted(index for index, _ in calls) == [0, 1, 2]
     for least, most in ((100, 2**20), (50, 60)):  # all under 100; 72 over 60
         calls.clear()
-        monkeypatch.setattr(budget, "THREADED_MIN_PIXELS", least)
-        monkeypatch.setattr(budget, "THREADED_FRAME_PIXELS", most)
-        budget.each_example(record, [(4, 5), (6, 7), (8, 9)])
+        monkeypatch.setattr(schedule, "THREADED_MIN_PIXELS", least)
+        monkeypatch.setattr(schedule, "THREADED_FRAME_PIXELS", most)
+        schedule.each_example(record, [(4, 5), (6, 7), (8, 9)])
         assert calls == [(index, here) for index in range(3)]

@@ -305,9 +305,9 @@ def test_the_registrations_nearest_pixels_are_the_bands_own_or_none():
 
 def test_the_examples_on_threads_give_the_one_at_a_time_bytes(monkeypatch):
     """The registration, the bands and the small features of each example on the kernels'
-    threads (budget.each_example) give the very map, sources and costs of one example at a
+    threads (schedule.each_example) give the very map, sources and costs of one example at a
     time (the reference: the frames below THREADED_MIN_PIXELS)."""
-    from imagemap.depth import budget
+    from imagemap.depth import schedule
 
     examples = []
     for i, (centre, radii) in enumerate([((45, 60), (30, 48)), ((43, 62), (29, 50))]):
@@ -317,7 +317,7 @@ def test_the_examples_on_threads_give_the_one_at_a_time_bytes(monkeypatch):
     database = Database(examples)
     runs = []
     for least in (2**40, 0):  # one at a time, then on the threads
-        monkeypatch.setattr(budget, "THREADED_MIN_PIXELS", least)
+        monkeypatch.setattr(schedule, "THREADED_MIN_PIXELS", least)
         runs.append(colorize(query, database, "fish", seed=0))
     one, threaded = runs
     for a, b in ((one.image, threaded.image), (one.source, threaded.source)):

@@ -33,9 +33,9 @@ from imagemap.core.pyramid import collapse_laplacian
 from imagemap.core.seams import place_seams, with_channels
 from imagemap.core.stages import Stage
 from imagemap.depth import completion
-from imagemap.depth.budget import each_example
 from imagemap.depth.config import DepthConfig
 from imagemap.depth.guides import example_ycbcr, to_rgb
+from imagemap.depth.schedule import each_example
 
 __all__ = [
     "BLEND",

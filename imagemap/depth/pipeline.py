@@ -66,7 +66,7 @@ from imagemap.core.finecopy import fine_positions
 from imagemap.core.stages import Stage, StageRecord, run_pipeline
 from imagemap.database import Database
 from imagemap.depth import completion
-from imagemap.depth.budget import averaging_factor, each_example, guard_colorize
+from imagemap.depth.budget import averaging_factor, guard_colorize
 from imagemap.depth.config import OPTIONS, PRESETS, DepthConfig, resolve_config
 from imagemap.depth.finish import (
     BLEND,
@@ -107,6 +107,7 @@ from imagemap.depth.register import (
     relief_agreement,
     relief_detail,
 )
+from imagemap.depth.schedule import each_example
 from imagemap.depth.selection import poses_against, select_examples, select_with_poses
 from imagemap.depth.units import exclude_query, units_free
 from imagemap.io import InputError, validate_depth

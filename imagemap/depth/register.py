@@ -40,8 +40,8 @@ import numpy as np
 from scipy import ndimage
 from threadpoolctl import threadpool_limits
 
-from imagemap.depth.budget import each_example
 from imagemap.depth.config import Registration
+from imagemap.depth.schedule import each_example
 
 __all__ = [
     "Warp",
