@@ -18,13 +18,17 @@ __all__ = ["THREADED_FRAME_PIXELS", "THREADED_MIN_PIXELS", "each_example"]
 
 #: Examples' frames of at least THREADED_MIN_PIXELS and at most THREADED_FRAME_PIXELS have
 #: their own work (the registration's guides and fit, the bands, the small features) done
-#: on the kernels' threads at once; others one example at a time. Measured (the side by
-#: side's fish, 2 examples, one thread against two in one process): 512^2 frames (2^18
-#: pixels) x0.68-0.76 of these stages' wall with the second core free, x1.2 with both cores
-#: busy with other work; 200x150 frames x0.81-0.89 free, x1.7 busy (each example's work
-#: is a few tens of ms: the GIL's handovers weigh). Between the two not measured: the lower
-#: bound is half the 512^2 frame.
-THREADED_MIN_PIXELS = 2**17
+#: on the kernels' threads at once; others one example at a time. The bound is the side by
+#: side's 200x150 frame, the crossover measured (the fish, 2 examples; these three stages'
+#: wall, threaded against one at a time in one process, rotated pairs, medians): with the
+#: second core free x0.81 and x0.90 at 200x150 (two runs), x0.80 at 256x192, x0.74 at
+#: 320x240 and 400x300, x0.68 at 448x336 (2^17 was half the 512^2 frame, not measured);
+#: below 200x150 only the small features gain (x0.69), the bands lose (x1.12-1.17 at
+#: 160x120 and 128x96) and the sum is within noise (x0.92-0.95). With one core busy with
+#: other work about even at every size (x1.04 at 200x150, x1.05, x1.00, x0.93 at 512^2);
+#: with both busy a loss (x1.7 at 200x150, x1.2 at 512^2: the GIL's handovers wait for
+#: the OS), accepted as before: #44's side by side runs on a quiet machine.
+THREADED_MIN_PIXELS = 200 * 150
 #: The upper bound: two examples' transients at once, and what the worker threads' malloc
 #: arenas keep (benchmarks/memory.py): the 512^2 task's peak 259 -> 271 MB (reached in the
 #: engine; the bands' 175 -> 188), the 1024^2 fish's 327 -> 329 MB (the bands' 269 -> 306,
