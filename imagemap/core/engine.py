@@ -315,8 +315,8 @@ def _synthesize(query_levels, exemplar_levels, params, seed, quiet) -> EngineRes
         # number drawn): before the features, so that its transients do not add to them.
         propagated: Any = None if coarse_source is None else solver.propagate(coarse_source)
         coarse_source = None
-        # The heap's free pages are given back around the finest level's features alone
-        # (see TRIMMED_LEVELS); at the coarser levels the freed pages stay for the next.
+        # The heap's free pages are given back around the features of the TRIMMED_LEVELS
+        # finest levels only; at the coarser levels the freed pages stay for the next.
         if level < TRIMMED_LEVELS:
             trim_heap()
         solver.prepare(rng)

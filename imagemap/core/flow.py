@@ -26,6 +26,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+# The kernels' index type: every index of max_flow's arrays is >= 0, and numba checks a
+# signed index for a negative value to wrap around, not an unsigned one (0.85x the flow's
+# CPU on the 512^2 moves).
+from imagemap.core.kernels import _U
+
 __all__ = ["grid_cut", "grid_cut_halved"]
 
 #: ``parent`` values besides a node number: in no tree, a tree's root (joined to its
@@ -43,10 +48,6 @@ _QUEUED = 2
 #: arc 4 p + d). Kept beside the parent's number, so that a walk up a tree reads one field
 #: a step (the parent) instead of the arc and then its head: 0.87x the flow's CPU.
 _TURN = 2
-#: The index type of :func:`max_flow`'s arrays (every index there is >= 0): numba checks a
-#: signed index for a negative value to wrap around, not an unsigned one (0.85x the flow's
-#: CPU on the 512^2 moves; as :data:`imagemap.core.kernels._U`).
-_U = np.uint64
 #: The augmentations' time stamps are int32: past this many, every stamp is set back to 0
 #: (they only mark which distances are of the current augmentation).
 _STAMP_LIMIT = (1 << 31) - 2
